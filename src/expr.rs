@@ -1,0 +1,393 @@
+//! Matrix entries as numbers or expressions in `t` and the model's params.
+//!
+//! Expressions are parsed once with exmex; entries that do not depend on `t` are
+//! evaluated once at compile time, so only the time-varying entries cost anything
+//! per step (≈ 50 ns each, see BENCHMARKS.md).
+
+use crate::error::FieldError;
+use crate::model::Value;
+use exmex::prelude::*;
+use std::collections::BTreeMap;
+
+/// Names that are functions or constants in expressions, not parameters.
+const FUNCTIONS: &[&str] = &[
+    "sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "asinh", "acosh",
+    "atanh", "exp", "ln", "log", "log2", "log10", "sqrt", "cbrt", "abs", "signum", "floor",
+    "ceil", "round", "trunc", "fract", "PI", "π", "E",
+];
+
+/// Whether `name` is a function or constant of the expression language.
+pub fn is_reserved(name: &str) -> bool {
+    FUNCTIONS.contains(&name)
+}
+
+/// A time-varying scalar: compiled expression plus its variable vector.
+#[derive(Clone, Debug)]
+pub struct TimeFn {
+    expr: FlatEx<f64>,
+    /// Values of the expression's variables in exmex's (alphabetical) order.
+    vars: Vec<f64>,
+    /// Index of `t` in `vars`.
+    t_slot: usize,
+}
+
+impl TimeFn {
+    #[inline]
+    pub fn eval(&mut self, t: f64) -> f64 {
+        self.vars[self.t_slot] = t;
+        // Errors cannot happen after a successful parse with the right variable count;
+        // NaN makes the caller's finiteness check fire with the entry's path.
+        self.expr.eval(&self.vars).unwrap_or(f64::NAN)
+    }
+}
+
+/// One compiled entry.
+#[derive(Clone, Debug)]
+pub enum Entry {
+    Const(f64),
+    Time(TimeFn),
+}
+
+/// Compile one entry at `path`. `allow_t` false: `t` is an error (constant fields).
+pub fn compile_entry(
+    value: &Value,
+    params: &BTreeMap<String, f64>,
+    path: &str,
+    allow_t: bool,
+    t_probe: f64,
+) -> Result<Entry, FieldError> {
+    let text = match value {
+        Value::Number(x) => {
+            return if x.is_finite() {
+                Ok(Entry::Const(*x))
+            } else {
+                Err(FieldError::new(path, "expected a finite number"))
+            };
+        }
+        Value::Expr(s) => s.as_str(),
+    };
+    if text.trim().is_empty() {
+        return Err(FieldError::new(
+            path,
+            "empty expression: expected a number or an expression such as \"-s/m\"",
+        ));
+    }
+    check_identifiers(text, params, path, allow_t)?;
+    let plain = expand_exponents(text);
+    let expr = FlatEx::<f64>::parse(&plain).map_err(|e| {
+        FieldError::new(
+            path,
+            format!("cannot parse expression \"{text}\": {}", describe(&e.to_string())),
+        )
+    })?;
+    let mut vars = Vec::with_capacity(expr.var_names().len());
+    let mut t_slot = None;
+    for (i, name) in expr.var_names().iter().enumerate() {
+        if name == "t" {
+            t_slot = Some(i);
+            vars.push(t_probe);
+        } else if let Some(v) = params.get(name.as_str()) {
+            vars.push(*v);
+        } else {
+            return Err(unknown(text, name, params, path, allow_t));
+        }
+    }
+    let value = expr.eval(&vars).map_err(|e| {
+        FieldError::new(path, format!("cannot evaluate \"{text}\": {e}"))
+    })?;
+    match t_slot {
+        None => {
+            if value.is_finite() {
+                Ok(Entry::Const(value))
+            } else {
+                Err(FieldError::new(
+                    path,
+                    format!("\"{text}\" evaluates to {value}; expected a finite number"),
+                ))
+            }
+        }
+        Some(t_slot) => Ok(Entry::Time(TimeFn { expr, vars, t_slot })),
+    }
+}
+
+/// Compile an entry that must be a constant number (params allowed, `t` not).
+pub fn compile_const(
+    value: &Value,
+    params: &BTreeMap<String, f64>,
+    path: &str,
+) -> Result<f64, FieldError> {
+    match compile_entry(value, params, path, false, 0.0)? {
+        Entry::Const(x) => Ok(x),
+        Entry::Time(_) => Err(FieldError::new(path, "must not depend on t")),
+    }
+}
+
+/// exmex's number literals have no exponent: rewrite `1.5e-5` as a plain decimal
+/// (Rust prints f64 without an exponent, exactly round-tripping).
+fn expand_exponents(text: &str) -> String {
+    let b = text.as_bytes();
+    let mut out = String::with_capacity(text.len());
+    let mut i = 0;
+    while i < b.len() {
+        let starts_number = (b[i].is_ascii_digit() || b[i] == b'.')
+            && (i == 0 || !(b[i - 1].is_ascii_alphanumeric() || b[i - 1] == b'_'));
+        if !starts_number {
+            out.push(text[i..].chars().next().unwrap());
+            i += text[i..].chars().next().unwrap().len_utf8();
+            continue;
+        }
+        let start = i;
+        while i < b.len() && (b[i].is_ascii_digit() || b[i] == b'.') {
+            i += 1;
+        }
+        let mut end = i;
+        if i < b.len() && (b[i] == b'e' || b[i] == b'E') {
+            let mut j = i + 1;
+            if j < b.len() && (b[j] == b'+' || b[j] == b'-') {
+                j += 1;
+            }
+            let digits = j;
+            while j < b.len() && b[j].is_ascii_digit() {
+                j += 1;
+            }
+            if j > digits {
+                end = j;
+            }
+        }
+        let lit = &text[start..end];
+        match lit.parse::<f64>() {
+            Ok(x) if end > i && x.is_finite() => out.push_str(&format!("{x}")),
+            _ => out.push_str(lit),
+        }
+        i = end;
+    }
+    out
+}
+
+fn describe(msg: &str) -> String {
+    msg.trim().to_string()
+}
+
+/// Scan identifiers ourselves so that an unknown name is reported with its position
+/// (exmex would silently take it as a variable).
+fn check_identifiers(
+    text: &str,
+    params: &BTreeMap<String, f64>,
+    path: &str,
+    allow_t: bool,
+) -> Result<(), FieldError> {
+    let mut depth: i64 = 0;
+    let chars: Vec<(usize, char)> = text.char_indices().collect();
+    let mut i = 0;
+    while i < chars.len() {
+        let (pos, c) = chars[i];
+        if c == '(' {
+            depth += 1;
+        } else if c == ')' {
+            depth -= 1;
+            if depth < 0 {
+                return Err(FieldError::new(
+                    path,
+                    format!(
+                        "unbalanced ')' at position {} in \"{text}\"",
+                        char_pos(text, pos) + 1
+                    ),
+                ));
+            }
+        }
+        if c.is_alphabetic() || c == '_' {
+            // A number's exponent (1e-5) is not an identifier.
+            let in_number = i > 0 && {
+                let (_, p) = chars[i - 1];
+                (c == 'e' || c == 'E') && (p.is_ascii_digit() || p == '.')
+            };
+            let start = i;
+            while i < chars.len() && (chars[i].1.is_alphanumeric() || chars[i].1 == '_') {
+                i += 1;
+            }
+            if in_number {
+                continue;
+            }
+            let name: String = chars[start..i].iter().map(|(_, c)| *c).collect();
+            if FUNCTIONS.contains(&name.as_str()) || params.contains_key(&name) {
+                continue;
+            }
+            if name == "t" {
+                if allow_t {
+                    continue;
+                }
+                return Err(FieldError::new(
+                    path,
+                    format!("\"{text}\" depends on t, but this field must be constant"),
+                ));
+            }
+            let mut e = unknown(text, &name, params, path, allow_t);
+            e.message = format!(
+                "{} (at position {})",
+                e.message,
+                char_pos(text, chars[start].0) + 1
+            );
+            return Err(e);
+        }
+        i += 1;
+    }
+    if depth > 0 {
+        return Err(FieldError::new(
+            path,
+            format!("unbalanced '(' in \"{text}\": {depth} not closed"),
+        ));
+    }
+    Ok(())
+}
+
+fn char_pos(text: &str, byte: usize) -> usize {
+    text[..byte].chars().count()
+}
+
+fn unknown(
+    text: &str,
+    name: &str,
+    params: &BTreeMap<String, f64>,
+    path: &str,
+    allow_t: bool,
+) -> FieldError {
+    let mut known: Vec<String> = params.keys().cloned().collect();
+    if allow_t {
+        known.insert(0, "t".into());
+    }
+    let known = if known.is_empty() {
+        "no params are defined".to_string()
+    } else {
+        format!("known: {}", known.join(", "))
+    };
+    FieldError::new(
+        path,
+        format!("unknown parameter \"{name}\" in \"{text}\" ({known})"),
+    )
+}
+
+/// A matrix (row-major) whose entries may vary with time.
+#[derive(Clone, Debug)]
+pub struct TimeMatrix {
+    pub rows: usize,
+    pub cols: usize,
+    /// Current values, row-major; constant entries are set once.
+    pub values: Vec<f64>,
+    /// (flat index, function, path) of each time-varying entry.
+    varying: Vec<(usize, TimeFn, String)>,
+}
+
+impl TimeMatrix {
+    pub fn constant(rows: usize, cols: usize, values: Vec<f64>) -> Self {
+        debug_assert_eq!(values.len(), rows * cols);
+        TimeMatrix {
+            rows,
+            cols,
+            values,
+            varying: Vec::new(),
+        }
+    }
+
+    /// Build from compiled entries; `paths[i]` names entry i for error messages.
+    pub fn from_entries(rows: usize, cols: usize, entries: Vec<(Entry, String)>) -> Self {
+        let mut values = vec![0.0; rows * cols];
+        let mut varying = Vec::new();
+        for (i, (e, path)) in entries.into_iter().enumerate() {
+            match e {
+                Entry::Const(x) => values[i] = x,
+                Entry::Time(f) => varying.push((i, f, path)),
+            }
+        }
+        TimeMatrix {
+            rows,
+            cols,
+            values,
+            varying,
+        }
+    }
+
+    pub fn is_constant(&self) -> bool {
+        self.varying.is_empty()
+    }
+
+    pub fn varying_count(&self) -> usize {
+        self.varying.len()
+    }
+
+    /// Re-evaluate the time-varying entries at t. Err(path) if one is not finite.
+    #[inline]
+    pub fn update(&mut self, t: f64) -> Result<(), &str> {
+        for (i, f, path) in self.varying.iter_mut() {
+            let v = f.eval(t);
+            if !v.is_finite() {
+                return Err(path.as_str());
+            }
+            self.values[*i] = v;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params() -> BTreeMap<String, f64> {
+        [("m".to_string(), 100.0), ("s".to_string(), 37.17)]
+            .into_iter()
+            .collect()
+    }
+
+    #[test]
+    fn constant_expressions_fold() {
+        let e = compile_entry(&"-s/m".into(), &params(), "a[0][0]", true, 0.0).unwrap();
+        match e {
+            Entry::Const(x) => assert_eq!(x, -37.17 / 100.0),
+            _ => panic!("expected a constant"),
+        }
+    }
+
+    #[test]
+    fn time_expressions_evaluate() {
+        let e = compile_entry(&"0.3*sin(2*t)+m".into(), &params(), "p", true, 0.0).unwrap();
+        let Entry::Time(mut f) = e else {
+            panic!("expected time-varying")
+        };
+        assert!((f.eval(0.7) - (0.3 * (1.4f64).sin() + 100.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn unknown_parameter_is_named_with_position() {
+        let e = compile_entry(&"s/mass".into(), &params(), "system.a[0][0]", true, 0.0)
+            .unwrap_err();
+        assert_eq!(e.path, "system.a[0][0]");
+        assert!(e.message.contains("unknown parameter \"mass\""), "{}", e.message);
+        assert!(e.message.contains("position 3"), "{}", e.message);
+    }
+
+    #[test]
+    fn exponent_is_not_an_identifier() {
+        let e = compile_entry(&"1e-5*m".into(), &params(), "p", true, 0.0).unwrap();
+        assert!(matches!(e, Entry::Const(x) if (x - 1e-3).abs() < 1e-15));
+    }
+
+    #[test]
+    fn t_in_constant_field_is_rejected() {
+        let e = compile_const(&"m*t".into(), &params(), "measurement.c[0][0]").unwrap_err();
+        assert!(e.message.contains("must be constant"), "{}", e.message);
+    }
+
+    #[test]
+    fn parse_errors_are_reported() {
+        let e = compile_entry(&"s*(m".into(), &params(), "p", true, 0.0).unwrap_err();
+        assert!(e.message.contains("unbalanced"), "{}", e.message);
+        let e = compile_entry(&"s**/m".into(), &params(), "p", true, 0.0).unwrap_err();
+        assert!(e.message.contains("cannot parse"), "{}", e.message);
+    }
+
+    #[test]
+    fn non_finite_is_rejected() {
+        let e = compile_entry(&"1/0".into(), &params(), "p", true, 0.0).unwrap_err();
+        assert!(e.message.contains("finite"), "{}", e.message);
+    }
+}

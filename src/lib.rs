@@ -1,0 +1,99 @@
+//! kea-core: the filtering-effect analysis of METHOD.md, as a pure library.
+//!
+//! Architecture invariant: this crate knows nothing about HTTP, threads, files or the
+//! browser. It takes a [`Model`] (plus parameter overrides), returns a result or an
+//! [`Error`] naming the field path, and reports progress through [`Progress`], which
+//! is also how a caller cancels.
+
+pub mod analysis;
+pub mod error;
+pub mod expr;
+pub mod model;
+pub mod presets;
+pub mod result;
+pub mod validate;
+
+pub use error::{Error, FieldError};
+pub use model::Model;
+pub use result::AnalysisResult;
+
+use std::collections::BTreeMap;
+use std::ops::ControlFlow;
+
+/// Parameter overrides (`--set name=value`): each must name an existing param.
+pub type Overrides = BTreeMap<String, f64>;
+
+/// Progress reports and cancellation: `report` is called every few thousand steps
+/// with the fraction done (0..1); returning `ControlFlow::Break(())` cancels.
+pub trait Progress {
+    fn report(&mut self, fraction: f64) -> ControlFlow<()>;
+}
+
+/// No progress reporting, never cancels.
+pub struct NoProgress;
+
+impl Progress for NoProgress {
+    fn report(&mut self, _fraction: f64) -> ControlFlow<()> {
+        ControlFlow::Continue(())
+    }
+}
+
+impl<F: FnMut(f64) -> ControlFlow<()>> Progress for F {
+    fn report(&mut self, fraction: f64) -> ControlFlow<()> {
+        self(fraction)
+    }
+}
+
+/// Run the analysis of METHOD §1.2–§1.6 on a model with parameter overrides.
+pub fn analyze(
+    model: &Model,
+    set: &Overrides,
+    progress: &mut dyn Progress,
+) -> Result<AnalysisResult, Error> {
+    let compiled = validate::compile(model, set)?;
+    analysis::run(&compiled, progress)
+}
+
+/// Validate a model without running it; every problem found is returned.
+pub fn check(model: &Model, set: &Overrides) -> Result<(), Error> {
+    validate::compile(model, set).map(|_| ())
+}
+
+/// How much work an analysis is, before running it (for limits and scheduling).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct WorkEstimate {
+    /// Steps D (for `"auto"`: the cap, the worst case).
+    pub steps: u64,
+    /// State dimension N.
+    pub states: usize,
+    /// steps × N³: the Riccati recursion's cost in multiply-adds, up to a constant.
+    pub work: f64,
+}
+
+/// Estimate the work of a model without running it. Validates the model.
+pub fn estimate_work(model: &Model, set: &Overrides) -> Result<WorkEstimate, Error> {
+    let compiled = validate::compile(model, set)?;
+    let n = compiled.n_states();
+    let steps = compiled.max_steps();
+    Ok(WorkEstimate {
+        steps,
+        states: n,
+        work: steps as f64 * (n as f64).powi(3),
+    })
+}
+
+/// Parse a model from a JSON value, with serde errors located at their field path.
+pub fn model_from_value(value: serde_json::Value) -> Result<Model, Error> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let path = e.path().to_string();
+        let path = if path == "." { String::new() } else { path };
+        Error::invalid(path, e.into_inner().to_string())
+    })
+}
+
+/// Parse a model from JSON text, with serde errors located at their field path.
+pub fn model_from_json(text: &str) -> Result<Model, Error> {
+    let value: serde_json::Value = serde_json::from_str(text)
+        .map_err(|e| Error::invalid("", format!("not valid JSON: {e}")))?;
+    model_from_value(value)
+}

@@ -1,0 +1,237 @@
+//! The model format: what a user submits (JSON, serde), before validation.
+//!
+//! Every matrix entry is a [`Value`]: a number or an expression string in `t` and the
+//! model's `params`. Validation (`crate::validate`) turns a [`Model`] into a
+//! `CompiledModel` or a list of errors naming the exact field path.
+
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// The version of the model format this build reads and writes.
+pub const MODEL_FORMAT_VERSION: u32 = 1;
+
+/// A matrix or vector entry: a number, or an expression in `t` and the params.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Value {
+    Number(f64),
+    Expr(String),
+}
+
+impl From<f64> for Value {
+    fn from(x: f64) -> Self {
+        Value::Number(x)
+    }
+}
+
+impl From<&str> for Value {
+    fn from(s: &str) -> Self {
+        Value::Expr(s.to_string())
+    }
+}
+
+/// A complete model (METHOD §1.1): dynamic system, measurements, criteria, options.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Model {
+    /// Format version; absent means the current one.
+    #[serde(default = "default_version")]
+    pub kea_model: u32,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub description: Option<String>,
+    /// Named numbers usable in every expression.
+    #[serde(default)]
+    pub params: BTreeMap<String, f64>,
+    pub time: Time,
+    pub system: System,
+    pub measurement: Measurement,
+    #[serde(default)]
+    pub criteria: Criteria,
+    #[serde(default)]
+    pub options: Options,
+}
+
+fn default_version() -> u32 {
+    MODEL_FORMAT_VERSION
+}
+
+/// The time grid (METHOD §1.2): `t0`, `t_end` and the number of steps D.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Time {
+    pub t0: f64,
+    pub t_end: f64,
+    /// An integer D, or the string `"auto"` (step-size selection, METHOD §1.2).
+    pub steps: Steps,
+    /// Settings of `steps: "auto"`; ignored for an integer `steps`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub auto: Option<AutoSteps>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Steps {
+    Fixed(u64),
+    Auto(String),
+}
+
+/// Step-size selection: D, 2D, 4D, … until successive mean solutions agree.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AutoSteps {
+    /// Time-averaged |Δy| between successive solutions, relative to max|y|.
+    #[serde(default = "default_auto_tolerance")]
+    pub tolerance: f64,
+    /// The first D tried.
+    #[serde(default = "default_auto_initial")]
+    pub initial_steps: u64,
+    /// The cap: never more steps than this.
+    #[serde(default = "default_auto_max")]
+    pub max_steps: u64,
+}
+
+impl Default for AutoSteps {
+    fn default() -> Self {
+        AutoSteps {
+            tolerance: default_auto_tolerance(),
+            initial_steps: default_auto_initial(),
+            max_steps: default_auto_max(),
+        }
+    }
+}
+
+fn default_auto_tolerance() -> f64 {
+    1e-9
+}
+fn default_auto_initial() -> u64 {
+    1000
+}
+fn default_auto_max() -> u64 {
+    4_096_000
+}
+
+/// The dynamic system dY/dt = a(t) Y + u(t) + b(t) F (1.1).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct System {
+    /// State names; their count is N.
+    pub states: Vec<String>,
+    /// N×N.
+    pub a: Vec<Vec<Value>>,
+    /// N; zero when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u: Option<Vec<Value>>,
+    /// N×L.
+    pub b: Vec<Vec<Value>>,
+    /// Initial mean (N); zero when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub y0: Option<Vec<Value>>,
+    /// Initial SKOs η0 (N); zero when absent. R0 = diag(η0²).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eta0: Option<Vec<Value>>,
+    /// Model-error SKOs φ (L), W = diag(φ²) (1.17) — or give `W`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub phi: Option<Vec<Value>>,
+    /// Full model-error covariance W (L×L), instead of `phi`.
+    #[serde(default, rename = "W", skip_serializing_if = "Option::is_none")]
+    pub w: Option<Vec<Vec<Value>>>,
+}
+
+/// The measurements Z = C y + Γ(t) Φ (1.2).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Measurement {
+    /// Measurement names; their count is n ≤ N.
+    pub names: Vec<String>,
+    /// n×N, constant (expressions may use params, not `t`).
+    pub c: Vec<Vec<Value>>,
+    /// n×M noise matrix Γ(t).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gamma: Option<Vec<Vec<Value>>>,
+    /// The seed's form N×M: Z = c (y + g Φ), i.e. Γ = c g. Give `gamma` or `g`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub g: Option<Vec<Vec<Value>>>,
+    /// Measurement-error SKOs ψ (M), V = diag(ψ²) (1.18) — or give `V`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub psi: Option<Vec<Value>>,
+    /// Full measurement-error covariance V (M×M), instead of `psi`.
+    #[serde(default, rename = "V", skip_serializing_if = "Option::is_none")]
+    pub v: Option<Vec<Vec<Value>>>,
+    /// Explicit state↔measurement pairs; when absent they are inferred from C.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pairs: Option<Vec<Pair>>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Pair {
+    pub state: String,
+    pub measurement: String,
+}
+
+/// Weights and confidence of the criteria (3.25), (3.26), (3.14).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Criteria {
+    #[serde(default)]
+    pub weights: Weights,
+    /// Confidence probability P for the Laplace coefficient λ = Φ⁻¹((1+P)/2).
+    #[serde(default = "default_confidence")]
+    pub confidence: f64,
+}
+
+impl Default for Criteria {
+    fn default() -> Self {
+        Criteria {
+            weights: Weights::default(),
+            confidence: default_confidence(),
+        }
+    }
+}
+
+fn default_confidence() -> f64 {
+    0.95
+}
+
+/// Per-state weights k_i of each criterion (N entries each, summing to 1).
+/// Absent: equal weights over the states where the criterion is defined.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Weights {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub yz: Option<Vec<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zx: Option<Vec<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub yx: Option<Vec<f64>>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Options {
+    /// Rows kept in the decimated traces (each bucket keeps its extremes).
+    #[serde(default = "default_trace_points")]
+    pub trace_points: usize,
+    /// For time-invariant models: stop the Riccati recursion once it is stationary.
+    #[serde(default = "default_true")]
+    pub steady_state_shortcut: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            trace_points: default_trace_points(),
+            steady_state_shortcut: true,
+        }
+    }
+}
+
+fn default_trace_points() -> usize {
+    1000
+}
+fn default_true() -> bool {
+    true
+}
+

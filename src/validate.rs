@@ -1,0 +1,694 @@
+//! Validation: a submitted [`Model`] plus overrides becomes a [`CompiledModel`] or a
+//! list of errors, each naming the field path and what was expected.
+
+use crate::error::{Error, FieldError};
+use crate::expr::{Entry, TimeMatrix, compile_const, compile_entry};
+use crate::model::{MODEL_FORMAT_VERSION, Model, Steps, Value};
+use crate::Overrides;
+use std::collections::BTreeMap;
+
+/// Largest accepted number of steps D (beyond this a run would take hours).
+pub const MAX_STEPS: u64 = 100_000_000;
+/// Largest accepted state dimension N.
+pub const MAX_STATES: usize = 200;
+/// Largest accepted number of trace rows.
+pub const MAX_TRACE_POINTS: usize = 100_000;
+/// Weights must sum to 1 within this.
+const WEIGHT_TOL: f64 = 1e-9;
+
+#[derive(Clone, Debug)]
+pub enum StepPlan {
+    Fixed(u64),
+    Auto {
+        tolerance: f64,
+        initial_steps: u64,
+        max_steps: u64,
+    },
+}
+
+/// A validated model, ready to run. Matrices are row-major.
+#[derive(Clone, Debug)]
+pub struct CompiledModel {
+    pub states: Vec<String>,
+    pub measurements: Vec<String>,
+    pub t0: f64,
+    pub t_end: f64,
+    pub steps: StepPlan,
+    /// a(t), N×N.
+    pub a: TimeMatrix,
+    /// u(t), N×1.
+    pub u: TimeMatrix,
+    /// b(t), N×L.
+    pub b: TimeMatrix,
+    /// C, n×N (constant).
+    pub c: Vec<f64>,
+    /// Γ(t), n×M — or, in the seed's form, g(t) N×M with Γ = C g.
+    pub noise: MeasurementNoise,
+    pub y0: Vec<f64>,
+    pub eta0: Vec<f64>,
+    /// W, L×L; φ_l = sqrt(W_ll).
+    pub w: Vec<f64>,
+    pub phi: Vec<f64>,
+    /// V, M×M; ψ_m = sqrt(V_mm).
+    pub v: Vec<f64>,
+    pub psi: Vec<f64>,
+    /// For each state, its paired measurement (METHOD §1.1).
+    pub pair_of_state: Vec<Option<usize>>,
+    /// Weights per criterion (N each); None = equal over the states where defined.
+    pub weights_yz: Option<Vec<f64>>,
+    pub weights_zx: Option<Vec<f64>>,
+    pub weights_yx: Option<Vec<f64>>,
+    pub confidence: f64,
+    pub trace_points: usize,
+    pub steady_state_shortcut: bool,
+}
+
+#[derive(Clone, Debug)]
+pub enum MeasurementNoise {
+    /// Γ(t), n×M.
+    Gamma(TimeMatrix),
+    /// g(t), N×M; Γ = C g.
+    SeedG(TimeMatrix),
+}
+
+impl MeasurementNoise {
+    pub fn sources(&self) -> usize {
+        match self {
+            MeasurementNoise::Gamma(m) | MeasurementNoise::SeedG(m) => m.cols,
+        }
+    }
+    pub fn matrix(&self) -> &TimeMatrix {
+        match self {
+            MeasurementNoise::Gamma(m) | MeasurementNoise::SeedG(m) => m,
+        }
+    }
+}
+
+impl CompiledModel {
+    pub fn n_states(&self) -> usize {
+        self.states.len()
+    }
+    pub fn n_measurements(&self) -> usize {
+        self.measurements.len()
+    }
+    /// D, or the cap of `"auto"`.
+    pub fn max_steps(&self) -> u64 {
+        match self.steps {
+            StepPlan::Fixed(d) => d,
+            StepPlan::Auto { max_steps, .. } => max_steps,
+        }
+    }
+    /// Whether the covariance recursion's inputs (a, b, Γ) do not depend on t.
+    pub fn is_time_invariant(&self) -> bool {
+        self.a.is_constant() && self.b.is_constant() && self.noise.matrix().is_constant()
+    }
+}
+
+/// Collects errors; the first error per field is enough.
+struct Errors(Vec<FieldError>);
+
+impl Errors {
+    fn push(&mut self, e: FieldError) {
+        self.0.push(e);
+    }
+    fn at(&mut self, path: &str, msg: impl Into<String>) {
+        self.0.push(FieldError::new(path, msg));
+    }
+}
+
+/// Validate and compile a model with parameter overrides.
+pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
+    let mut errs = Errors(Vec::new());
+
+    if model.kea_model != MODEL_FORMAT_VERSION {
+        errs.at(
+            "kea_model",
+            format!(
+                "unsupported model format version {}; this kea reads version {MODEL_FORMAT_VERSION}",
+                model.kea_model
+            ),
+        );
+    }
+
+    // --- params and overrides
+    let mut params = model.params.clone();
+    for (name, value) in &model.params {
+        let path = format!("params.{name}");
+        if !is_identifier(name) {
+            errs.at(&path, "a parameter name must be an identifier (letters, digits, _; not starting with a digit)");
+        } else if name == "t" {
+            errs.at(&path, "\"t\" is the time variable and cannot be a parameter");
+        } else if crate::expr::is_reserved(name) {
+            errs.at(&path, format!("\"{name}\" is a function name and cannot be a parameter"));
+        }
+        if !value.is_finite() {
+            errs.at(&path, "expected a finite number");
+        }
+    }
+    for (name, value) in set {
+        let path = format!("set.{name}");
+        if !model.params.contains_key(name) {
+            let known: Vec<&str> = model.params.keys().map(|s| s.as_str()).collect();
+            errs.at(
+                &path,
+                format!(
+                    "no parameter \"{name}\" in the model (params: {})",
+                    if known.is_empty() { "none".to_string() } else { known.join(", ") }
+                ),
+            );
+        } else if !value.is_finite() {
+            errs.at(&path, "expected a finite number");
+        } else {
+            params.insert(name.clone(), *value);
+        }
+    }
+    if !errs.0.is_empty() {
+        return Err(Error::Invalid(errs.0));
+    }
+
+    // --- time
+    let t = &model.time;
+    if !t.t0.is_finite() {
+        errs.at("time.t0", "expected a finite number");
+    }
+    if !t.t_end.is_finite() {
+        errs.at("time.t_end", "expected a finite number");
+    } else if t.t0.is_finite() && t.t_end <= t.t0 {
+        errs.at(
+            "time.t_end",
+            format!("t_end ({}) must be greater than t0 ({})", t.t_end, t.t0),
+        );
+    }
+    let steps = match &t.steps {
+        Steps::Fixed(0) => {
+            errs.at("time.steps", "steps must be at least 1");
+            StepPlan::Fixed(1)
+        }
+        Steps::Fixed(d) if *d > MAX_STEPS => {
+            errs.at(
+                "time.steps",
+                format!("{d} steps is more than the limit of {MAX_STEPS}"),
+            );
+            StepPlan::Fixed(1)
+        }
+        Steps::Fixed(d) => StepPlan::Fixed(*d),
+        Steps::Auto(s) if s == "auto" => {
+            let auto = t.auto.clone().unwrap_or_default();
+            if !(auto.tolerance.is_finite() && auto.tolerance > 0.0) {
+                errs.at("time.auto.tolerance", "expected a positive number");
+            }
+            if auto.initial_steps == 0 {
+                errs.at("time.auto.initial_steps", "must be at least 1");
+            }
+            if auto.max_steps > MAX_STEPS {
+                errs.at(
+                    "time.auto.max_steps",
+                    format!("must not exceed the limit of {MAX_STEPS}"),
+                );
+            }
+            if auto.max_steps < auto.initial_steps {
+                errs.at("time.auto.max_steps", "must be at least initial_steps");
+            }
+            StepPlan::Auto {
+                tolerance: auto.tolerance,
+                initial_steps: auto.initial_steps.max(1),
+                max_steps: auto.max_steps.clamp(1, MAX_STEPS),
+            }
+        }
+        Steps::Auto(s) => {
+            errs.at(
+                "time.steps",
+                format!("expected a positive integer or \"auto\", got \"{s}\""),
+            );
+            StepPlan::Fixed(1)
+        }
+    };
+    let t0 = if t.t0.is_finite() { t.t0 } else { 0.0 };
+
+    // --- system
+    let sys = &model.system;
+    let n = sys.states.len();
+    if n == 0 {
+        errs.at("system.states", "at least one state is needed");
+    } else if n > MAX_STATES {
+        errs.at(
+            "system.states",
+            format!("{n} states is more than the limit of {MAX_STATES}"),
+        );
+    }
+    check_names(&sys.states, "system.states", &mut errs);
+    if !errs.0.is_empty() {
+        return Err(Error::Invalid(errs.0));
+    }
+
+    let a = time_matrix(&sys.a, n, Some(n), "system.a", "N", &params, t0, &mut errs);
+    let u = match &sys.u {
+        Some(u) => time_vector(u, n, "system.u", "N", &params, t0, &mut errs),
+        None => TimeMatrix::constant(n, 1, vec![0.0; n]),
+    };
+    // b: N rows, L columns (L from the first row).
+    let l = sys.b.first().map(|r| r.len()).unwrap_or(0);
+    if sys.b.len() == n && l == 0 {
+        errs.at("system.b[0]", "b needs at least one column (L ≥ 1)");
+    }
+    let b = time_matrix(&sys.b, n, Some(l.max(1)), "system.b", "N", &params, t0, &mut errs);
+    let y0 = const_vector(sys.y0.as_deref(), n, "system.y0", "N", &params, &mut errs, false);
+    let eta0 = const_vector(sys.eta0.as_deref(), n, "system.eta0", "N", &params, &mut errs, true);
+    let (w, phi) = noise_cov(
+        sys.phi.as_deref(),
+        sys.w.as_deref(),
+        l.max(1),
+        ("system.phi", "system.W", "L"),
+        &params,
+        &mut errs,
+    );
+
+    // --- measurement
+    let meas = &model.measurement;
+    let nm = meas.names.len();
+    if nm == 0 {
+        errs.at("measurement.names", "at least one measurement is needed");
+    } else if nm > n {
+        errs.at(
+            "measurement.names",
+            format!("{nm} measurements but only {n} states: kea needs n ≤ N"),
+        );
+    }
+    check_names(&meas.names, "measurement.names", &mut errs);
+    let mut c = vec![0.0; nm * n];
+    check_shape(&meas.c, nm, Some(n), "measurement.c", "n", "N", &mut errs);
+    for (i, row) in meas.c.iter().enumerate().take(nm) {
+        for (j, v) in row.iter().enumerate().take(n) {
+            let path = format!("measurement.c[{i}][{j}]");
+            match compile_const(v, &params, &path) {
+                Ok(x) => c[i * n + j] = x,
+                Err(e) => errs.push(e),
+            }
+        }
+    }
+    let noise = match (&meas.gamma, &meas.g) {
+        (Some(_), Some(_)) => {
+            errs.at("measurement.g", "give either gamma (n×M) or g (N×M, the seed's form), not both");
+            None
+        }
+        (None, None) => {
+            errs.at("measurement.gamma", "missing: give gamma (n×M) or g (N×M, the seed's form)");
+            None
+        }
+        (Some(gm), None) => {
+            let mcols = gm.first().map(|r| r.len()).unwrap_or(0);
+            if mcols == 0 && gm.len() == nm {
+                errs.at("measurement.gamma[0]", "gamma needs at least one column (M ≥ 1)");
+            }
+            Some(MeasurementNoise::Gamma(time_matrix(
+                gm, nm, Some(mcols.max(1)), "measurement.gamma", "n", &params, t0, &mut errs,
+            )))
+        }
+        (None, Some(g)) => {
+            let mcols = g.first().map(|r| r.len()).unwrap_or(0);
+            if mcols == 0 && g.len() == n {
+                errs.at("measurement.g[0]", "g needs at least one column (M ≥ 1)");
+            }
+            Some(MeasurementNoise::SeedG(time_matrix(
+                g, n, Some(mcols.max(1)), "measurement.g", "N", &params, t0, &mut errs,
+            )))
+        }
+    };
+    let m_sources = noise.as_ref().map(|x| x.sources()).unwrap_or(1);
+    let (v, psi) = noise_cov(
+        meas.psi.as_deref(),
+        meas.v.as_deref(),
+        m_sources,
+        ("measurement.psi", "measurement.V", "M"),
+        &params,
+        &mut errs,
+    );
+
+    // --- pairs (METHOD §1.1)
+    let mut pair_of_state: Vec<Option<usize>> = vec![None; n];
+    match &meas.pairs {
+        Some(pairs) => {
+            let mut used_m = vec![false; nm];
+            for (k, p) in pairs.iter().enumerate() {
+                let si = sys.states.iter().position(|s| *s == p.state);
+                let mi = meas.names.iter().position(|s| *s == p.measurement);
+                match (si, mi) {
+                    (None, _) => errs.at(
+                        &format!("measurement.pairs[{k}].state"),
+                        format!("no state named \"{}\" (states: {})", p.state, sys.states.join(", ")),
+                    ),
+                    (_, None) => errs.at(
+                        &format!("measurement.pairs[{k}].measurement"),
+                        format!(
+                            "no measurement named \"{}\" (measurements: {})",
+                            p.measurement,
+                            meas.names.join(", ")
+                        ),
+                    ),
+                    (Some(si), Some(mi)) => {
+                        if pair_of_state[si].is_some() {
+                            errs.at(
+                                &format!("measurement.pairs[{k}].state"),
+                                format!("state \"{}\" is paired twice", p.state),
+                            );
+                        } else if used_m[mi] {
+                            errs.at(
+                                &format!("measurement.pairs[{k}].measurement"),
+                                format!("measurement \"{}\" is paired twice", p.measurement),
+                            );
+                        } else {
+                            pair_of_state[si] = Some(mi);
+                            used_m[mi] = true;
+                        }
+                    }
+                }
+            }
+        }
+        None => {
+            // Row j of C with a single non-zero entry, in column i, pairs state i with j.
+            for j in 0..nm {
+                let nz: Vec<usize> = (0..n).filter(|&i| c[j * n + i] != 0.0).collect();
+                if nz.len() == 1 && pair_of_state[nz[0]].is_none() {
+                    pair_of_state[nz[0]] = Some(j);
+                }
+            }
+        }
+    }
+
+    // --- criteria
+    let cr = &model.criteria;
+    if !(cr.confidence > 0.0 && cr.confidence < 1.0) {
+        errs.at(
+            "criteria.confidence",
+            format!("expected a probability strictly between 0 and 1, got {}", cr.confidence),
+        );
+    }
+    let paired: Vec<bool> = pair_of_state.iter().map(|p| p.is_some()).collect();
+    let weights_yz = weights(cr.weights.yz.as_deref(), n, Some(&paired), "criteria.weights.yz", &sys.states, &mut errs);
+    let weights_zx = weights(cr.weights.zx.as_deref(), n, Some(&paired), "criteria.weights.zx", &sys.states, &mut errs);
+    let weights_yx = weights(cr.weights.yx.as_deref(), n, None, "criteria.weights.yx", &sys.states, &mut errs);
+
+    // --- options
+    let op = &model.options;
+    if op.trace_points < 2 || op.trace_points > MAX_TRACE_POINTS {
+        errs.at(
+            "options.trace_points",
+            format!("expected 2 to {MAX_TRACE_POINTS}, got {}", op.trace_points),
+        );
+    }
+
+    if !errs.0.is_empty() {
+        return Err(Error::Invalid(errs.0));
+    }
+    Ok(CompiledModel {
+        states: sys.states.clone(),
+        measurements: meas.names.clone(),
+        t0,
+        t_end: t.t_end,
+        steps,
+        a,
+        u,
+        b,
+        c,
+        noise: noise.expect("checked above"),
+        y0,
+        eta0,
+        w,
+        phi,
+        v,
+        psi,
+        pair_of_state,
+        weights_yz,
+        weights_zx,
+        weights_yx,
+        confidence: cr.confidence,
+        trace_points: op.trace_points,
+        steady_state_shortcut: op.steady_state_shortcut,
+    })
+}
+
+fn is_identifier(s: &str) -> bool {
+    let mut it = s.chars();
+    matches!(it.next(), Some(c) if c.is_alphabetic() || c == '_')
+        && it.all(|c| c.is_alphanumeric() || c == '_')
+}
+
+fn check_names(names: &[String], path: &str, errs: &mut Errors) {
+    for (i, name) in names.iter().enumerate() {
+        if name.trim().is_empty() {
+            errs.at(&format!("{path}[{i}]"), "a name must not be empty");
+        } else if names[..i].contains(name) {
+            errs.at(&format!("{path}[{i}]"), format!("duplicate name \"{name}\""));
+        }
+    }
+}
+
+/// Check rows × cols; `cols` None means "any, but all rows equal".
+fn check_shape(
+    m: &[Vec<Value>],
+    rows: usize,
+    cols: Option<usize>,
+    path: &str,
+    rows_sym: &str,
+    cols_sym: &str,
+    errs: &mut Errors,
+) -> bool {
+    let mut ok = true;
+    if m.len() != rows {
+        errs.at(
+            path,
+            format!("has {} rows, expected {rows} ({rows_sym} = {rows})", m.len()),
+        );
+        ok = false;
+    }
+    if let Some(cols) = cols {
+        for (i, row) in m.iter().enumerate().take(rows) {
+            if row.len() != cols {
+                errs.at(
+                    &format!("{path}[{i}]"),
+                    format!(
+                        "row {i} of `{}` has {} entries, expected {cols} ({cols_sym} = {cols})",
+                        path.rsplit('.').next().unwrap_or(path),
+                        row.len()
+                    ),
+                );
+                ok = false;
+            }
+        }
+    }
+    ok
+}
+
+#[allow(clippy::too_many_arguments)]
+fn time_matrix(
+    m: &[Vec<Value>],
+    rows: usize,
+    cols: Option<usize>,
+    path: &str,
+    rows_sym: &str,
+    params: &BTreeMap<String, f64>,
+    t0: f64,
+    errs: &mut Errors,
+) -> TimeMatrix {
+    let cols_n = cols.unwrap_or(0);
+    let cols_sym = match path {
+        "system.a" => "N",
+        "system.b" => "L, from row 0",
+        _ => "M, from row 0",
+    };
+    let shape_ok = check_shape(m, rows, cols, path, rows_sym, cols_sym, errs);
+    let mut entries = Vec::with_capacity(rows * cols_n);
+    for i in 0..rows {
+        for j in 0..cols_n {
+            let p = format!("{path}[{i}][{j}]");
+            let e = match m.get(i).and_then(|r| r.get(j)) {
+                Some(v) if shape_ok => match compile_entry(v, params, &p, true, t0) {
+                    Ok(e) => e,
+                    Err(e) => {
+                        errs.push(e);
+                        Entry::Const(0.0)
+                    }
+                },
+                _ => Entry::Const(0.0),
+            };
+            entries.push((e, p));
+        }
+    }
+    TimeMatrix::from_entries(rows, cols_n, entries)
+}
+
+fn time_vector(
+    v: &[Value],
+    n: usize,
+    path: &str,
+    sym: &str,
+    params: &BTreeMap<String, f64>,
+    t0: f64,
+    errs: &mut Errors,
+) -> TimeMatrix {
+    if v.len() != n {
+        errs.at(path, format!("has {} entries, expected {n} ({sym} = {n})", v.len()));
+    }
+    let mut entries = Vec::with_capacity(n);
+    for i in 0..n {
+        let p = format!("{path}[{i}]");
+        let e = match v.get(i) {
+            Some(x) => compile_entry(x, params, &p, true, t0).unwrap_or_else(|e| {
+                errs.push(e);
+                Entry::Const(0.0)
+            }),
+            None => Entry::Const(0.0),
+        };
+        entries.push((e, p));
+    }
+    TimeMatrix::from_entries(n, 1, entries)
+}
+
+fn const_vector(
+    v: Option<&[Value]>,
+    n: usize,
+    path: &str,
+    sym: &str,
+    params: &BTreeMap<String, f64>,
+    errs: &mut Errors,
+    non_negative: bool,
+) -> Vec<f64> {
+    let Some(v) = v else {
+        return vec![0.0; n];
+    };
+    if v.len() != n {
+        errs.at(path, format!("has {} entries, expected {n} ({sym} = {n})", v.len()));
+        return vec![0.0; n];
+    }
+    v.iter()
+        .enumerate()
+        .map(|(i, x)| {
+            let p = format!("{path}[{i}]");
+            match compile_const(x, params, &p) {
+                Ok(x) if non_negative && x < 0.0 => {
+                    errs.at(&p, format!("an SKO must be ≥ 0, got {x}"));
+                    0.0
+                }
+                Ok(x) => x,
+                Err(e) => {
+                    errs.push(e);
+                    0.0
+                }
+            }
+        })
+        .collect()
+}
+
+/// SKOs (diagonal covariance) or a full covariance matrix: returns (cov, skos).
+fn noise_cov(
+    sko: Option<&[Value]>,
+    cov: Option<&[Vec<Value>]>,
+    dim: usize,
+    (sko_path, cov_path, sym): (&str, &str, &str),
+    params: &BTreeMap<String, f64>,
+    errs: &mut Errors,
+) -> (Vec<f64>, Vec<f64>) {
+    match (sko, cov) {
+        (Some(_), Some(_)) => {
+            errs.at(cov_path, format!("give either {} or {}, not both", leaf(sko_path), leaf(cov_path)));
+            (vec![0.0; dim * dim], vec![0.0; dim])
+        }
+        (None, None) => {
+            errs.at(
+                sko_path,
+                format!("missing: give the SKOs {} ({sym} entries) or the covariance {}", leaf(sko_path), leaf(cov_path)),
+            );
+            (vec![0.0; dim * dim], vec![0.0; dim])
+        }
+        (Some(s), None) => {
+            let s = const_vector(Some(s), dim, sko_path, sym, params, errs, true);
+            let mut cov = vec![0.0; dim * dim];
+            for i in 0..dim {
+                cov[i * dim + i] = s[i] * s[i];
+            }
+            (cov, s)
+        }
+        (None, Some(m)) => {
+            let mut cov = vec![0.0; dim * dim];
+            if !check_shape(m, dim, Some(dim), cov_path, sym, sym, errs) {
+                return (cov, vec![0.0; dim]);
+            }
+            let before = errs.0.len();
+            for i in 0..dim {
+                for j in 0..dim {
+                    let p = format!("{cov_path}[{i}][{j}]");
+                    match compile_const(&m[i][j], params, &p) {
+                        Ok(x) => cov[i * dim + j] = x,
+                        Err(e) => errs.push(e),
+                    }
+                }
+            }
+            if errs.0.len() == before {
+                for i in 0..dim {
+                    for j in 0..i {
+                        let (x, y) = (cov[i * dim + j], cov[j * dim + i]);
+                        if (x - y).abs() > 1e-12 * x.abs().max(y.abs()) {
+                            errs.at(
+                                &format!("{cov_path}[{i}][{j}]"),
+                                format!("a covariance must be symmetric: [{i}][{j}] = {x} but [{j}][{i}] = {y}"),
+                            );
+                        }
+                    }
+                }
+                let mat = nalgebra::DMatrix::from_row_slice(dim, dim, &cov);
+                let eig = nalgebra::SymmetricEigen::new(mat);
+                let min = eig.eigenvalues.iter().cloned().fold(f64::INFINITY, f64::min);
+                let max = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
+                if min < -1e-12 * max.max(f64::MIN_POSITIVE) {
+                    errs.at(
+                        cov_path,
+                        format!("a covariance must be positive semi-definite; its smallest eigenvalue is {min:e}"),
+                    );
+                }
+            }
+            let s = (0..dim).map(|i| cov[i * dim + i].max(0.0).sqrt()).collect();
+            (cov, s)
+        }
+    }
+}
+
+fn leaf(path: &str) -> &str {
+    path.rsplit('.').next().unwrap_or(path)
+}
+
+fn weights(
+    w: Option<&[f64]>,
+    n: usize,
+    defined: Option<&[bool]>,
+    path: &str,
+    states: &[String],
+    errs: &mut Errors,
+) -> Option<Vec<f64>> {
+    let w = w?;
+    if w.len() != n {
+        errs.at(path, format!("has {} weights, expected one per state ({n})", w.len()));
+        return None;
+    }
+    let mut ok = true;
+    for (i, x) in w.iter().enumerate() {
+        if !(x.is_finite() && *x >= 0.0) {
+            errs.at(&format!("{path}[{i}]"), format!("a weight must be a finite number ≥ 0, got {x}"));
+            ok = false;
+        } else if *x > 0.0 && defined.is_some_and(|d| !d[i]) {
+            errs.at(
+                &format!("{path}[{i}]"),
+                format!(
+                    "state \"{}\" has no paired measurement, so this criterion is undefined for it: its weight must be 0",
+                    states[i]
+                ),
+            );
+            ok = false;
+        }
+    }
+    let sum: f64 = w.iter().sum();
+    if ok && (sum - 1.0).abs() > WEIGHT_TOL {
+        errs.at(path, format!("weights must sum to 1, they sum to {sum}"));
+        ok = false;
+    }
+    ok.then(|| w.to_vec())
+}

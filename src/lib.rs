@@ -10,6 +10,7 @@ pub mod error;
 pub mod expr;
 pub mod model;
 pub mod presets;
+pub mod report;
 pub mod result;
 pub mod validate;
 

@@ -1,1 +1,150 @@
+//! kea in the browser: a thin wasm-bindgen adapter over `kea-core`.
+//!
+//! Architecture invariant: no estimation maths here. Every function parses its JSON
+//! input, calls one core function, and returns JSON (or throws a JSON error object of
+//! the same shape as the HTTP API's problem details: `{kind, title, errors:[{path,
+//! message}]}`). It is meant to run inside a Web Worker (`web/worker.js`), so a long
+//! analysis never blocks the page.
 
+use kea_core::{Error, FieldError, Overrides};
+use serde::Serialize;
+use std::ops::ControlFlow;
+use wasm_bindgen::prelude::*;
+
+/// The error thrown to JavaScript, as a JSON string.
+#[derive(Serialize)]
+struct ErrorOut {
+    /// `invalid`, `numerical` or `cancelled`.
+    kind: &'static str,
+    title: String,
+    errors: Vec<FieldError>,
+}
+
+fn error_json(e: &Error) -> String {
+    let kind = match e {
+        Error::Invalid(_) => "invalid",
+        Error::Numerical { .. } => "numerical",
+        Error::Cancelled => "cancelled",
+    };
+    let out = ErrorOut {
+        kind,
+        title: e.to_string(),
+        errors: e.field_errors(),
+    };
+    serde_json::to_string(&out).expect("error serialises")
+}
+
+fn to_js(e: &Error) -> JsValue {
+    JsValue::from_str(&error_json(e))
+}
+
+/// Parse `{"name": value, ...}` overrides; an empty string means none.
+fn overrides(set_json: &str) -> Result<Overrides, Error> {
+    if set_json.trim().is_empty() {
+        return Ok(Overrides::new());
+    }
+    serde_json::from_str(set_json)
+        .map_err(|e| Error::invalid("set", format!("expected an object of numbers: {e}")))
+}
+
+/// Parse and validate a model: the list of problems as JSON (`[]` when valid).
+/// Paths are the core's (`system.a[1][2]`), so the editor can mark the exact cell.
+#[wasm_bindgen]
+pub fn check(model_json: &str, set_json: &str) -> String {
+    let result = kea_core::model_from_json(model_json)
+        .and_then(|model| kea_core::check(&model, &overrides(set_json)?));
+    let errors = match result {
+        Ok(()) => Vec::new(),
+        Err(e) => e.field_errors(),
+    };
+    serde_json::to_string(&errors).expect("errors serialise")
+}
+
+/// Run the analysis. `progress(fraction)` is called every few thousand steps; if it
+/// returns `false` the run stops and this throws a `cancelled` error. Returns the
+/// result JSON, with `timing.wall_ms` measured here (the core has no clock).
+#[wasm_bindgen]
+pub fn analyze(
+    model_json: &str,
+    set_json: &str,
+    progress: &js_sys::Function,
+) -> Result<String, JsValue> {
+    let start = js_sys::Date::now();
+    let model = kea_core::model_from_json(model_json).map_err(|e| to_js(&e))?;
+    let set = overrides(set_json).map_err(|e| to_js(&e))?;
+    let mut report = |fraction: f64| {
+        let answer = progress.call1(&JsValue::NULL, &JsValue::from_f64(fraction));
+        match answer {
+            Ok(v) if v == JsValue::FALSE => ControlFlow::Break(()),
+            Err(_) => ControlFlow::Break(()),
+            Ok(_) => ControlFlow::Continue(()),
+        }
+    };
+    let mut result = kea_core::analyze(&model, &set, &mut report).map_err(|e| to_js(&e))?;
+    result.timing.wall_ms = js_sys::Date::now() - start;
+    serde_json::to_string(&result).map_err(|e| JsValue::from_str(&e.to_string()))
+}
+
+/// The traces of a result (as returned by [`analyze`]) as CSV, same as the CLI's.
+#[wasm_bindgen]
+pub fn traces_csv(result_json: &str) -> Result<String, JsValue> {
+    let result: kea_core::AnalysisResult = serde_json::from_str(result_json)
+        .map_err(|e| to_js(&Error::invalid("", format!("not a kea result: {e}"))))?;
+    Ok(kea_core::report::traces_csv(&result))
+}
+
+/// Name, title, description and sizes of every preset, as JSON.
+#[wasm_bindgen]
+pub fn presets() -> String {
+    serde_json::to_string(&kea_core::presets::list()).expect("presets serialise")
+}
+
+/// One preset's model JSON, exactly as shipped; `undefined` for an unknown name.
+#[wasm_bindgen]
+pub fn preset(name: &str) -> Option<String> {
+    kea_core::presets::get_json(name).map(str::to_string)
+}
+
+/// The version of kea this build comes from.
+#[wasm_bindgen]
+pub fn version() -> String {
+    env!("CARGO_PKG_VERSION").to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn check_points_at_the_bad_cell() {
+        let mut model: serde_json::Value =
+            serde_json::from_str(kea_core::presets::get_json("cv-tracker").unwrap()).unwrap();
+        model["system"]["a"][0][1] = serde_json::json!("1 +* q");
+        let errors: Vec<serde_json::Value> =
+            serde_json::from_str(&check(&model.to_string(), "")).unwrap();
+        assert!(!errors.is_empty());
+        assert_eq!(errors[0]["path"], "system.a[0][1]");
+    }
+
+    #[test]
+    fn check_accepts_every_preset_and_rejects_unknown_overrides() {
+        for p in kea_core::presets::names() {
+            assert_eq!(check(kea_core::presets::get_json(p).unwrap(), "{}"), "[]");
+        }
+        let seed = kea_core::presets::get_json("seed-example").unwrap();
+        let errors: Vec<serde_json::Value> =
+            serde_json::from_str(&check(seed, r#"{"nope": 1}"#)).unwrap();
+        assert_eq!(errors.len(), 1);
+        let bad: Vec<serde_json::Value> = serde_json::from_str(&check(seed, "[1]")).unwrap();
+        assert_eq!(bad[0]["path"], "set");
+    }
+
+    #[test]
+    fn presets_list_names_and_texts() {
+        let list: Vec<serde_json::Value> = serde_json::from_str(&presets()).unwrap();
+        assert_eq!(list.len(), kea_core::presets::names().len());
+        assert_eq!(list[0]["name"], "seed-example");
+        assert!(preset("seed-example").unwrap().contains("\"kea_model\""));
+        assert!(preset("no-such").is_none());
+    }
+}

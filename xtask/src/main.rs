@@ -1,1 +1,370 @@
-fn main() {}
+//! kea's dev tasks (`cargo xtask …`, see `.cargo/config.toml`), std only.
+//!
+//! - `cargo xtask serve [-- <kea serve args>]`: build the wasm module and start
+//!   `kea serve` with the web UI — the README's one run command.
+//! - `cargo xtask test`: every test — Rust (release, so the builds are shared with
+//!   `serve`), then the browser end-to-end tests against the real server.
+//! - `cargo xtask wasm`: only build the wasm module into `web/pkg`.
+//! - `cargo xtask bench-web`: the wasm-in-browser vs native benchmark.
+//!
+//! Missing tools are installed on the way: the `wasm32-unknown-unknown` target, the
+//! `wasm-bindgen` CLI of exactly the version pinned in `wasm/Cargo.toml`, Chromium (apt) and the
+//! e2e tests' npm packages (`npm ci`).
+
+use std::env;
+use std::ffi::OsStr;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitCode};
+
+type Result<T> = std::result::Result<T, String>;
+
+const WASM_TARGET: &str = "wasm32-unknown-unknown";
+const USAGE: &str = "usage: cargo xtask <command>
+
+commands:
+  serve [-- <kea serve args>]   build the wasm module, then run `kea serve` (web UI at /)
+  test                          run every test: Rust (release) and the browser e2e tests
+  wasm                          build the wasm module into web/pkg
+  bench-web                     benchmark the analysis in the browser (wasm) against native
+";
+
+fn main() -> ExitCode {
+    let args: Vec<String> = env::args().skip(1).collect();
+    let (cmd, rest) = match args.split_first() {
+        Some((c, r)) => (c.as_str(), r),
+        None => {
+            eprint!("{USAGE}");
+            return ExitCode::FAILURE;
+        }
+    };
+    // Arguments after `--` go to `kea serve`; a leading `--` is optional.
+    let rest: Vec<String> = match rest.first().map(String::as_str) {
+        Some("--") => rest[1..].to_vec(),
+        _ => rest.to_vec(),
+    };
+    let outcome = match cmd {
+        "serve" => serve(&rest),
+        "test" => test(),
+        "wasm" => build_wasm(),
+        "bench-web" => bench_web(),
+        "-h" | "--help" | "help" => {
+            print!("{USAGE}");
+            Ok(())
+        }
+        other => Err(format!("unknown command `{other}`\n\n{USAGE}")),
+    };
+    match outcome {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// The workspace root (the parent of this crate's folder).
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("xtask lives in the workspace")
+        .to_path_buf()
+}
+
+/// Cargo's target folder: `$CARGO_TARGET_DIR` or `<root>/target`.
+fn target_dir() -> PathBuf {
+    match env::var_os("CARGO_TARGET_DIR") {
+        Some(dir) => {
+            let dir = PathBuf::from(dir);
+            if dir.is_absolute() {
+                dir
+            } else {
+                root().join(dir)
+            }
+        }
+        None => root().join("target"),
+    }
+}
+
+fn cargo() -> Command {
+    let mut c = Command::new(env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
+    c.current_dir(root());
+    c
+}
+
+/// Run a command to completion; an error names it if it fails or cannot start.
+fn run(cmd: &mut Command) -> Result<()> {
+    eprintln!("xtask: $ {}", describe(cmd));
+    let status = cmd
+        .status()
+        .map_err(|e| format!("cannot start `{}`: {e}", describe(cmd)))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("`{}` failed ({status})", describe(cmd)))
+    }
+}
+
+/// Run a command and return its stdout, or None if it cannot start or fails.
+fn output(cmd: &mut Command) -> Option<String> {
+    let out = cmd.output().ok()?;
+    out.status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+fn describe(cmd: &Command) -> String {
+    let mut s = cmd.get_program().to_string_lossy().into_owned();
+    for a in cmd.get_args() {
+        s.push(' ');
+        s.push_str(&a.to_string_lossy());
+    }
+    s
+}
+
+// ---------------------------------------------------------------- toolchain
+
+/// The wasm-bindgen version pinned (`"=X.Y.Z"`) in `wasm/Cargo.toml`: the CLI must
+/// match it exactly.
+fn pinned_wasm_bindgen() -> Result<String> {
+    let path = root().join("wasm").join("Cargo.toml");
+    let manifest =
+        fs::read_to_string(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    exact_pin(&manifest, "wasm-bindgen").ok_or_else(|| {
+        format!(
+            "{} must pin wasm-bindgen exactly (`wasm-bindgen = \"=X.Y.Z\"`)",
+            path.display()
+        )
+    })
+}
+
+/// The version of dependency `name` pinned as `name = "=X.Y.Z"` in a manifest.
+fn exact_pin(manifest: &str, name: &str) -> Option<String> {
+    manifest.lines().find_map(|line| {
+        let (key, value) = line.split_once('=')?;
+        if key.trim() != name {
+            return None;
+        }
+        let v = value.trim().strip_prefix("\"=")?.strip_suffix('"')?;
+        Some(v.to_string())
+    })
+}
+
+/// The `wasm-bindgen` executable: on PATH, else in `$CARGO_HOME/bin`.
+fn wasm_bindgen_exe() -> PathBuf {
+    let cargo_home = env::var_os("CARGO_HOME")
+        .map(PathBuf::from)
+        .or_else(|| env::var_os("HOME").map(|h| PathBuf::from(h).join(".cargo")));
+    if output(Command::new("wasm-bindgen").arg("--version")).is_none() {
+        if let Some(home) = cargo_home {
+            let exe = home.join("bin").join("wasm-bindgen");
+            if exe.exists() {
+                return exe;
+            }
+        }
+    }
+    PathBuf::from("wasm-bindgen")
+}
+
+/// Make sure the wasm target and the matching wasm-bindgen CLI are installed.
+fn ensure_wasm_toolchain() -> Result<PathBuf> {
+    let installed = output(Command::new("rustup").args(["target", "list", "--installed"]));
+    match installed {
+        Some(list) if list.lines().any(|l| l.trim() == WASM_TARGET) => {}
+        Some(_) => run(Command::new("rustup").args(["target", "add", WASM_TARGET]))?,
+        None => {
+            eprintln!("xtask: rustup not found; assuming the {WASM_TARGET} target is installed")
+        }
+    }
+
+    let version = pinned_wasm_bindgen()?;
+    let exe = wasm_bindgen_exe();
+    let found = output(Command::new(&exe).arg("--version"));
+    let want = format!("wasm-bindgen {version}");
+    if found.as_deref().map(str::trim) != Some(want.as_str()) {
+        eprintln!(
+            "xtask: need wasm-bindgen-cli {version} (found: {}); installing (a few minutes)",
+            found.as_deref().map(str::trim).unwrap_or("none")
+        );
+        // No `--locked`: the CLI's own lock file names a version the index lacks
+        // (see TOOLCHAIN notes); the exact `--version` pin is what matters.
+        run(cargo().args(["install", "wasm-bindgen-cli", "--version", &version]))?;
+        let exe = wasm_bindgen_exe();
+        let found = output(Command::new(&exe).arg("--version"));
+        if found.as_deref().map(str::trim) != Some(want.as_str()) {
+            return Err(format!(
+                "installed wasm-bindgen-cli {version} but `{}` reports {:?}; is ~/.cargo/bin on PATH?",
+                exe.display(),
+                found
+            ));
+        }
+        return Ok(exe);
+    }
+    Ok(exe)
+}
+
+/// Build `kea-wasm` for the browser into `web/pkg` (release).
+fn build_wasm() -> Result<()> {
+    let wasm_bindgen = ensure_wasm_toolchain()?;
+    run(cargo().args([
+        "build",
+        "--release",
+        "-p",
+        "kea-wasm",
+        "--target",
+        WASM_TARGET,
+    ]))?;
+    let wasm = target_dir()
+        .join(WASM_TARGET)
+        .join("release")
+        .join("kea_wasm.wasm");
+    run(Command::new(wasm_bindgen)
+        .current_dir(root())
+        .args(["--target", "web", "--no-typescript", "--out-dir"])
+        .arg(root().join("web").join("pkg"))
+        .arg(&wasm))
+}
+
+// ---------------------------------------------------------------- commands
+
+fn serve(args: &[String]) -> Result<()> {
+    build_wasm()?;
+    let mut cmd = cargo();
+    cmd.args([
+        "run",
+        "--release",
+        "-p",
+        "kea-server",
+        "--bin",
+        "kea",
+        "--",
+        "serve",
+    ]);
+    cmd.args(args);
+    run(&mut cmd)
+}
+
+fn test() -> Result<()> {
+    build_wasm()?;
+    run(cargo().args(["test", "--workspace", "--release"]))?;
+    run(cargo().args(["build", "--release", "-p", "kea-server", "--bin", "kea"]))?;
+    e2e(&["--test"], &e2e_test_files()?)
+}
+
+fn bench_web() -> Result<()> {
+    build_wasm()?;
+    run(cargo().args(["build", "--release", "-p", "kea-server", "--bin", "kea"]))?;
+    e2e(&[], &[PathBuf::from("bench.mjs")])
+}
+
+/// The browser test files: `tests/e2e/*.test.mjs`, sorted.
+fn e2e_test_files() -> Result<Vec<PathBuf>> {
+    let dir = root().join("tests").join("e2e");
+    let mut files: Vec<PathBuf> = fs::read_dir(&dir)
+        .map_err(|e| format!("cannot list {}: {e}", dir.display()))?
+        .filter_map(|e| e.ok())
+        .map(|e| PathBuf::from(e.file_name()))
+        .filter(|p| p.to_string_lossy().ends_with(".test.mjs"))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(format!("no *.test.mjs files in {}", dir.display()));
+    }
+    Ok(files)
+}
+
+/// Run node scripts in `tests/e2e` against the built `kea` binary and Chromium.
+fn e2e(node_args: &[&str], files: &[PathBuf]) -> Result<()> {
+    let chromium = ensure_chromium()?;
+    ensure_node()?;
+    let dir = root().join("tests").join("e2e");
+    run(Command::new("npm")
+        .current_dir(&dir)
+        .args(["ci", "--no-audit", "--no-fund"]))?;
+    let kea = target_dir().join("release").join(exe_name("kea"));
+    let mut cmd = Command::new("node");
+    cmd.current_dir(&dir)
+        .args(node_args)
+        .args(files)
+        .env("KEA_BIN", &kea)
+        .env("KEA_ROOT", root())
+        .env("KEA_CHROMIUM", &chromium);
+    run(&mut cmd)
+}
+
+fn exe_name(name: &str) -> String {
+    format!("{name}{}", env::consts::EXE_SUFFIX)
+}
+
+/// Chromium for the browser tests: `$KEA_CHROMIUM`, else Debian's, installed if missing.
+fn ensure_chromium() -> Result<PathBuf> {
+    if let Some(p) = env::var_os("KEA_CHROMIUM") {
+        return Ok(PathBuf::from(p));
+    }
+    let debian = PathBuf::from("/usr/bin/chromium");
+    if !debian.exists() {
+        eprintln!("xtask: Chromium missing; installing it with apt-get");
+        apt_install(&["chromium"])?;
+    }
+    if debian.exists() {
+        Ok(debian)
+    } else {
+        Err("Chromium is still missing after apt-get; set KEA_CHROMIUM to a browser".into())
+    }
+}
+
+fn ensure_node() -> Result<()> {
+    if output(Command::new("node").arg("--version")).is_some()
+        && output(Command::new("npm").arg("--version")).is_some()
+    {
+        return Ok(());
+    }
+    eprintln!("xtask: node/npm missing; installing them with apt-get");
+    apt_install(&["nodejs", "npm"])
+}
+
+fn apt_install(packages: &[&str]) -> Result<()> {
+    let as_root = output(Command::new("id").arg("-u")).is_some_and(|u| u.trim() == "0");
+    let apt = |args: &[&str]| {
+        let mut c = if as_root {
+            Command::new("apt-get")
+        } else {
+            let mut c = Command::new("sudo");
+            c.arg("apt-get");
+            c
+        };
+        c.args(args).env("DEBIAN_FRONTEND", "noninteractive");
+        c
+    };
+    run(&mut apt(&["update"]))?;
+    let mut install = apt(&["install", "-y", "--no-install-recommends"]);
+    install.args(packages.iter().map(OsStr::new));
+    run(&mut install)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_an_exact_pin_from_a_manifest() {
+        let manifest = "[dependencies]\nwasm-bindgen-futures = \"=9.9.9\"\n\
+                        wasm-bindgen = \"=0.2.130\"\njs-sys = \"0.3\"\n";
+        assert_eq!(
+            exact_pin(manifest, "wasm-bindgen").as_deref(),
+            Some("0.2.130")
+        );
+        assert_eq!(
+            exact_pin(manifest, "wasm-bindgen-futures").as_deref(),
+            Some("9.9.9")
+        );
+        assert_eq!(exact_pin(manifest, "js-sys"), None, "not an exact pin");
+        assert_eq!(exact_pin(manifest, "serde"), None);
+    }
+
+    #[test]
+    fn the_workspace_pins_wasm_bindgen() {
+        let v = pinned_wasm_bindgen().unwrap();
+        assert_eq!(v.split('.').count(), 3, "{v}");
+    }
+}

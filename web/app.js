@@ -1,0 +1,264 @@
+// kea's web UI: wires the preset picker, the model editor, the run toggle (browser
+// wasm worker or server job) and the results. The model lives in the URL (#model=…,
+// deflated and base64url-encoded) so any state can be shared as a link.
+
+import { ModelEditor } from './editor.js';
+import { BrowserRunner, ServerRunner, WasmWorker } from './runner.js';
+import { TraceChart, criteriaTable, finalTable, fmt } from './results.js';
+
+const $ = (id) => document.getElementById(id);
+
+const service = new WasmWorker(); // presets, validation, CSV: never blocked by a run
+const runners = { browser: new BrowserRunner(), server: new ServerRunner() };
+const state = { preset: null, result: null, job: null, running: null, checkSeq: 0 };
+
+// ------------------------------------------------------------------ URL
+
+function toBase64Url(bytes) {
+  let s = '';
+  for (const b of new Uint8Array(bytes)) s += String.fromCharCode(b);
+  return btoa(s).replaceAll('+', '-').replaceAll('/', '_').replace(/=+$/, '');
+}
+
+function fromBase64Url(text) {
+  const s = atob(text.replaceAll('-', '+').replaceAll('_', '/'));
+  return Uint8Array.from(s, (c) => c.charCodeAt(0));
+}
+
+async function encodeModel(json) {
+  const stream = new Blob([json]).stream().pipeThrough(new CompressionStream('deflate-raw'));
+  return toBase64Url(await new Response(stream).arrayBuffer());
+}
+
+async function decodeModel(text) {
+  const stream = new Blob([fromBase64Url(text)]).stream().pipeThrough(new DecompressionStream('deflate-raw'));
+  return JSON.parse(await new Response(stream).text());
+}
+
+let urlTimer = null;
+function saveToUrl() {
+  clearTimeout(urlTimer);
+  urlTimer = setTimeout(async () => {
+    const hash = state.preset ? `#preset=${encodeURIComponent(state.preset)}` : `#model=${await encodeModel(modelJson())}`;
+    if (location.hash !== hash) history.replaceState(null, '', hash);
+  }, 300);
+}
+
+// ------------------------------------------------------------------ model
+
+const editor = new ModelEditor($('editor'), () => {
+  if (state.preset) {
+    state.preset = null;
+    $('preset').value = '';
+  }
+  saveToUrl();
+  scheduleCheck();
+});
+
+function modelJson() {
+  return JSON.stringify(editor.model);
+}
+
+let checkTimer = null;
+function scheduleCheck() {
+  clearTimeout(checkTimer);
+  checkTimer = setTimeout(check, 150);
+}
+
+async function check() {
+  const seq = ++state.checkSeq;
+  const errors = await service.call('check', { model: modelJson(), set: '' });
+  if (seq === state.checkSeq) editor.showErrors(errors);
+  return errors;
+}
+
+function loadModel(model, presetName = null) {
+  state.preset = presetName;
+  $('preset').value = presetName ?? '';
+  editor.load(model);
+  saveToUrl();
+  return check();
+}
+
+async function loadPreset(name) {
+  const model = await service.call('preset', { name });
+  if (!model) throw new Error(`no preset named ${name}`);
+  return loadModel(model, name);
+}
+
+async function loadFromUrl() {
+  const params = new URLSearchParams(location.hash.slice(1));
+  if (params.has('model')) {
+    try {
+      return await loadModel(await decodeModel(params.get('model')));
+    } catch (e) {
+      setStatus(`The link's model could not be read (${e.message}); showing a preset.`, true);
+    }
+  }
+  return loadPreset(params.get('preset') ?? 'seed-example');
+}
+
+function download(name, type, text) {
+  const url = URL.createObjectURL(new Blob([text], { type }));
+  const a = Object.assign(document.createElement('a'), { href: url, download: name });
+  document.body.append(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 1000);
+}
+
+function fileStem() {
+  return (state.preset ?? editor.model.name ?? 'model').replace(/[^a-zA-Z0-9_-]+/g, '-').toLowerCase();
+}
+
+// ------------------------------------------------------------------ running
+
+function setStatus(text, error = false) {
+  $('status').textContent = text;
+  $('status').classList.toggle('error', error);
+}
+
+function mode() {
+  return document.querySelector('input[name=mode]:checked').value;
+}
+
+async function run() {
+  if (state.running) return;
+  const where = mode();
+  const runner = runners[where];
+  state.running = runner;
+  $('run').disabled = true;
+  $('cancel').disabled = false;
+  $('progress').value = 0;
+  setStatus(where === 'browser' ? 'Running in this browser…' : 'Running on the server…');
+  const started = performance.now();
+  try {
+    const { result, job } = await runner.run(modelJson(), (p) => ($('progress').value = p));
+    $('progress').value = 1;
+    const elapsed = performance.now() - started;
+    state.result = result;
+    state.job = job ?? null;
+    editor.showErrors([]);
+    showResult(result, where, elapsed);
+    setStatus(`Done in ${fmt(elapsed / 1000)} s (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`);
+  } catch (e) {
+    if (e.kind === 'cancelled') {
+      setStatus('Cancelled.');
+    } else {
+      const errors = e.errors ?? [];
+      if (errors.length) editor.showErrors(errors);
+      setStatus(errors.length ? `${e.title ?? 'Invalid model'} (see the marked fields)` : e.title ?? String(e), true);
+    }
+    $('progress').value = 0;
+  } finally {
+    state.running = null;
+    $('run').disabled = false;
+    $('cancel').disabled = true;
+  }
+}
+
+function cancel() {
+  state.running?.cancel();
+}
+
+function showResult(r, where, elapsed) {
+  $('results').hidden = false;
+  const parts = [
+    `D = ${r.steps.toLocaleString('en')} steps, Δt = ${fmt(r.dt)}`,
+    `t ∈ [${fmt(r.t0)}, ${fmt(r.t_end)}]`,
+    r.steady_state ? `steady state from step ${r.steady_state.reached_at_step.toLocaleString('en')}${r.steady_state.shortcut_used ? ' (shortcut used)' : ''}` : null,
+    `computed in ${fmt(r.timing.wall_ms)} ms on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`,
+  ].filter(Boolean);
+  $('summary').textContent = parts.join(' · ');
+  $('summary').dataset.where = where;
+  $('summary').dataset.elapsedMs = String(elapsed);
+  $('warnings').replaceChildren(...r.warnings.map((w) => Object.assign(document.createElement('li'), { textContent: w })));
+  $('criteria').replaceChildren(criteriaTable(r));
+  $('final').replaceChildren(finalTable(r));
+  const select = $('trace-state');
+  const previous = select.value;
+  select.replaceChildren(
+    ...r.traces.states.map((s, i) => Object.assign(document.createElement('option'), { value: String(i), textContent: s.state })),
+  );
+  if (previous && Number(previous) < r.traces.states.length) select.value = previous;
+  chart.show(r, { state: select, log: $('trace-log') });
+}
+
+const chart = new TraceChart($('chart'));
+
+// ------------------------------------------------------------------ wiring
+
+async function serverAvailable() {
+  try {
+    const r = await fetch('v1/presets', { headers: { accept: 'application/json' } });
+    return r.ok;
+  } catch {
+    return false;
+  }
+}
+
+async function main() {
+  const presets = await service.call('presets');
+  const picker = $('preset');
+  picker.append(Object.assign(document.createElement('option'), { value: '', textContent: '(custom model)' }));
+  for (const p of presets) {
+    picker.append(
+      Object.assign(document.createElement('option'), {
+        value: p.name,
+        textContent: `${p.title} — N=${p.states}, n=${p.measurements}`,
+        title: p.description,
+      }),
+    );
+  }
+  picker.addEventListener('change', () => picker.value && loadPreset(picker.value));
+
+  $('export-model').addEventListener('click', () =>
+    download(`${fileStem()}.json`, 'application/json', JSON.stringify(editor.model, null, 2) + '\n'),
+  );
+  $('import-model').addEventListener('change', async (e) => {
+    const file = e.target.files[0];
+    if (!file) return;
+    try {
+      await loadModel(JSON.parse(await file.text()));
+      setStatus(`Imported ${file.name}.`);
+    } catch (err) {
+      setStatus(`${file.name} is not JSON: ${err.message}`, true);
+    }
+    e.target.value = '';
+  });
+  $('copy-link').addEventListener('click', async () => {
+    const link = `${location.origin}${location.pathname}#model=${await encodeModel(modelJson())}`;
+    try {
+      await navigator.clipboard.writeText(link);
+      setStatus('Link copied.');
+    } catch {
+      history.replaceState(null, '', link);
+      setStatus('Link is in the address bar.');
+    }
+  });
+  $('run').addEventListener('click', run);
+  $('cancel').addEventListener('click', cancel);
+  $('download-result').addEventListener('click', () =>
+    download(`${fileStem()}-result.json`, 'application/json', JSON.stringify(state.result, null, 2) + '\n'),
+  );
+  $('download-csv').addEventListener('click', async () => {
+    const csv = await service.call('traces_csv', { result: JSON.stringify(state.result) });
+    download(`${fileStem()}-traces.csv`, 'text/csv', csv);
+  });
+  $('trace-state').addEventListener('change', () => chart.draw());
+  $('trace-log').addEventListener('change', () => chart.draw());
+  document.addEventListener('keydown', (e) => {
+    if ((e.ctrlKey || e.metaKey) && e.key === 'Enter') run();
+    if (e.key === 'Escape' && state.running) cancel();
+  });
+
+  if (!(await serverAvailable())) {
+    const server = document.querySelector('input[name=mode][value=server]');
+    server.disabled = true;
+    server.parentElement.title = 'No kea server answers here (open the page through `kea serve`).';
+  }
+  await loadFromUrl();
+  document.body.dataset.ready = 'true';
+}
+
+main().catch((e) => setStatus(`Could not start: ${e.title ?? e.message ?? e}`, true));

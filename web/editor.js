@@ -1,0 +1,528 @@
+// The model editor: params, time, dimensions, and every matrix as a grid of cells
+// that accept a number or an expression in t and the params. Edits change the model
+// object in place (fields the editor does not show are kept), and the core's
+// validation messages are shown at the cell their path names.
+
+const NUMBER = /^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$/;
+
+/** A cell's text as a model value: a number when it reads as one, else an expression. */
+export function parseCell(text) {
+  const s = text.trim();
+  return NUMBER.test(s) ? Number(s) : s;
+}
+
+function showValue(v) {
+  return v === undefined || v === null ? '' : String(v);
+}
+
+function el(tag, attrs = {}, ...children) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (v === undefined || v === null || v === false) continue;
+    if (k === 'class') e.className = v;
+    else if (k === 'text') e.textContent = v;
+    else if (k.startsWith('on')) e.addEventListener(k.slice(2), v);
+    else e.setAttribute(k, v === true ? '' : v);
+  }
+  for (const c of children) if (c !== null && c !== undefined) e.append(c);
+  return e;
+}
+
+const zeros = (n) => Array.from({ length: n }, () => 0);
+const resizeVec = (v, n, fill = () => 0) =>
+  Array.from({ length: n }, (_, i) => (v && i < v.length ? v[i] : fill(i)));
+const resizeMat = (m, r, c) =>
+  Array.from({ length: r }, (_, i) => resizeVec(m?.[i], c));
+
+/** The model's dimensions N, n, L, M (METHOD §1.1). */
+export function dimensions(model) {
+  const s = model.system ?? {};
+  const m = model.measurement ?? {};
+  const noise = m.gamma ?? m.g;
+  return {
+    N: s.states?.length ?? 0,
+    n: m.names?.length ?? 0,
+    L: s.b?.[0]?.length ?? s.phi?.length ?? s.W?.length ?? 0,
+    M: noise?.[0]?.length ?? m.psi?.length ?? m.V?.length ?? 0,
+  };
+}
+
+/** Resize every matrix of the model to new dimensions (new entries 0). */
+export function resize(model, { N, n, L, M }) {
+  const s = model.system;
+  const m = model.measurement;
+  s.states = resizeVec(s.states, N, (i) => `y${i + 1}`);
+  s.a = resizeMat(s.a, N, N);
+  s.b = resizeMat(s.b, N, L);
+  for (const k of ['u', 'y0', 'eta0']) if (s[k]) s[k] = resizeVec(s[k], N);
+  if (s.W) s.W = resizeMat(s.W, L, L);
+  else s.phi = resizeVec(s.phi, L);
+  m.names = resizeVec(m.names, n, (j) => `z${j + 1}`);
+  m.c = resizeMat(m.c, n, N);
+  if (m.g) m.g = resizeMat(m.g, N, M);
+  else m.gamma = resizeMat(m.gamma, n, M);
+  if (m.V) m.V = resizeMat(m.V, M, M);
+  else m.psi = resizeVec(m.psi, M);
+}
+
+/** Parse `system.a[1][2]` into ['system', 'a', 1, 2]. */
+export function splitPath(path) {
+  const out = [];
+  for (const part of path.split('.')) {
+    const m = part.match(/^([^[]*)((\[\d+\])*)$/);
+    if (!m) {
+      out.push(part);
+      continue;
+    }
+    if (m[1]) out.push(m[1]);
+    for (const idx of m[2].matchAll(/\[(\d+)\]/g)) out.push(Number(idx[1]));
+  }
+  return out;
+}
+
+/** The path one level up: `system.a[1][2]` → `system.a[1]` → `system.a` → `system`. */
+function parentPath(path) {
+  if (path.endsWith(']')) return path.slice(0, path.lastIndexOf('['));
+  const dot = path.lastIndexOf('.');
+  return dot < 0 ? '' : path.slice(0, dot);
+}
+
+export class ModelEditor {
+  /** `onChange()` is called after every edit of the model. */
+  constructor(root, onChange) {
+    this.root = root;
+    this.onChange = onChange;
+    this.model = null;
+    this.fields = new Map(); // path → {input?, holder}
+    this.general = el('ul', { class: 'general-errors', 'aria-live': 'polite' });
+  }
+
+  load(model) {
+    this.model = model;
+    this.render();
+  }
+
+  changed() {
+    this.onChange?.();
+  }
+
+  // ------------------------------------------------------------ rendering
+
+  render() {
+    const focused = document.activeElement?.dataset?.path;
+    this.fields.clear();
+    const m = this.model;
+    m.system ??= {};
+    m.measurement ??= {};
+    m.time ??= { t0: 0, t_end: 1, steps: 1000 };
+    const dims = dimensions(m);
+    this.root.replaceChildren(
+      this.general,
+      this.sectionModel(),
+      this.sectionParams(),
+      this.sectionTime(dims),
+      this.sectionSystem(dims),
+      this.sectionMeasurement(dims),
+      this.sectionCriteria(),
+    );
+    if (focused) this.root.querySelector(`[data-path="${CSS.escape(focused)}"]`)?.focus();
+  }
+
+  register(path, input, holder) {
+    this.fields.set(path, { input, holder: holder ?? input.parentElement });
+  }
+
+  /** A labelled input bound to obj[key]; `parse` turns its text into the value. */
+  field(label, path, obj, key, { type = 'text', parse = parseCell, rerender = false, help } = {}) {
+    const id = `f-${path.replace(/[^a-zA-Z0-9]/g, '-')}`;
+    const input = el('input', {
+      id,
+      type,
+      'data-path': path,
+      value: showValue(obj[key]),
+      'aria-describedby': help ? `${id}-help` : undefined,
+    });
+    if (type === 'checkbox') input.checked = !!obj[key];
+    input.addEventListener(rerender ? 'change' : 'input', () => {
+      obj[key] = type === 'checkbox' ? input.checked : parse(input.value);
+      if (rerender) this.render();
+      this.changed();
+    });
+    const wrap = el('div', { class: 'field' }, el('label', { for: id, text: label }), input);
+    if (help) wrap.append(el('small', { id: `${id}-help`, class: 'help', text: help }));
+    this.register(path, input, wrap);
+    return wrap;
+  }
+
+  sectionModel() {
+    const m = this.model;
+    const desc = el('textarea', { id: 'f-description', rows: 2, 'data-path': 'description' });
+    desc.value = m.description ?? '';
+    desc.addEventListener('input', () => {
+      m.description = desc.value;
+      this.changed();
+    });
+    const fs = el(
+      'fieldset',
+      { class: 'section' },
+      el('legend', { text: 'Name and description' }),
+      this.field('Name', 'name', m, 'name', { parse: (s) => s }),
+      el('div', { class: 'field wide' }, el('label', { for: 'f-description', text: 'Description' }), desc),
+    );
+    this.register('description', desc);
+    return fs;
+  }
+
+  sectionParams() {
+    const m = this.model;
+    m.params ??= {};
+    const body = el('tbody');
+    for (const name of Object.keys(m.params)) {
+      const nameInput = el('input', {
+        value: name,
+        'aria-label': `parameter name ${name}`,
+        'data-path': `params.${name}.name`,
+        class: 'name',
+      });
+      nameInput.addEventListener('change', () => {
+        const renamed = nameInput.value.trim();
+        if (!renamed || renamed === name) return;
+        // Keep the order: rebuild the object with the new key in place.
+        m.params = Object.fromEntries(
+          Object.entries(m.params).map(([k, v]) => [k === name ? renamed : k, v]),
+        );
+        this.render();
+        this.changed();
+      });
+      const valueInput = el('input', {
+        value: showValue(m.params[name]),
+        'aria-label': `value of ${name}`,
+        'data-path': `params.${name}`,
+        inputmode: 'decimal',
+      });
+      valueInput.addEventListener('input', () => {
+        m.params[name] = parseCell(valueInput.value);
+        this.changed();
+      });
+      const remove = el('button', {
+        type: 'button',
+        class: 'icon',
+        'aria-label': `remove parameter ${name}`,
+        title: `Remove ${name}`,
+        text: '×',
+        onclick: () => {
+          delete m.params[name];
+          this.render();
+          this.changed();
+        },
+      });
+      const cell = el('td', {}, valueInput);
+      this.register(`params.${name}`, valueInput, cell);
+      body.append(el('tr', {}, el('td', {}, nameInput), cell, el('td', {}, remove)));
+    }
+    const add = el('button', {
+      type: 'button',
+      text: 'Add parameter',
+      onclick: () => {
+        let i = 1;
+        while (`p${i}` in m.params) i++;
+        m.params[`p${i}`] = 0;
+        this.render();
+        this.changed();
+        this.root.querySelector(`[data-path="params.p${i}.name"]`)?.focus();
+      },
+    });
+    const table = el(
+      'table',
+      { class: 'grid params' },
+      el('thead', {}, el('tr', {}, el('th', { text: 'name' }), el('th', { text: 'value' }), el('th'))),
+      body,
+    );
+    const fs = el(
+      'fieldset',
+      { class: 'section' },
+      el('legend', { text: 'Parameters' }),
+      el('p', { class: 'help', text: 'Named numbers usable in every expression (with t).' }),
+      table,
+      add,
+    );
+    this.register('params', table, fs);
+    return fs;
+  }
+
+  sectionTime(dims) {
+    const m = this.model;
+    const dim = (label, key, help) => {
+      const id = `dim-${key}`;
+      const input = el('input', { id, type: 'number', min: 1, max: 200, step: 1, value: dims[key] });
+      input.addEventListener('change', () => {
+        const v = Math.max(1, Math.min(200, Math.round(Number(input.value)) || 1));
+        resize(m, { ...dimensions(m), [key]: v });
+        this.render();
+        this.changed();
+      });
+      return el('div', { class: 'field' }, el('label', { for: id, text: label, title: help }), input);
+    };
+    const steps = (s) => (s.trim() === 'auto' ? 'auto' : parseCell(s));
+    return el(
+      'fieldset',
+      { class: 'section' },
+      el('legend', { text: 'Time and dimensions' }),
+      el(
+        'div',
+        { class: 'row' },
+        this.field('t₀', 'time.t0', m.time, 't0'),
+        this.field('t_E', 'time.t_end', m.time, 't_end'),
+        this.field('Steps D (or auto)', 'time.steps', m.time, 'steps', { parse: steps }),
+      ),
+      el(
+        'div',
+        { class: 'row' },
+        dim('States N', 'N', 'state dimension'),
+        dim('Measurements n', 'n', 'number of measurements'),
+        dim('Model errors L', 'L', 'model-error sources F (columns of b)'),
+        dim('Meas. errors M', 'M', 'measurement-error sources Φ'),
+      ),
+    );
+  }
+
+  /**
+   * A grid of cells for a matrix (`rows`×`cols`) or a vector (`cols` = 0) at `path`
+   * inside `obj[key]`; absent optional vectors show 0 and are created on first edit.
+   */
+  grid({ title, path, obj, key, rows, cols, rowLabels, colLabels, create, text = false }) {
+    const table = el('table', { class: 'grid', 'data-grid': path });
+    const caption = el('caption', {}, title);
+    table.append(caption);
+    const vector = cols === 0;
+    if (colLabels) {
+      table.append(
+        el('thead', {}, el('tr', {}, el('th'), ...colLabels.map((c) => el('th', { scope: 'col', text: c })))),
+      );
+    }
+    const body = el('tbody');
+    for (let i = 0; i < rows; i++) {
+      const tr = el('tr', {}, el('th', { scope: 'row', text: rowLabels?.[i] ?? String(i + 1) }));
+      for (let j = 0; j < (vector ? 1 : cols); j++) {
+        const cellPath = vector ? `${path}[${i}]` : `${path}[${i}][${j}]`;
+        const current = vector ? obj[key]?.[i] : obj[key]?.[i]?.[j];
+        const label = `${title} ${vector ? `[${i + 1}]` : `[${i + 1}, ${j + 1}]`}`;
+        const input = el('input', {
+          value: showValue(current),
+          placeholder: current === undefined ? '0' : undefined,
+          'data-path': cellPath,
+          'data-row': i,
+          'data-col': j,
+          'aria-label': label,
+          spellcheck: 'false',
+          autocomplete: 'off',
+        });
+        input.addEventListener('input', () => {
+          if (!obj[key]) obj[key] = create();
+          const value = text ? input.value : parseCell(input.value);
+          if (vector) obj[key][i] = value;
+          else obj[key][i][j] = value;
+          this.changed();
+        });
+        if (text) {
+          input.addEventListener('change', () => this.render());
+        }
+        input.addEventListener('keydown', (e) => this.gridKey(e, table));
+        const td = el('td', { 'data-path': cellPath }, input);
+        this.register(cellPath, input, td);
+        tr.append(td);
+      }
+      body.append(tr);
+    }
+    table.append(body);
+    this.register(path, table, caption);
+    return table;
+  }
+
+  /** Arrow keys and Enter move between the cells of a grid. */
+  gridKey(e, table) {
+    const input = e.target;
+    const r = Number(input.dataset.row);
+    const c = Number(input.dataset.col);
+    let dr = 0;
+    let dc = 0;
+    if (e.key === 'ArrowUp') dr = -1;
+    else if (e.key === 'ArrowDown' || e.key === 'Enter') dr = 1;
+    else if (e.key === 'ArrowLeft' && input.selectionStart === 0 && input.selectionEnd === 0) dc = -1;
+    else if (e.key === 'ArrowRight' && input.selectionStart === input.value.length) dc = 1;
+    else return;
+    const next = table.querySelector(`input[data-row="${r + dr}"][data-col="${c + dc}"]`);
+    if (next) {
+      e.preventDefault();
+      next.focus();
+      next.select();
+    }
+  }
+
+  /** A choice between two forms of one quantity (φ or W, Γ or g, ψ or V). */
+  formChoice(label, name, options, current, onPick) {
+    const id = `form-${name}`;
+    const select = el('select', { id });
+    for (const [value, text] of options) {
+      select.append(el('option', { value, text, selected: value === current }));
+    }
+    select.addEventListener('change', () => {
+      onPick(select.value);
+      this.render();
+      this.changed();
+    });
+    return el('div', { class: 'field' }, el('label', { for: id, text: label }), select);
+  }
+
+  sectionSystem({ N, L }) {
+    const s = this.model.system;
+    const states = s.states ?? [];
+    const lcols = Array.from({ length: L }, (_, l) => `F${l + 1}`);
+    const errorForm = s.W ? 'W' : 'phi';
+    const errorsGrid =
+      errorForm === 'W'
+        ? this.grid({ title: 'W (L×L)', path: 'system.W', obj: s, key: 'W', rows: L, cols: L, rowLabels: lcols, colLabels: lcols, create: () => resizeMat([], L, L) })
+        : this.grid({ title: 'φ model-error SKOs (L)', path: 'system.phi', obj: s, key: 'phi', rows: L, cols: 0, rowLabels: lcols, create: () => zeros(L) });
+    return el(
+      'fieldset',
+      { class: 'section' },
+      el('legend', { text: 'System  dY/dt = a Y + u + b F' }),
+      el(
+        'div',
+        { class: 'grids' },
+        this.grid({ title: 'State names', path: 'system.states', obj: s, key: 'states', rows: N, cols: 0, text: true, create: () => [] }),
+        this.grid({ title: 'a (N×N)', path: 'system.a', obj: s, key: 'a', rows: N, cols: N, rowLabels: states, colLabels: states, create: () => resizeMat([], N, N) }),
+        this.grid({ title: 'b (N×L)', path: 'system.b', obj: s, key: 'b', rows: N, cols: L, rowLabels: states, colLabels: lcols, create: () => resizeMat([], N, L) }),
+        this.grid({ title: 'u (N)', path: 'system.u', obj: s, key: 'u', rows: N, cols: 0, rowLabels: states, create: () => zeros(N) }),
+        this.grid({ title: 'y₀ (N)', path: 'system.y0', obj: s, key: 'y0', rows: N, cols: 0, rowLabels: states, create: () => zeros(N) }),
+        this.grid({ title: 'η₀ initial SKOs (N)', path: 'system.eta0', obj: s, key: 'eta0', rows: N, cols: 0, rowLabels: states, create: () => zeros(N) }),
+        el(
+          'div',
+          { class: 'stack' },
+          this.formChoice('Model errors given as', 'system-errors', [['phi', 'SKOs φ (W = diag φ²)'], ['W', 'covariance W']], errorForm, (v) => {
+            if (v === 'W') {
+              s.W = resizeMat([], L, L);
+              (s.phi ?? []).forEach((x, l) => (s.W[l][l] = typeof x === 'number' ? x * x : `(${x})^2`));
+              delete s.phi;
+            } else {
+              s.phi = (s.W ?? []).map((row, l) => (typeof row[l] === 'number' ? Math.sqrt(row[l]) : `sqrt(${row[l]})`));
+              delete s.W;
+            }
+          }),
+          errorsGrid,
+        ),
+      ),
+    );
+  }
+
+  sectionMeasurement({ N, n, M }) {
+    const m = this.model.measurement;
+    const states = this.model.system.states ?? [];
+    const names = m.names ?? [];
+    const mcols = Array.from({ length: M }, (_, k) => `Φ${k + 1}`);
+    const noiseForm = m.g ? 'g' : 'gamma';
+    const errorForm = m.V ? 'V' : 'psi';
+    const noiseGrid =
+      noiseForm === 'g'
+        ? this.grid({ title: 'g (N×M), Γ = C g', path: 'measurement.g', obj: m, key: 'g', rows: N, cols: M, rowLabels: states, colLabels: mcols, create: () => resizeMat([], N, M) })
+        : this.grid({ title: 'Γ (n×M)', path: 'measurement.gamma', obj: m, key: 'gamma', rows: n, cols: M, rowLabels: names, colLabels: mcols, create: () => resizeMat([], n, M) });
+    const errorsGrid =
+      errorForm === 'V'
+        ? this.grid({ title: 'V (M×M)', path: 'measurement.V', obj: m, key: 'V', rows: M, cols: M, rowLabels: mcols, colLabels: mcols, create: () => resizeMat([], M, M) })
+        : this.grid({ title: 'ψ measurement-error SKOs (M)', path: 'measurement.psi', obj: m, key: 'psi', rows: M, cols: 0, rowLabels: mcols, create: () => zeros(M) });
+    return el(
+      'fieldset',
+      { class: 'section' },
+      el('legend', { text: 'Measurements  Z = C y + Γ Φ' }),
+      el(
+        'div',
+        { class: 'grids' },
+        this.grid({ title: 'Measurement names', path: 'measurement.names', obj: m, key: 'names', rows: n, cols: 0, text: true, create: () => [] }),
+        this.grid({ title: 'C (n×N)', path: 'measurement.c', obj: m, key: 'c', rows: n, cols: N, rowLabels: names, colLabels: states, create: () => resizeMat([], n, N) }),
+        el(
+          'div',
+          { class: 'stack' },
+          this.formChoice('Noise matrix', 'measurement-noise', [['gamma', 'Γ (n×M)'], ['g', "seed's g (N×M)"]], noiseForm, (v) => {
+            if (v === 'g') {
+              m.g = resizeMat([], N, M);
+              delete m.gamma;
+            } else {
+              m.gamma = resizeMat([], n, M);
+              delete m.g;
+            }
+          }),
+          noiseGrid,
+        ),
+        el(
+          'div',
+          { class: 'stack' },
+          this.formChoice('Measurement errors given as', 'measurement-errors', [['psi', 'SKOs ψ (V = diag ψ²)'], ['V', 'covariance V']], errorForm, (v) => {
+            if (v === 'V') {
+              m.V = resizeMat([], M, M);
+              (m.psi ?? []).forEach((x, k) => (m.V[k][k] = typeof x === 'number' ? x * x : `(${x})^2`));
+              delete m.psi;
+            } else {
+              m.psi = (m.V ?? []).map((row, k) => (typeof row[k] === 'number' ? Math.sqrt(row[k]) : `sqrt(${row[k]})`));
+              delete m.V;
+            }
+          }),
+          errorsGrid,
+        ),
+      ),
+    );
+  }
+
+  sectionCriteria() {
+    const m = this.model;
+    m.criteria ??= { confidence: 0.95 };
+    m.options ??= { trace_points: 1000, steady_state_shortcut: true };
+    m.options.steady_state_shortcut ??= true;
+    return el(
+      'fieldset',
+      { class: 'section' },
+      el('legend', { text: 'Criteria and options' }),
+      el(
+        'div',
+        { class: 'row' },
+        this.field('Confidence P', 'criteria.confidence', m.criteria, 'confidence'),
+        this.field('Trace points', 'options.trace_points', m.options, 'trace_points'),
+        this.field('Steady-state shortcut', 'options.steady_state_shortcut', m.options, 'steady_state_shortcut', { type: 'checkbox' }),
+      ),
+    );
+  }
+
+  // ------------------------------------------------------------ validation
+
+  /** Show the core's errors at their cells; the rest at the top. Returns the count. */
+  showErrors(errors) {
+    for (const e of this.root.querySelectorAll('.cell-error')) e.remove();
+    for (const e of this.root.querySelectorAll('[aria-invalid="true"]')) {
+      e.removeAttribute('aria-invalid');
+      e.classList.remove('invalid');
+    }
+    this.general.replaceChildren();
+    for (const error of errors) {
+      let path = error.path ?? '';
+      let target = this.fields.get(path);
+      while (!target && path) {
+        path = parentPath(path);
+        target = this.fields.get(path);
+      }
+      if (!target) {
+        this.general.append(el('li', { text: error.path ? `${error.path}: ${error.message}` : error.message }));
+        continue;
+      }
+      const exact = path === error.path;
+      target.input.setAttribute('aria-invalid', 'true');
+      target.input.classList.add('invalid');
+      const msg = el('div', {
+        class: 'cell-error',
+        role: 'alert',
+        'data-error-path': error.path,
+        text: exact ? error.message : `${error.path}: ${error.message}`,
+      });
+      target.holder.append(msg);
+    }
+    return errors.length;
+  }
+}

@@ -1,0 +1,175 @@
+// Results: the criteria tables (bound and covariance side by side, per state and
+// weighted), the final values, and plots of the SKO traces (uPlot).
+
+import uPlot from './vendor/uplot/uPlot.esm.js';
+
+const CRITERIA = [
+  ['yz', 'F_YZ', 'measured vs a-priori: > 1 when the measurements beat the model’s prediction'],
+  ['zx', 'F_ZX', 'filtered vs measured: > 1 when the filter beats the raw measurements'],
+  ['yx', 'F_YX', 'filtered vs a-priori: how many times the filter beats the prediction'],
+];
+const SETS = [
+  ['bound', 'bound'],
+  ['covariance', 'covariance'],
+];
+const SERIES = [
+  ['eta', 'η a-priori (bound)', '#1f77b4'],
+  ['zeta', 'ζ measured (bound)', '#ff7f0e'],
+  ['chi', 'χ filtered (bound)', '#2ca02c'],
+  ['potential_sko', 'potential SKO √R', '#9467bd'],
+];
+
+function el(tag, attrs = {}, ...children) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (v === undefined || v === null || v === false) continue;
+    if (k === 'class') e.className = v;
+    else if (k === 'text') e.textContent = v;
+    else e.setAttribute(k, v === true ? '' : v);
+  }
+  for (const c of children) if (c !== null && c !== undefined) e.append(c);
+  return e;
+}
+
+/** A number for reading: 5 significant digits, exponent when very small or large. */
+export function fmt(x) {
+  if (x === null || x === undefined) return '—';
+  if (x === 0) return '0';
+  const a = Math.abs(x);
+  if (a >= 1e-3 && a < 1e6) return Number(x.toPrecision(5)).toString();
+  return x.toExponential(4);
+}
+
+/** One criterion cell: the full-precision value in data-value, highlighted when > 1. */
+function criterionCell(set, criterion, row, stateName, value, why) {
+  const td = el('td', {
+    class: `num${value !== null && value > 1 ? ' effect' : ''}`,
+    'data-set': set,
+    'data-criterion': criterion,
+    'data-row': row,
+    'data-state': stateName,
+    'data-value': value === null ? '' : String(value),
+    title: value === null ? why ?? 'undefined' : String(value),
+  });
+  td.textContent = fmt(value);
+  return td;
+}
+
+export function criteriaTable(result) {
+  const table = el('table', { class: 'criteria', id: 'criteria-table' });
+  table.append(
+    el('caption', { text: 'Criteria (averaged over the steps; > 1 = an effect, highlighted)' }),
+  );
+  const head1 = el('tr', {}, el('th', { rowspan: 2, scope: 'col', text: 'state' }));
+  const head2 = el('tr');
+  for (const [key, label, help] of CRITERIA) {
+    head1.append(el('th', { colspan: 2, scope: 'colgroup', title: help, 'data-criterion': key, text: label }));
+    for (const [, setLabel] of SETS) head2.append(el('th', { scope: 'col', text: setLabel }));
+  }
+  table.append(el('thead', {}, head1, head2));
+  const body = el('tbody');
+  const sets = result.criteria;
+  sets.bound.per_state.forEach((ps, i) => {
+    const tr = el('tr', {}, el('th', { scope: 'row', text: ps.state + (ps.measurement ? ` ↔ ${ps.measurement}` : '') }));
+    for (const [key] of CRITERIA) {
+      for (const [set] of SETS) {
+        const s = sets[set].per_state[i];
+        tr.append(criterionCell(set, key, String(i), s.state, s[key], s.undefined?.[key]));
+      }
+    }
+    body.append(tr);
+  });
+  const tr = el('tr', { class: 'weighted' }, el('th', { scope: 'row', text: 'weighted' }));
+  for (const [key] of CRITERIA) {
+    for (const [set] of SETS) {
+      const w = sets[set].weighted;
+      tr.append(criterionCell(set, key, 'weighted', '', w[key], w.undefined?.[key]));
+    }
+  }
+  body.append(tr);
+  table.append(body);
+  return table;
+}
+
+export function finalTable(result) {
+  const f = result.final;
+  const table = el('table', { class: 'final' });
+  table.append(el('caption', { text: `Values at t_E = ${fmt(result.t_end)} (bound SKOs; ΔX = λχ, λ = ${fmt(result.lambda)} for P = ${result.confidence})` }));
+  const cols = [
+    ['eta', 'η'],
+    ['zeta', 'ζ'],
+    ['chi', 'χ'],
+    ['potential_sko', '√R'],
+    ['delta_y', 'ΔY'],
+    ['delta_x', 'ΔX'],
+  ];
+  table.append(el('thead', {}, el('tr', {}, el('th', { scope: 'col', text: 'state' }), ...cols.map(([, l]) => el('th', { scope: 'col', text: l })))));
+  const body = el('tbody');
+  result.states.forEach((name, i) => {
+    body.append(
+      el('tr', {}, el('th', { scope: 'row', text: name }), ...cols.map(([k]) => el('td', { class: 'num', text: fmt(f[k]?.[i] ?? null) }))),
+    );
+  });
+  table.append(body);
+  return table;
+}
+
+/** The SKO-trace chart with a state selector and a log-scale toggle. */
+export class TraceChart {
+  constructor(root) {
+    this.root = root;
+    this.plot = null;
+    this.result = null;
+    this.observer = new ResizeObserver(() => this.fit());
+    this.observer.observe(root);
+  }
+
+  show(result, controls) {
+    this.result = result;
+    this.controls = controls;
+    this.draw();
+  }
+
+  width() {
+    return Math.max(320, this.root.clientWidth - 8);
+  }
+
+  fit() {
+    this.plot?.setSize({ width: this.width(), height: 320 });
+  }
+
+  draw() {
+    const r = this.result;
+    if (!r) return;
+    const i = Number(this.controls.state.value) || 0;
+    const log = this.controls.log.checked;
+    const trace = r.traces.states[i];
+    const clean = (v) => (v === null || (log && !(v > 0)) ? null : v);
+    const data = [r.traces.t];
+    const series = [{ label: 't' }];
+    for (const [key, label, stroke] of SERIES) {
+      const values = trace[key];
+      if (!values) continue;
+      data.push(values.map(clean));
+      series.push({ label, stroke, width: 1.5, value: (_, v) => (v === null ? '—' : fmt(v)) });
+    }
+    this.plot?.destroy();
+    this.root.replaceChildren();
+    this.plot = new uPlot(
+      {
+        title: `SKOs of ${trace.state} over time`,
+        width: this.width(),
+        height: 320,
+        scales: { x: { time: false }, y: log ? { distr: 3 } : {} },
+        axes: [
+          { label: 't', values: (_, ticks) => ticks.map(fmt) },
+          { label: 'SKO', size: 70, values: (_, ticks) => ticks.map(fmt) },
+        ],
+        series,
+        legend: { live: true },
+      },
+      data,
+      this.root,
+    );
+  }
+}

@@ -1,0 +1,172 @@
+// Where an analysis runs: in this browser (the wasm worker) or on the kea server
+// (a job with progress over SSE). Both give the same result JSON, or throw
+// {kind, title, errors:[{path, message}]} with paths relative to the model.
+
+/** A worker speaking worker.js's protocol: call(op, args, onProgress) → Promise. */
+export class WasmWorker {
+  constructor() {
+    this.next = 1;
+    this.pending = new Map();
+    this.start();
+  }
+
+  start() {
+    this.worker = new Worker(new URL('./worker.js', import.meta.url), { type: 'module' });
+    this.worker.onmessage = (event) => {
+      const { id, progress, ok, error } = event.data;
+      const p = this.pending.get(id);
+      if (!p) return;
+      if (progress !== undefined) {
+        p.onProgress?.(progress);
+        return;
+      }
+      this.pending.delete(id);
+      if (error) p.reject(error);
+      else p.resolve(ok);
+    };
+    this.worker.onerror = (event) => {
+      event.preventDefault();
+      const error = { kind: 'internal', title: `worker failed: ${event.message}`, errors: [] };
+      for (const p of this.pending.values()) p.reject(error);
+      this.pending.clear();
+    };
+  }
+
+  call(op, args = {}, onProgress) {
+    const id = this.next++;
+    return new Promise((resolve, reject) => {
+      this.pending.set(id, { resolve, reject, onProgress });
+      this.worker.postMessage({ id, op, ...args });
+    });
+  }
+
+  /** Stop whatever runs now: every pending call rejects as cancelled. */
+  cancel() {
+    this.worker.terminate();
+    const error = { kind: 'cancelled', title: 'cancelled', errors: [] };
+    for (const p of this.pending.values()) p.reject(error);
+    this.pending.clear();
+    this.start();
+  }
+}
+
+/** Runs in the browser: analyze on its own worker, so cancel can terminate it. */
+export class BrowserRunner {
+  constructor() {
+    this.worker = null;
+  }
+
+  async run(modelJson, onProgress) {
+    this.worker ??= new WasmWorker();
+    const result = await this.worker.call('analyze', { model: modelJson, set: '' }, onProgress);
+    return { result };
+  }
+
+  cancel() {
+    this.worker?.cancel();
+  }
+}
+
+/** Strip the server's `model.` prefix so paths match the editor's. */
+function modelPaths(problem) {
+  const errors = (problem.errors ?? []).map((e) => ({
+    path: (e.path ?? '').replace(/^model(\.|$)/, ''),
+    message: e.message,
+  }));
+  return {
+    kind: problem.kind ?? problem.type ?? 'server',
+    title: problem.title ?? problem.detail ?? 'the server refused the request',
+    status: problem.status,
+    errors,
+  };
+}
+
+async function problemOf(response) {
+  let body = {};
+  try {
+    body = await response.json();
+  } catch {
+    // not JSON: keep the status line
+  }
+  return modelPaths({
+    title: body.title ?? `${response.status} ${response.statusText}`,
+    detail: body.detail,
+    status: response.status,
+    errors: body.errors,
+  });
+}
+
+/** Runs on the server: POST a job, follow its events, fetch the result. */
+export class ServerRunner {
+  constructor(base = '') {
+    this.base = base;
+    this.job = null;
+    this.source = null;
+    this.abort = null;
+  }
+
+  async run(modelJson, onProgress) {
+    const response = await fetch(`${this.base}/v1/jobs`, {
+      method: 'POST',
+      headers: { 'content-type': 'application/json' },
+      body: `{"kind":"analysis","model":${modelJson}}`,
+    });
+    if (!response.ok) throw await problemOf(response);
+    const job = await response.json();
+    this.job = job.id;
+    const final = await this.follow(job.id, onProgress);
+    this.job = null;
+    if (final.status === 'cancelled') throw { kind: 'cancelled', title: 'cancelled', errors: [] };
+    if (final.status !== 'succeeded') {
+      throw modelPaths({ title: final.error?.title ?? `job ${final.status}`, ...(final.error ?? {}) });
+    }
+    const result = await fetch(`${this.base}/v1/jobs/${job.id}/result`);
+    if (!result.ok) throw await problemOf(result);
+    return { result: await result.json(), job: job.id };
+  }
+
+  /** Follow the job's SSE stream to its final status (the job object). */
+  follow(id, onProgress) {
+    return new Promise((resolve, reject) => {
+      const source = new EventSource(`${this.base}/v1/jobs/${id}/events`);
+      this.source = source;
+      this.reject = reject;
+      const finish = async () => {
+        source.close();
+        this.source = null;
+        try {
+          const r = await fetch(`${this.base}/v1/jobs/${id}`);
+          if (!r.ok) throw await problemOf(r);
+          resolve(await r.json());
+        } catch (e) {
+          reject(e);
+        }
+      };
+      const onData = (event) => {
+        let data = {};
+        try {
+          data = JSON.parse(event.data);
+        } catch {
+          return;
+        }
+        if (typeof data.progress === 'number') onProgress?.(data.progress);
+        const status = data.status ?? data.state;
+        if (status && !['queued', 'running'].includes(status)) finish();
+      };
+      source.onmessage = onData;
+      for (const name of ['progress', 'status', 'done', 'final', 'succeeded', 'failed', 'cancelled']) {
+        source.addEventListener(name, onData);
+      }
+      source.onerror = () => {
+        // The server closes the stream after the final event: look at the job.
+        if (this.source === source) finish();
+      };
+    });
+  }
+
+  async cancel() {
+    const id = this.job;
+    if (!id) return;
+    await fetch(`${this.base}/v1/jobs/${id}`, { method: 'DELETE' }).catch(() => {});
+  }
+}

@@ -1,0 +1,63 @@
+// The wasm build of kea-core, in a Web Worker so the page never freezes.
+//
+// Messages in:  {id, op: 'presets' | 'preset' | 'check' | 'analyze' | 'traces_csv', ...args}
+// Messages out: {id, progress} while analysing (at most every 50 ms), then
+//               {id, ok: <value>} or {id, error: {kind, title, errors:[{path, message}]}}.
+// Cancelling a run: the page terminates this worker and starts a new one (instant).
+import init, * as kea from './pkg/kea_wasm.js';
+
+const ready = init();
+
+function asError(e) {
+  if (typeof e === 'string') {
+    try {
+      return JSON.parse(e);
+    } catch {
+      return { kind: 'internal', title: e, errors: [] };
+    }
+  }
+  return { kind: 'internal', title: String(e && e.message ? e.message : e), errors: [] };
+}
+
+self.onmessage = async (event) => {
+  const { id, op } = event.data;
+  try {
+    await ready;
+    let value;
+    switch (op) {
+      case 'version':
+        value = kea.version();
+        break;
+      case 'presets':
+        value = JSON.parse(kea.presets());
+        break;
+      case 'preset':
+        value = JSON.parse(kea.preset(event.data.name) ?? 'null');
+        break;
+      case 'check':
+        value = JSON.parse(kea.check(event.data.model, event.data.set ?? ''));
+        break;
+      case 'analyze': {
+        let last = 0;
+        const text = kea.analyze(event.data.model, event.data.set ?? '', (fraction) => {
+          const now = performance.now();
+          if (now - last > 50) {
+            last = now;
+            self.postMessage({ id, progress: fraction });
+          }
+          return true;
+        });
+        value = JSON.parse(text);
+        break;
+      }
+      case 'traces_csv':
+        value = kea.traces_csv(event.data.result);
+        break;
+      default:
+        throw `{"kind":"internal","title":"unknown op ${op}","errors":[]}`;
+    }
+    self.postMessage({ id, ok: value });
+  } catch (e) {
+    self.postMessage({ id, error: asError(e) });
+  }
+};

@@ -1,0 +1,54 @@
+//! `kea analyze MODEL.json [--set name=value]… [--json]`.
+
+use crate::Run;
+use kea_core::{NoProgress, Overrides};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The model file (JSON, the format of `kea preset NAME`).
+    pub model: PathBuf,
+    /// Override a model parameter, e.g. `--set q=0.5` (repeatable).
+    #[arg(long = "set", value_name = "NAME=VALUE", value_parser = super::parse_override)]
+    pub set: Vec<(String, f64)>,
+    /// Print the whole result as JSON instead of the criteria table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl Run for Args {
+    fn run(self) -> ExitCode {
+        let text = match std::fs::read_to_string(&self.model) {
+            Ok(t) => t,
+            Err(e) => {
+                eprintln!("cannot read {}: {e}", self.model.display());
+                return ExitCode::from(super::EXIT_FAILURE);
+            }
+        };
+        let model = match kea_core::model_from_json(&text) {
+            Ok(m) => m,
+            Err(e) => return super::report_error(&e),
+        };
+        let set: Overrides = self.set.into_iter().collect();
+        let start = Instant::now();
+        let mut result = match kea_core::analyze(&model, &set, &mut NoProgress) {
+            Ok(r) => r,
+            Err(e) => return super::report_error(&e),
+        };
+        result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        if self.json {
+            match serde_json::to_string_pretty(&result) {
+                Ok(s) => println!("{s}"),
+                Err(e) => {
+                    eprintln!("cannot serialise the result: {e}");
+                    return ExitCode::from(super::EXIT_FAILURE);
+                }
+            }
+        } else {
+            print!("{}", kea_core::report::criteria_table(&result));
+        }
+        ExitCode::SUCCESS
+    }
+}

@@ -1,0 +1,70 @@
+//! kea-server: the `kea` binary's command line and HTTP service, as adapters over
+//! `kea_core`.
+//!
+//! Architecture invariant: this crate contains no estimation maths. A command or a
+//! handler parses its input, calls one core function, maps the error, and formats
+//! the output. Anything about filtering belongs in `kea_core`.
+
+pub mod cli;
+pub mod serve;
+
+use clap::{CommandFactory, Parser, Subcommand};
+use std::process::ExitCode;
+
+/// What every subcommand's arguments implement: run it, return the exit code
+/// (0 success, 1 failure, 2 invalid input).
+pub trait Run {
+    fn run(self) -> ExitCode;
+}
+
+/// Declares the subcommands: adding one is one line here (its arguments type
+/// implements [`Run`]); the doc comment becomes its `--help` summary.
+macro_rules! commands {
+    ($( $(#[$meta:meta])* $name:ident($args:ty), )*) => {
+        #[derive(Debug, Subcommand)]
+        pub enum Command {
+            $( $(#[$meta])* $name($args), )*
+        }
+
+        impl Command {
+            fn run(self) -> ExitCode {
+                match self {
+                    $( Command::$name(args) => Run::run(args), )*
+                }
+            }
+        }
+    };
+}
+
+commands! {
+    /// Analyse a model file: the filtering-effect criteria (table or JSON).
+    Analyze(cli::analyze::Args),
+    /// List the preset models.
+    Presets(cli::presets::ListArgs),
+    /// Print a preset model's JSON (a starting point for your own model).
+    Preset(cli::presets::ShowArgs),
+    /// Run the HTTP service (API, jobs, web UI).
+    Serve(serve::Args),
+}
+
+/// kea — how much more accurate will the filtered information be than the model's own
+/// prediction and the raw measurements?
+#[derive(Debug, Parser)]
+#[command(name = "kea", version)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+impl Cli {
+    pub fn run(self) -> ExitCode {
+        match self.command {
+            Some(command) => command.run(),
+            None => {
+                // `kea` alone: the help, as a successful answer.
+                let _ = Cli::command().print_help();
+                ExitCode::SUCCESS
+            }
+        }
+    }
+}

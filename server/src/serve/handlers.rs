@@ -1,0 +1,216 @@
+//! Handlers for health, presets, stored models and synchronous analysis. Each parses,
+//! calls the core (or the store), maps the error, and answers.
+
+use super::jobs::{PreparedJob, Work};
+use super::problem::{Problem, kind};
+use super::request::{self, JsonBody};
+use super::state::AppState;
+use super::store::{ModelRecord, new_id, now_rfc3339};
+use axum::Json;
+use axum::extract::{Path, RawQuery, State};
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use kea_core::FieldError;
+use serde_json::{Map, Value, json};
+
+/// `GET /healthz`.
+pub async fn health() -> Json<Value> {
+    Json(json!({ "status": "ok", "version": env!("CARGO_PKG_VERSION") }))
+}
+
+/// `GET /v1/presets`.
+pub async fn list_presets() -> Json<Value> {
+    Json(json!({ "items": kea_core::presets::list() }))
+}
+
+/// `GET /v1/presets/{name}`: the model JSON exactly as shipped.
+pub async fn get_preset(Path(name): Path<String>) -> Result<Response, Problem> {
+    let json = kea_core::presets::get_json(&name).ok_or_else(|| {
+        Problem::not_found("preset", &name).detail(format!(
+            "there is no preset `{name}`; known: {}",
+            kea_core::presets::names().join(", ")
+        ))
+    })?;
+    Ok(raw_json(StatusCode::OK, json.to_string()))
+}
+
+/// A response whose body is JSON text already.
+pub fn raw_json(status: StatusCode, body: String) -> Response {
+    (
+        status,
+        [(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static("application/json"),
+        )],
+        body,
+    )
+        .into_response()
+}
+
+/// `POST /v1/models`: the body is a model; it is validated, stored, and given an id.
+pub async fn create_model(
+    State(state): State<AppState>,
+    JsonBody(body): JsonBody,
+) -> Result<Response, Problem> {
+    let model = kea_core::model_from_value(body.clone()).map_err(Problem::from_core)?;
+    kea_core::check(&model, &Default::default()).map_err(Problem::from_core)?;
+    let record = ModelRecord {
+        id: new_id(),
+        name: model.name.clone(),
+        created_at: now_rfc3339(),
+        model_json: body.to_string(),
+    };
+    let view = json!({ "id": record.id, "name": record.name, "created_at": record.created_at });
+    let location = format!("/v1/models/{}", record.id);
+    state.db(move |s| s.insert_model(&record)).await?;
+    let mut res = (StatusCode::CREATED, Json(view)).into_response();
+    res.headers_mut().insert(
+        header::LOCATION,
+        HeaderValue::from_str(&location).expect("ids are ASCII"),
+    );
+    Ok(res)
+}
+
+/// `GET /v1/models?limit&cursor`: newest first.
+pub async fn list_models(
+    State(state): State<AppState>,
+    RawQuery(raw): RawQuery,
+) -> Result<Json<Value>, Problem> {
+    let q = request::list_query(raw, &[])?;
+    let page = state
+        .db(move |s| s.list_models(q.cursor.as_deref(), q.limit))
+        .await?;
+    Ok(Json(
+        json!({ "items": page.items, "next_cursor": page.next_cursor }),
+    ))
+}
+
+/// `GET /v1/models/{id}`.
+pub async fn get_model(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<Value>, Problem> {
+    let key = id.clone();
+    let record = state
+        .db(move |s| s.get_model(&key))
+        .await?
+        .ok_or_else(|| Problem::not_found("model", &id))?;
+    let model: Value = serde_json::from_str(&record.model_json).map_err(Problem::internal)?;
+    Ok(Json(json!({
+        "id": record.id,
+        "name": record.name,
+        "created_at": record.created_at,
+        "model": model,
+    })))
+}
+
+/// `DELETE /v1/models/{id}`: 204. Jobs submitted with this model keep their copy.
+pub async fn delete_model(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<StatusCode, Problem> {
+    let key = id.clone();
+    if state.db(move |s| s.delete_model(&key)).await? {
+        Ok(StatusCode::NO_CONTENT)
+    } else {
+        Err(Problem::not_found("model", &id))
+    }
+}
+
+/// Replace `model_id` by the stored model, so the request is self-contained.
+pub async fn resolve_model_id(
+    state: &AppState,
+    obj: &mut Map<String, Value>,
+) -> Result<(), Problem> {
+    let Some(idv) = obj.remove("model_id") else {
+        return Ok(());
+    };
+    if obj.contains_key("model") {
+        return Err(Problem::invalid(vec![FieldError::new(
+            "model_id",
+            "give either `model` or `model_id`, not both",
+        )]));
+    }
+    let Value::String(id) = idv else {
+        return Err(Problem::invalid(vec![FieldError::new(
+            "model_id",
+            format!(
+                "expected a model id (a string), got {}",
+                request::type_name(&idv)
+            ),
+        )]));
+    };
+    let key = id.clone();
+    let record = state.db(move |s| s.get_model(&key)).await?.ok_or_else(|| {
+        Problem::invalid(vec![FieldError::new(
+            "model_id",
+            format!("there is no stored model with id `{id}` (see GET /v1/models)"),
+        )])
+    })?;
+    let model: Value = serde_json::from_str(&record.model_json).map_err(Problem::internal)?;
+    obj.insert("model".into(), model);
+    Ok(())
+}
+
+/// Refuse work above `limit`; `advice` says what to do instead.
+pub fn check_work(
+    work: &Work,
+    limit: f64,
+    type_: &'static str,
+    advice: &str,
+) -> Result<(), Problem> {
+    if work.units <= limit {
+        return Ok(());
+    }
+    let message = format!(
+        "estimated work {:.3e} ({}) is above the limit of {:.3e}; {advice}",
+        work.units, work.explain, limit
+    );
+    Err(Problem::new(
+        StatusCode::UNPROCESSABLE_ENTITY,
+        type_,
+        "too much work for this request",
+    )
+    .detail(message.clone())
+    .error(work.path.clone(), message))
+}
+
+/// `POST /v1/analyze`: `{model | model_id, set?}` → the analysis result, for small work.
+pub async fn analyze(
+    State(state): State<AppState>,
+    JsonBody(body): JsonBody,
+) -> Result<Response, Problem> {
+    let mut obj = request::object(body)?;
+    resolve_model_id(&state, &mut obj).await?;
+    let kind = state
+        .registry
+        .get("analysis")
+        .expect("the analysis kind is registered");
+    let prepared: Box<dyn PreparedJob> = kind
+        .prepare(&Value::Object(obj))
+        .map_err(Problem::from_core)?;
+    let limits = &state.config.limits;
+    check_work(
+        &prepared.work(),
+        limits.max_work,
+        kind::TOO_MUCH_WORK,
+        "reduce the steps or the state dimension",
+    )?;
+    check_work(
+        &prepared.work(),
+        limits.sync_work,
+        kind::USE_A_JOB,
+        "submit it as a job instead: POST /v1/jobs with {\"kind\": \"analysis\", \"model\": …}",
+    )?;
+    let _permit = state
+        .sync_permits
+        .clone()
+        .acquire_owned()
+        .await
+        .map_err(Problem::internal)?;
+    let out = tokio::task::spawn_blocking(move || prepared.run(&mut kea_core::NoProgress))
+        .await
+        .map_err(Problem::internal)?
+        .map_err(Problem::from_core)?;
+    Ok(raw_json(StatusCode::OK, out.result_json))
+}

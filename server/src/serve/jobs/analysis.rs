@@ -1,0 +1,92 @@
+//! The `analysis` job kind: `{model, set?}` → the core's analysis result (METHOD §1.2–§1.6).
+
+use super::{JobKind, JobOutput, PreparedJob, Work};
+use crate::serve::request;
+use kea_core::{Error, FieldError, Model, Overrides, Progress};
+use serde_json::Value;
+use std::time::Instant;
+
+pub struct Analysis;
+
+/// The members an analysis request may have (`model_id` is resolved to `model`
+/// before a kind sees the request).
+pub const MEMBERS: &[&str] = &["model", "model_id", "set"];
+
+impl JobKind for Analysis {
+    fn name(&self) -> &'static str {
+        "analysis"
+    }
+
+    fn prepare(&self, request: &Value) -> Result<Box<dyn PreparedJob>, Error> {
+        let Value::Object(obj) = request else {
+            return Err(Error::invalid("", "expected a JSON object"));
+        };
+        let mut errors = request::unknown_members(obj, MEMBERS);
+        let model = match obj.get("model") {
+            None => {
+                errors.push(FieldError::new(
+                    "model",
+                    "missing: give `model` (a model object) or `model_id` (a stored model)",
+                ));
+                None
+            }
+            Some(v) => match kea_core::model_from_value(v.clone()) {
+                Ok(m) => Some(m),
+                Err(e) => {
+                    errors.extend(e.with_prefix("model").field_errors());
+                    None
+                }
+            },
+        };
+        let set = match request::overrides(obj.get("set")) {
+            Ok(s) => s,
+            Err(e) => {
+                errors.extend(e);
+                Overrides::new()
+            }
+        };
+        let Some(model) = model.filter(|_| errors.is_empty()) else {
+            return Err(Error::Invalid(errors));
+        };
+        let estimate = kea_core::estimate_work(&model, &set).map_err(request::locate)?;
+        Ok(Box::new(Prepared {
+            model,
+            set,
+            work: Work {
+                units: estimate.work,
+                explain: format!(
+                    "D = {} steps × N³ = {} (N = {})",
+                    estimate.steps,
+                    estimate.states.pow(3),
+                    estimate.states
+                ),
+                path: "model.time.steps".into(),
+            },
+        }))
+    }
+}
+
+struct Prepared {
+    model: Model,
+    set: Overrides,
+    work: Work,
+}
+
+impl PreparedJob for Prepared {
+    fn work(&self) -> Work {
+        self.work.clone()
+    }
+
+    fn run(self: Box<Self>, progress: &mut dyn Progress) -> Result<JobOutput, Error> {
+        let start = Instant::now();
+        let mut result =
+            kea_core::analyze(&self.model, &self.set, progress).map_err(request::locate)?;
+        result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        let result_json = serde_json::to_string(&result)
+            .map_err(|e| Error::invalid("", format!("result not serialisable: {e}")))?;
+        Ok(JobOutput {
+            result_json,
+            traces_csv: Some(kea_core::report::traces_csv(&result)),
+        })
+    }
+}

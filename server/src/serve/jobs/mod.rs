@@ -1,0 +1,77 @@
+//! Job kinds: what a job computes, independent of queues, storage and HTTP.
+//!
+//! A kind parses a self-contained request (the `model_id` already resolved to
+//! `model`) into a [`PreparedJob`], which estimates its work and runs on a worker
+//! thread with progress and cancellation. Adding a kind (synthesis, Monte Carlo
+//! simulation, identification) is one module implementing [`JobKind`] plus one line
+//! in [`registry`].
+
+pub mod analysis;
+
+use kea_core::{Error, Progress};
+use serde_json::Value;
+use std::sync::Arc;
+
+/// One kind of computation a job can run.
+pub trait JobKind: Send + Sync + 'static {
+    /// The `kind` member of a job request, e.g. `"analysis"`.
+    fn name(&self) -> &'static str;
+    /// Validate a request (the job body without `kind`) and prepare the work.
+    /// Errors carry paths into the request body (`model.system.a[0][1]`, `set.q`).
+    fn prepare(&self, request: &Value) -> Result<Box<dyn PreparedJob>, Error>;
+}
+
+/// A validated request, ready to run.
+pub trait PreparedJob: Send {
+    /// The estimated work, used to choose sync vs job and to refuse the absurd.
+    fn work(&self) -> Work;
+    /// Run to completion, reporting progress; `Error::Cancelled` when progress said stop.
+    fn run(self: Box<Self>, progress: &mut dyn Progress) -> Result<JobOutput, Error>;
+}
+
+/// A work estimate, in units where 1e8 is roughly a tenth of a second of one core.
+#[derive(Clone, Debug)]
+pub struct Work {
+    pub units: f64,
+    /// How it was computed, for messages (e.g. "D = 1000 steps × N³ = 8").
+    pub explain: String,
+    /// The request field that drives it (for the error path).
+    pub path: String,
+}
+
+/// What a finished job produced.
+pub struct JobOutput {
+    /// The result document (JSON text).
+    pub result_json: String,
+    /// Time series as CSV, when the kind has them.
+    pub traces_csv: Option<String>,
+}
+
+/// The job kinds this server runs.
+#[derive(Clone)]
+pub struct Registry {
+    kinds: Arc<Vec<Box<dyn JobKind>>>,
+}
+
+/// Every kind, in the order they are listed in errors.
+pub fn registry() -> Registry {
+    Registry {
+        kinds: Arc::new(vec![
+            Box::new(analysis::Analysis),
+            // New kinds: one line each, e.g. Box::new(synthesis::Synthesis),
+        ]),
+    }
+}
+
+impl Registry {
+    pub fn get(&self, name: &str) -> Option<&dyn JobKind> {
+        self.kinds
+            .iter()
+            .find(|k| k.name() == name)
+            .map(|k| k.as_ref())
+    }
+
+    pub fn names(&self) -> Vec<&'static str> {
+        self.kinds.iter().map(|k| k.name()).collect()
+    }
+}

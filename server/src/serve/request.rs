@@ -1,0 +1,292 @@
+//! Reading requests: the JSON body (size limit, media type, syntax), query strings,
+//! and the pieces every computation request shares (`model` | `model_id`, `set`).
+
+use super::problem::{Problem, kind};
+use super::state::AppState;
+use axum::extract::{FromRequest, Request};
+use axum::http::{StatusCode, header};
+use kea_core::{FieldError, Overrides};
+use serde_json::{Map, Value};
+use std::collections::BTreeMap;
+
+/// A JSON request body, read under the configured size limit. Every failure is a
+/// problem+json 4xx: 415 (not JSON), 413 (too large), 400 (malformed).
+pub struct JsonBody(pub Value);
+
+impl FromRequest<AppState> for JsonBody {
+    type Rejection = Problem;
+
+    async fn from_request(req: Request, state: &AppState) -> Result<Self, Problem> {
+        let ct = req
+            .headers()
+            .get(header::CONTENT_TYPE)
+            .and_then(|v| v.to_str().ok())
+            .unwrap_or("");
+        let essence = ct
+            .split(';')
+            .next()
+            .unwrap_or("")
+            .trim()
+            .to_ascii_lowercase();
+        if essence != "application/json" && !essence.ends_with("+json") {
+            return Err(Problem::new(
+                StatusCode::UNSUPPORTED_MEDIA_TYPE,
+                kind::MEDIA_TYPE,
+                "the body must be JSON",
+            )
+            .detail(format!(
+                "send the header `Content-Type: application/json` (got `{ct}`)"
+            )));
+        }
+        let limit = state.config.limits.max_body_bytes;
+        let bytes = axum::body::to_bytes(req.into_body(), limit)
+            .await
+            .map_err(|_| {
+                Problem::new(
+                    StatusCode::PAYLOAD_TOO_LARGE,
+                    kind::TOO_LARGE,
+                    "the request body is too large",
+                )
+                .detail(format!(
+                    "the limit is {limit} bytes (server option --max-body-bytes)"
+                ))
+            })?;
+        serde_json::from_slice(&bytes).map(JsonBody).map_err(|e| {
+            Problem::new(
+                StatusCode::BAD_REQUEST,
+                kind::MALFORMED,
+                "the body is not valid JSON",
+            )
+            .detail(e.to_string())
+            .error("", format!("not valid JSON: {e}"))
+        })
+    }
+}
+
+/// The body as a JSON object, or a 422 at the root.
+pub fn object(body: Value) -> Result<Map<String, Value>, Problem> {
+    match body {
+        Value::Object(m) => Ok(m),
+        other => Err(Problem::invalid(vec![FieldError::new(
+            "",
+            format!("expected a JSON object, got {}", type_name(&other)),
+        )])),
+    }
+}
+
+pub fn type_name(v: &Value) -> &'static str {
+    match v {
+        Value::Null => "null",
+        Value::Bool(_) => "a boolean",
+        Value::Number(_) => "a number",
+        Value::String(_) => "a string",
+        Value::Array(_) => "an array",
+        Value::Object(_) => "an object",
+    }
+}
+
+/// Errors for members of `obj` outside `allowed`.
+pub fn unknown_members(obj: &Map<String, Value>, allowed: &[&str]) -> Vec<FieldError> {
+    obj.keys()
+        .filter(|k| !allowed.contains(&k.as_str()))
+        .map(|k| {
+            FieldError::new(
+                k.clone(),
+                format!("unknown member; expected one of: {}", allowed.join(", ")),
+            )
+        })
+        .collect()
+}
+
+/// Parse `set` (parameter overrides): an object of finite numbers.
+pub fn overrides(set: Option<&Value>) -> Result<Overrides, Vec<FieldError>> {
+    let Some(set) = set else {
+        return Ok(Overrides::new());
+    };
+    let Value::Object(m) = set else {
+        return Err(vec![FieldError::new(
+            "set",
+            format!(
+                "expected an object of parameter values (e.g. {{\"q\": 0.5}}), got {}",
+                type_name(set)
+            ),
+        )]);
+    };
+    let mut out = BTreeMap::new();
+    let mut errors = Vec::new();
+    for (name, v) in m {
+        match v.as_f64() {
+            Some(x) if x.is_finite() => {
+                out.insert(name.clone(), x);
+            }
+            _ => errors.push(FieldError::new(
+                format!("set.{name}"),
+                format!("expected a number, got {}", type_name(v)),
+            )),
+        }
+    }
+    if errors.is_empty() {
+        Ok(out)
+    } else {
+        Err(errors)
+    }
+}
+
+/// Locate a core error from `check`/`analyze` of (`model`, `set`) in the request body:
+/// paths about the overrides (`set.…`) stay, the rest are under `model`.
+pub fn locate(err: kea_core::Error) -> kea_core::Error {
+    let under_set = |p: &str| p == "set" || p.starts_with("set.") || p.starts_with("set[");
+    match err {
+        kea_core::Error::Invalid(v) => kea_core::Error::Invalid(
+            v.into_iter()
+                .map(|e| {
+                    if under_set(&e.path) {
+                        e
+                    } else {
+                        match kea_core::Error::Invalid(vec![e]).with_prefix("model") {
+                            kea_core::Error::Invalid(mut one) => one.remove(0),
+                            _ => unreachable!("with_prefix keeps the variant"),
+                        }
+                    }
+                })
+                .collect(),
+        ),
+        e @ kea_core::Error::Numerical { .. } => e.with_prefix("model"),
+        e => e,
+    }
+}
+
+/// Query parameters of the list routes: `limit` (1..=1000, default 50), `cursor`.
+pub struct ListQuery {
+    pub limit: usize,
+    pub cursor: Option<String>,
+    pub rest: BTreeMap<String, String>,
+}
+
+pub const DEFAULT_PAGE: usize = 50;
+pub const MAX_PAGE: usize = 1000;
+
+pub fn list_query(raw: Option<String>, extra: &[&str]) -> Result<ListQuery, Problem> {
+    let mut limit = DEFAULT_PAGE;
+    let mut cursor = None;
+    let mut rest = BTreeMap::new();
+    let mut errors = Vec::new();
+    let pairs: Vec<(String, String)> = match raw.as_deref() {
+        None | Some("") => Vec::new(),
+        Some(q) => serde_urlencoded_pairs(q),
+    };
+    for (k, v) in pairs {
+        match k.as_str() {
+            "limit" => match v.parse::<usize>() {
+                Ok(n) if (1..=MAX_PAGE).contains(&n) => limit = n,
+                _ => errors.push(FieldError::new(
+                    "limit",
+                    format!("expected an integer from 1 to {MAX_PAGE}, got `{v}`"),
+                )),
+            },
+            "cursor" => cursor = Some(v),
+            other if extra.contains(&other) => {
+                rest.insert(k, v);
+            }
+            _ => {
+                let mut known = vec!["limit", "cursor"];
+                known.extend_from_slice(extra);
+                errors.push(FieldError::new(
+                    k.clone(),
+                    format!("unknown query parameter; known: {}", known.join(", ")),
+                ))
+            }
+        }
+    }
+    if !errors.is_empty() {
+        return Err(query_problem(errors));
+    }
+    Ok(ListQuery {
+        limit,
+        cursor,
+        rest,
+    })
+}
+
+pub fn query_problem(errors: Vec<FieldError>) -> Problem {
+    let mut p = Problem::invalid(errors);
+    p.status = StatusCode::BAD_REQUEST;
+    p.title = "invalid query parameters".into();
+    p
+}
+
+/// Split `a=1&b=x%20y` into decoded pairs.
+fn serde_urlencoded_pairs(q: &str) -> Vec<(String, String)> {
+    q.split('&')
+        .filter(|s| !s.is_empty())
+        .map(|kv| {
+            let (k, v) = kv.split_once('=').unwrap_or((kv, ""));
+            (percent_decode(k), percent_decode(v))
+        })
+        .collect()
+}
+
+fn percent_decode(s: &str) -> String {
+    let bytes = s.as_bytes();
+    let hex = |b: u8| (b as char).to_digit(16).map(|d| d as u8);
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'+' => out.push(b' '),
+            b'%' if i + 2 < bytes.len() => match (hex(bytes[i + 1]), hex(bytes[i + 2])) {
+                (Some(h), Some(l)) => {
+                    out.push(h * 16 + l);
+                    i += 2;
+                }
+                _ => out.push(b'%'),
+            },
+            b => out.push(b),
+        }
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn locate_keeps_set_paths_and_prefixes_model_paths() {
+        let e = kea_core::Error::Invalid(vec![
+            FieldError::new("set.q", "unknown"),
+            FieldError::new("system.a[0][1]", "bad"),
+            FieldError::new("", "root"),
+        ]);
+        let paths: Vec<String> = locate(e)
+            .field_errors()
+            .into_iter()
+            .map(|e| e.path)
+            .collect();
+        assert_eq!(paths, vec!["set.q", "model.system.a[0][1]", "model"]);
+    }
+
+    #[test]
+    fn overrides_are_numbers() {
+        let ok = overrides(Some(&serde_json::json!({"q": 2, "r": 0.5}))).unwrap();
+        assert_eq!(ok.get("q"), Some(&2.0));
+        let err = overrides(Some(&serde_json::json!({"q": "x"}))).unwrap_err();
+        assert_eq!(err[0].path, "set.q");
+        let err = overrides(Some(&serde_json::json!([1]))).unwrap_err();
+        assert_eq!(err[0].path, "set");
+    }
+
+    #[test]
+    fn query_strings_decode() {
+        assert_eq!(
+            serde_urlencoded_pairs("status=queued&cursor=a%2Db&x"),
+            vec![
+                ("status".to_string(), "queued".to_string()),
+                ("cursor".to_string(), "a-b".to_string()),
+                ("x".to_string(), String::new())
+            ]
+        );
+        assert_eq!(percent_decode("%zz%4"), "%zz%4");
+    }
+}

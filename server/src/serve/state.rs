@@ -1,0 +1,63 @@
+//! The configuration and the state shared by every handler.
+
+use super::jobs::Registry;
+use super::problem::Problem;
+use super::store::Store;
+use super::worker::Pool;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::{Semaphore, watch};
+
+/// The limits that keep work bounded; every one is a `kea serve` option.
+#[derive(Clone, Debug)]
+pub struct Limits {
+    /// Largest request body, bytes.
+    pub max_body_bytes: usize,
+    /// Largest work (steps × N³) answered synchronously by `POST /v1/analyze`.
+    pub sync_work: f64,
+    /// Largest work accepted at all (a job above this is refused as absurd).
+    pub max_work: f64,
+    /// Wall-clock limit of one job.
+    pub job_time: Duration,
+    /// Most jobs waiting in the queue; more submissions get 429.
+    pub queue: u64,
+    /// How long a shutdown lets running jobs finish before re-queueing them.
+    pub shutdown_grace: Duration,
+}
+
+#[derive(Clone, Debug)]
+pub struct Config {
+    pub token: Option<String>,
+    /// The static web UI; `None` serves no UI.
+    pub web_dir: Option<PathBuf>,
+    pub cors_origins: Vec<String>,
+    pub workers: usize,
+    pub limits: Limits,
+}
+
+#[derive(Clone)]
+pub struct AppState {
+    pub config: Arc<Config>,
+    pub store: Arc<dyn Store>,
+    pub pool: Arc<Pool>,
+    pub registry: Registry,
+    /// Bounds the synchronous analyses running at once (they share the cores).
+    pub sync_permits: Arc<Semaphore>,
+    /// Becomes true when the server shuts down (ends event streams).
+    pub shutdown: watch::Receiver<bool>,
+}
+
+impl AppState {
+    /// Run a store call on a blocking thread.
+    pub async fn db<T: Send + 'static>(
+        &self,
+        f: impl FnOnce(&dyn Store) -> super::store::Result<T> + Send + 'static,
+    ) -> Result<T, Problem> {
+        let store = Arc::clone(&self.store);
+        tokio::task::spawn_blocking(move || f(store.as_ref()))
+            .await
+            .map_err(Problem::internal)?
+            .map_err(Problem::from)
+    }
+}

@@ -1,0 +1,173 @@
+//! Persistence behind one small interface: models, jobs and job results.
+//!
+//! [`Store`] is all the rest of the server knows about storage. The default is
+//! [`sqlite::SqliteStore`] (embedded, one file in the data directory). The job queue
+//! *is* the store (`claim_next` takes the oldest queued job atomically), so a shared
+//! database (e.g. PostgreSQL with `FOR UPDATE SKIP LOCKED`) can later feed several
+//! kea instances by implementing this trait.
+
+pub mod sqlite;
+
+use serde::Serialize;
+use std::fmt;
+
+/// A storage failure: the server's fault (500), never the client's.
+#[derive(Debug)]
+pub struct StoreError(pub String);
+
+impl fmt::Display for StoreError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "storage error: {}", self.0)
+    }
+}
+
+impl std::error::Error for StoreError {}
+
+pub type Result<T> = std::result::Result<T, StoreError>;
+
+/// A job's lifecycle: queued → running → succeeded | failed | cancelled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JobStatus {
+    Queued,
+    Running,
+    Succeeded,
+    Failed,
+    Cancelled,
+}
+
+impl JobStatus {
+    pub const ALL: [JobStatus; 5] = [
+        JobStatus::Queued,
+        JobStatus::Running,
+        JobStatus::Succeeded,
+        JobStatus::Failed,
+        JobStatus::Cancelled,
+    ];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobStatus::Queued => "queued",
+            JobStatus::Running => "running",
+            JobStatus::Succeeded => "succeeded",
+            JobStatus::Failed => "failed",
+            JobStatus::Cancelled => "cancelled",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<JobStatus> {
+        JobStatus::ALL.into_iter().find(|x| x.as_str() == s)
+    }
+
+    /// Whether the job will not change any more.
+    pub fn is_terminal(self) -> bool {
+        matches!(
+            self,
+            JobStatus::Succeeded | JobStatus::Failed | JobStatus::Cancelled
+        )
+    }
+}
+
+/// A stored model (the JSON exactly as validated and stored).
+#[derive(Clone, Debug)]
+pub struct ModelRecord {
+    pub id: String,
+    pub name: Option<String>,
+    pub created_at: String,
+    pub model_json: String,
+}
+
+/// A model in a listing (without its body).
+#[derive(Clone, Debug, Serialize)]
+pub struct ModelSummary {
+    pub id: String,
+    pub name: Option<String>,
+    pub created_at: String,
+}
+
+/// A job as stored. `request_json` is self-contained (a `model_id` was resolved to
+/// the model at submission), so deleting a model never breaks a queued job.
+#[derive(Clone, Debug)]
+pub struct JobRecord {
+    pub id: String,
+    pub kind: String,
+    pub status: JobStatus,
+    pub progress: f64,
+    pub request_json: String,
+    /// The work estimate at submission (kind-specific units, e.g. steps × N³).
+    pub work: f64,
+    pub created_at: String,
+    pub started_at: Option<String>,
+    pub finished_at: Option<String>,
+    /// Problem-details JSON of a failed job.
+    pub error_json: Option<String>,
+    /// How many times a worker has started this job (re-queues count).
+    pub attempts: u32,
+}
+
+/// How a job ended.
+#[derive(Clone, Debug)]
+pub enum Outcome {
+    Succeeded {
+        result_json: String,
+        traces_csv: Option<String>,
+    },
+    Failed {
+        error_json: String,
+    },
+    Cancelled,
+}
+
+/// One page of a listing, newest first; `next_cursor` continues it.
+#[derive(Clone, Debug)]
+pub struct Page<T> {
+    pub items: Vec<T>,
+    pub next_cursor: Option<String>,
+}
+
+/// Everything the server stores. Implementations must be safe to call from many
+/// threads; every method is one short transaction.
+pub trait Store: Send + Sync + 'static {
+    fn insert_model(&self, model: &ModelRecord) -> Result<()>;
+    fn get_model(&self, id: &str) -> Result<Option<ModelRecord>>;
+    /// Newest first; `cursor` is the last id of the previous page.
+    fn list_models(&self, cursor: Option<&str>, limit: usize) -> Result<Page<ModelSummary>>;
+    /// Whether a model was deleted.
+    fn delete_model(&self, id: &str) -> Result<bool>;
+
+    fn insert_job(&self, job: &JobRecord) -> Result<()>;
+    fn get_job(&self, id: &str) -> Result<Option<JobRecord>>;
+    /// Newest first, optionally only one status.
+    fn list_jobs(
+        &self,
+        status: Option<JobStatus>,
+        cursor: Option<&str>,
+        limit: usize,
+    ) -> Result<Page<JobRecord>>;
+    fn count_jobs(&self, status: JobStatus) -> Result<u64>;
+    /// Atomically take the oldest queued job and mark it running.
+    fn claim_next(&self, started_at: &str) -> Result<Option<JobRecord>>;
+    fn set_progress(&self, id: &str, progress: f64) -> Result<()>;
+    /// Record how a running job ended (with its result, if any).
+    fn finish_job(&self, id: &str, outcome: &Outcome, finished_at: &str) -> Result<()>;
+    /// Put a running job back in the queue (shutdown, crash recovery of one job).
+    fn requeue(&self, id: &str) -> Result<()>;
+    /// Put every running job back in the queue (start-up after a crash); returns how many.
+    fn requeue_all_running(&self) -> Result<u64>;
+    /// Cancel a queued job; false if it was not queued.
+    fn cancel_queued(&self, id: &str, finished_at: &str) -> Result<bool>;
+    /// A finished job's result JSON and traces CSV.
+    fn get_result(&self, id: &str) -> Result<Option<(String, Option<String>)>>;
+}
+
+/// The current time, RFC 3339 (UTC).
+pub fn now_rfc3339() -> String {
+    time::OffsetDateTime::now_utc()
+        .format(&time::format_description::well_known::Rfc3339)
+        .expect("RFC 3339 formatting of the current time")
+}
+
+/// A new unique, time-ordered id.
+pub fn new_id() -> String {
+    uuid::Uuid::now_v7().to_string()
+}

@@ -1,0 +1,456 @@
+//! The embedded store: one SQLite file (`kea.sqlite`) in the data directory, WAL mode,
+//! schema versioned by `PRAGMA user_version` and migrated forward on open.
+
+use super::{
+    JobRecord, JobStatus, ModelRecord, ModelSummary, Outcome, Page, Result, Store, StoreError,
+};
+use rusqlite::{Connection, OptionalExtension, Row, params};
+use std::path::Path;
+use std::sync::Mutex;
+
+/// Migrations, in order; `user_version` = how many have been applied. Never edit a
+/// shipped migration: append a new one.
+const MIGRATIONS: &[&str] = &[
+    // 1: models, jobs, job results.
+    "CREATE TABLE models (
+        id TEXT PRIMARY KEY,
+        name TEXT,
+        created_at TEXT NOT NULL,
+        model_json TEXT NOT NULL
+     );
+     CREATE TABLE jobs (
+        id TEXT PRIMARY KEY,
+        kind TEXT NOT NULL,
+        status TEXT NOT NULL,
+        progress REAL NOT NULL DEFAULT 0,
+        request_json TEXT NOT NULL,
+        work REAL NOT NULL,
+        created_at TEXT NOT NULL,
+        started_at TEXT,
+        finished_at TEXT,
+        error_json TEXT,
+        attempts INTEGER NOT NULL DEFAULT 0
+     );
+     CREATE INDEX jobs_by_status ON jobs (status, id);
+     CREATE TABLE job_results (
+        job_id TEXT PRIMARY KEY REFERENCES jobs (id) ON DELETE CASCADE,
+        result_json TEXT NOT NULL,
+        traces_csv TEXT
+     );",
+];
+
+pub struct SqliteStore {
+    conn: Mutex<Connection>,
+}
+
+fn db_err(e: rusqlite::Error) -> StoreError {
+    StoreError(e.to_string())
+}
+
+const JOB_COLUMNS: &str = "id, kind, status, progress, request_json, work, created_at, \
+                           started_at, finished_at, error_json, attempts";
+
+fn job_from_row(row: &Row<'_>) -> rusqlite::Result<JobRecord> {
+    let status: String = row.get(2)?;
+    Ok(JobRecord {
+        id: row.get(0)?,
+        kind: row.get(1)?,
+        status: JobStatus::parse(&status).unwrap_or(JobStatus::Failed),
+        progress: row.get(3)?,
+        request_json: row.get(4)?,
+        work: row.get(5)?,
+        created_at: row.get(6)?,
+        started_at: row.get(7)?,
+        finished_at: row.get(8)?,
+        error_json: row.get(9)?,
+        attempts: row.get(10)?,
+    })
+}
+
+impl SqliteStore {
+    /// Open (creating if needed) `kea.sqlite` in `dir` and migrate it.
+    pub fn open(dir: &Path) -> Result<SqliteStore> {
+        std::fs::create_dir_all(dir).map_err(|e| {
+            StoreError(format!(
+                "cannot create data directory {}: {e}",
+                dir.display()
+            ))
+        })?;
+        let conn = Connection::open(dir.join("kea.sqlite")).map_err(db_err)?;
+        conn.busy_timeout(std::time::Duration::from_secs(10))
+            .map_err(db_err)?;
+        conn.execute_batch(
+            "PRAGMA journal_mode = WAL; PRAGMA synchronous = NORMAL; PRAGMA foreign_keys = ON;",
+        )
+        .map_err(db_err)?;
+        let store = SqliteStore {
+            conn: Mutex::new(conn),
+        };
+        store.migrate()?;
+        Ok(store)
+    }
+
+    fn migrate(&self) -> Result<()> {
+        let mut conn = self.conn.lock().expect("store lock");
+        let version: i64 = conn
+            .query_row("PRAGMA user_version", [], |r| r.get(0))
+            .map_err(db_err)?;
+        let version = version.max(0) as usize;
+        if version > MIGRATIONS.len() {
+            return Err(StoreError(format!(
+                "the data directory's schema version {version} is newer than this kea \
+                 build ({}); upgrade kea",
+                MIGRATIONS.len()
+            )));
+        }
+        for (i, sql) in MIGRATIONS.iter().enumerate().skip(version) {
+            let tx = conn.transaction().map_err(db_err)?;
+            tx.execute_batch(sql).map_err(db_err)?;
+            tx.pragma_update(None, "user_version", (i + 1) as i64)
+                .map_err(db_err)?;
+            tx.commit().map_err(db_err)?;
+            tracing::info!(version = i + 1, "applied schema migration");
+        }
+        Ok(())
+    }
+
+    fn with<T>(&self, f: impl FnOnce(&mut Connection) -> rusqlite::Result<T>) -> Result<T> {
+        let mut conn = self
+            .conn
+            .lock()
+            .map_err(|_| StoreError("lock poisoned".into()))?;
+        f(&mut conn).map_err(db_err)
+    }
+
+    /// The schema version of the open database.
+    pub fn schema_version(&self) -> Result<usize> {
+        self.with(|c| c.query_row("PRAGMA user_version", [], |r| r.get::<_, i64>(0)))
+            .map(|v| v.max(0) as usize)
+    }
+}
+
+impl Store for SqliteStore {
+    fn insert_model(&self, m: &ModelRecord) -> Result<()> {
+        self.with(|c| {
+            c.execute(
+                "INSERT INTO models (id, name, created_at, model_json) VALUES (?1, ?2, ?3, ?4)",
+                params![m.id, m.name, m.created_at, m.model_json],
+            )
+            .map(|_| ())
+        })
+    }
+
+    fn get_model(&self, id: &str) -> Result<Option<ModelRecord>> {
+        self.with(|c| {
+            c.query_row(
+                "SELECT id, name, created_at, model_json FROM models WHERE id = ?1",
+                [id],
+                |r| {
+                    Ok(ModelRecord {
+                        id: r.get(0)?,
+                        name: r.get(1)?,
+                        created_at: r.get(2)?,
+                        model_json: r.get(3)?,
+                    })
+                },
+            )
+            .optional()
+        })
+    }
+
+    fn list_models(&self, cursor: Option<&str>, limit: usize) -> Result<Page<ModelSummary>> {
+        let mut items = self.with(|c| {
+            let mut st = c.prepare_cached(
+                "SELECT id, name, created_at FROM models WHERE (?1 IS NULL OR id < ?1)
+                 ORDER BY id DESC LIMIT ?2",
+            )?;
+            st.query_map(params![cursor, limit as i64 + 1], |r| {
+                Ok(ModelSummary {
+                    id: r.get(0)?,
+                    name: r.get(1)?,
+                    created_at: r.get(2)?,
+                })
+            })?
+            .collect::<rusqlite::Result<Vec<_>>>()
+        })?;
+        let next_cursor = page_cursor(&mut items, limit, |m| m.id.clone());
+        Ok(Page { items, next_cursor })
+    }
+
+    fn delete_model(&self, id: &str) -> Result<bool> {
+        self.with(|c| {
+            c.execute("DELETE FROM models WHERE id = ?1", [id])
+                .map(|n| n > 0)
+        })
+    }
+
+    fn insert_job(&self, j: &JobRecord) -> Result<()> {
+        self.with(|c| {
+            c.execute(
+                "INSERT INTO jobs (id, kind, status, progress, request_json, work, created_at)
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+                params![
+                    j.id,
+                    j.kind,
+                    j.status.as_str(),
+                    j.progress,
+                    j.request_json,
+                    j.work,
+                    j.created_at
+                ],
+            )
+            .map(|_| ())
+        })
+    }
+
+    fn get_job(&self, id: &str) -> Result<Option<JobRecord>> {
+        self.with(|c| {
+            c.query_row(
+                &format!("SELECT {JOB_COLUMNS} FROM jobs WHERE id = ?1"),
+                [id],
+                job_from_row,
+            )
+            .optional()
+        })
+    }
+
+    fn list_jobs(
+        &self,
+        status: Option<JobStatus>,
+        cursor: Option<&str>,
+        limit: usize,
+    ) -> Result<Page<JobRecord>> {
+        let mut items = self.with(|c| {
+            let mut st = c.prepare_cached(&format!(
+                "SELECT {JOB_COLUMNS} FROM jobs
+                 WHERE (?1 IS NULL OR status = ?1) AND (?2 IS NULL OR id < ?2)
+                 ORDER BY id DESC LIMIT ?3"
+            ))?;
+            st.query_map(
+                params![status.map(|s| s.as_str()), cursor, limit as i64 + 1],
+                job_from_row,
+            )?
+            .collect::<rusqlite::Result<Vec<_>>>()
+        })?;
+        let next_cursor = page_cursor(&mut items, limit, |j| j.id.clone());
+        Ok(Page { items, next_cursor })
+    }
+
+    fn count_jobs(&self, status: JobStatus) -> Result<u64> {
+        self.with(|c| {
+            c.query_row(
+                "SELECT count(*) FROM jobs WHERE status = ?1",
+                [status.as_str()],
+                |r| r.get::<_, i64>(0),
+            )
+            .map(|n| n.max(0) as u64)
+        })
+    }
+
+    fn claim_next(&self, started_at: &str) -> Result<Option<JobRecord>> {
+        self.with(|c| {
+            c.query_row(
+                &format!(
+                    "UPDATE jobs SET status = 'running', started_at = ?1, progress = 0,
+                        attempts = attempts + 1
+                     WHERE id = (SELECT id FROM jobs WHERE status = 'queued'
+                                 ORDER BY rowid LIMIT 1)
+                     RETURNING {JOB_COLUMNS}"
+                ),
+                [started_at],
+                job_from_row,
+            )
+            .optional()
+        })
+    }
+
+    fn set_progress(&self, id: &str, progress: f64) -> Result<()> {
+        self.with(|c| {
+            c.execute(
+                "UPDATE jobs SET progress = ?2 WHERE id = ?1 AND status = 'running'",
+                params![id, progress],
+            )
+            .map(|_| ())
+        })
+    }
+
+    fn finish_job(&self, id: &str, outcome: &Outcome, finished_at: &str) -> Result<()> {
+        self.with(|c| {
+            let tx = c.transaction()?;
+            match outcome {
+                Outcome::Succeeded {
+                    result_json,
+                    traces_csv,
+                } => {
+                    tx.execute(
+                        "INSERT OR REPLACE INTO job_results (job_id, result_json, traces_csv)
+                         VALUES (?1, ?2, ?3)",
+                        params![id, result_json, traces_csv],
+                    )?;
+                    tx.execute(
+                        "UPDATE jobs SET status = 'succeeded', progress = 1, finished_at = ?2
+                         WHERE id = ?1",
+                        params![id, finished_at],
+                    )?;
+                }
+                Outcome::Failed { error_json } => {
+                    tx.execute(
+                        "UPDATE jobs SET status = 'failed', finished_at = ?2, error_json = ?3
+                         WHERE id = ?1",
+                        params![id, finished_at, error_json],
+                    )?;
+                }
+                Outcome::Cancelled => {
+                    tx.execute(
+                        "UPDATE jobs SET status = 'cancelled', finished_at = ?2 WHERE id = ?1",
+                        params![id, finished_at],
+                    )?;
+                }
+            }
+            tx.commit()
+        })
+    }
+
+    fn requeue(&self, id: &str) -> Result<()> {
+        self.with(|c| {
+            c.execute(
+                "UPDATE jobs SET status = 'queued', started_at = NULL, progress = 0
+                 WHERE id = ?1 AND status = 'running'",
+                [id],
+            )
+            .map(|_| ())
+        })
+    }
+
+    fn requeue_all_running(&self) -> Result<u64> {
+        self.with(|c| {
+            c.execute(
+                "UPDATE jobs SET status = 'queued', started_at = NULL, progress = 0
+                 WHERE status = 'running'",
+                [],
+            )
+            .map(|n| n as u64)
+        })
+    }
+
+    fn cancel_queued(&self, id: &str, finished_at: &str) -> Result<bool> {
+        self.with(|c| {
+            c.execute(
+                "UPDATE jobs SET status = 'cancelled', finished_at = ?2
+                 WHERE id = ?1 AND status = 'queued'",
+                params![id, finished_at],
+            )
+            .map(|n| n > 0)
+        })
+    }
+
+    fn get_result(&self, id: &str) -> Result<Option<(String, Option<String>)>> {
+        self.with(|c| {
+            c.query_row(
+                "SELECT result_json, traces_csv FROM job_results WHERE job_id = ?1",
+                [id],
+                |r| Ok((r.get(0)?, r.get(1)?)),
+            )
+            .optional()
+        })
+    }
+}
+
+/// Trim a `limit + 1` query to `limit` items; the cursor is set when more exist.
+fn page_cursor<T>(items: &mut Vec<T>, limit: usize, id: impl Fn(&T) -> String) -> Option<String> {
+    if items.len() > limit {
+        items.truncate(limit);
+        items.last().map(id)
+    } else {
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::serve::store::{new_id, now_rfc3339};
+
+    fn job(id: &str) -> JobRecord {
+        JobRecord {
+            id: id.into(),
+            kind: "analysis".into(),
+            status: JobStatus::Queued,
+            progress: 0.0,
+            request_json: "{}".into(),
+            work: 1.0,
+            created_at: now_rfc3339(),
+            started_at: None,
+            finished_at: None,
+            error_json: None,
+            attempts: 0,
+        }
+    }
+
+    #[test]
+    fn jobs_are_claimed_in_order_and_survive_reopen() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (new_id(), new_id());
+        {
+            let s = SqliteStore::open(dir.path()).unwrap();
+            assert_eq!(s.schema_version().unwrap(), MIGRATIONS.len());
+            s.insert_job(&job(&a)).unwrap();
+            s.insert_job(&job(&b)).unwrap();
+            let claimed = s.claim_next(&now_rfc3339()).unwrap().unwrap();
+            assert_eq!(claimed.id, a);
+            assert_eq!(claimed.status, JobStatus::Running);
+            assert_eq!(claimed.attempts, 1);
+        }
+        // Reopen: the running job is re-queued ahead of the other.
+        let s = SqliteStore::open(dir.path()).unwrap();
+        assert_eq!(s.requeue_all_running().unwrap(), 1);
+        assert_eq!(s.count_jobs(JobStatus::Queued).unwrap(), 2);
+        let again = s.claim_next(&now_rfc3339()).unwrap().unwrap();
+        assert_eq!((again.id.as_str(), again.attempts), (a.as_str(), 2));
+        s.finish_job(
+            &a,
+            &Outcome::Succeeded {
+                result_json: "{\"x\":1}".into(),
+                traces_csv: Some("t\n0\n".into()),
+            },
+            &now_rfc3339(),
+        )
+        .unwrap();
+        assert_eq!(s.get_job(&a).unwrap().unwrap().status, JobStatus::Succeeded);
+        assert_eq!(
+            s.get_result(&a).unwrap(),
+            Some(("{\"x\":1}".into(), Some("t\n0\n".into())))
+        );
+        assert!(s.cancel_queued(&b, &now_rfc3339()).unwrap());
+        assert!(!s.cancel_queued(&b, &now_rfc3339()).unwrap());
+        assert!(s.claim_next(&now_rfc3339()).unwrap().is_none());
+    }
+
+    #[test]
+    fn listing_pages_newest_first() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = SqliteStore::open(dir.path()).unwrap();
+        let ids: Vec<String> = (0..5).map(|_| new_id()).collect();
+        for id in &ids {
+            s.insert_model(&ModelRecord {
+                id: id.clone(),
+                name: None,
+                created_at: now_rfc3339(),
+                model_json: "{}".into(),
+            })
+            .unwrap();
+        }
+        let p1 = s.list_models(None, 2).unwrap();
+        assert_eq!(
+            p1.items.iter().map(|m| &m.id).collect::<Vec<_>>(),
+            vec![&ids[4], &ids[3]]
+        );
+        let p2 = s.list_models(p1.next_cursor.as_deref(), 2).unwrap();
+        let p3 = s.list_models(p2.next_cursor.as_deref(), 2).unwrap();
+        assert_eq!(p3.items.len(), 1);
+        assert_eq!(p3.items[0].id, ids[0]);
+        assert_eq!(p3.next_cursor, None);
+        assert!(s.delete_model(&ids[0]).unwrap());
+        assert!(!s.delete_model(&ids[0]).unwrap());
+    }
+}

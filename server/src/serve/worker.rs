@@ -1,0 +1,368 @@
+//! The worker pool: dedicated threads that take the oldest queued job from the
+//! store, run it with progress and cancellation, and record how it ended.
+//!
+//! The store is the queue, so nothing submitted lives only in memory: a job that
+//! was running when the process died is re-queued on start, and a graceful shutdown
+//! lets running jobs finish for a grace period, then re-queues them.
+
+use super::jobs::Registry;
+use super::problem::{Problem, kind};
+use super::store::{JobRecord, JobStatus, Outcome, Store, now_rfc3339};
+use axum::http::StatusCode;
+use kea_core::Error;
+use std::cell::Cell;
+use std::collections::HashMap;
+use std::ops::ControlFlow;
+use std::panic::AssertUnwindSafe;
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+use tokio::sync::watch;
+
+/// A job's state as seen live (between store writes).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Snapshot {
+    pub status: JobStatus,
+    pub progress: f64,
+}
+
+/// The in-memory side of a queued or running job of this process.
+pub struct LiveJob {
+    cancel: AtomicBool,
+    tx: watch::Sender<Snapshot>,
+}
+
+impl LiveJob {
+    fn new(status: JobStatus) -> Arc<LiveJob> {
+        Arc::new(LiveJob {
+            cancel: AtomicBool::new(false),
+            tx: watch::Sender::new(Snapshot {
+                status,
+                progress: 0.0,
+            }),
+        })
+    }
+
+    pub fn subscribe(&self) -> watch::Receiver<Snapshot> {
+        self.tx.subscribe()
+    }
+
+    pub fn snapshot(&self) -> Snapshot {
+        *self.tx.borrow()
+    }
+}
+
+/// What `cancel` did.
+#[derive(Debug, PartialEq)]
+pub enum CancelOutcome {
+    /// It was queued and is now cancelled.
+    Cancelled,
+    /// It is running; it stops at its next progress report.
+    Requested,
+    /// It had already finished.
+    AlreadyFinished(JobStatus),
+    NotFound,
+}
+
+const RUNNING: u8 = 0;
+/// Take no new jobs; let running ones finish.
+const DRAINING: u8 = 1;
+/// Interrupt running jobs and re-queue them.
+const STOPPING: u8 = 2;
+
+/// How often a running job's progress is written to the store.
+const PERSIST_EVERY: Duration = Duration::from_millis(500);
+/// Idle workers look at the store this often even without a wake-up (another
+/// instance sharing the store may have queued work).
+const POLL_EVERY: Duration = Duration::from_secs(1);
+
+pub struct Pool {
+    store: Arc<dyn Store>,
+    registry: Registry,
+    job_time_limit: Duration,
+    /// Live jobs by id. Claims, submissions and cancellations take this lock so a
+    /// cancellation never slips between "claimed in the store" and "known here".
+    live: Mutex<HashMap<String, Arc<LiveJob>>>,
+    wake: Mutex<u64>,
+    cond: Condvar,
+    state: AtomicU8,
+    busy: AtomicUsize,
+    threads: Mutex<Vec<JoinHandle<()>>>,
+}
+
+/// Why a running job was asked to stop.
+#[derive(Clone, Copy, PartialEq)]
+enum Stop {
+    Cancelled,
+    TimeLimit,
+    Shutdown,
+}
+
+impl Pool {
+    /// Re-queue jobs a previous process left running, then start `workers` threads.
+    pub fn start(
+        store: Arc<dyn Store>,
+        registry: Registry,
+        workers: usize,
+        job_time_limit: Duration,
+    ) -> Result<Arc<Pool>, super::store::StoreError> {
+        let requeued = store.requeue_all_running()?;
+        if requeued > 0 {
+            tracing::warn!(
+                requeued,
+                "re-queued jobs that were running when kea stopped"
+            );
+        }
+        let pool = Arc::new(Pool {
+            store,
+            registry,
+            job_time_limit,
+            live: Mutex::new(HashMap::new()),
+            wake: Mutex::new(0),
+            cond: Condvar::new(),
+            state: AtomicU8::new(RUNNING),
+            busy: AtomicUsize::new(0),
+            threads: Mutex::new(Vec::new()),
+        });
+        let mut threads = pool.threads.lock().unwrap();
+        for i in 0..workers.max(1) {
+            let p = Arc::clone(&pool);
+            threads.push(
+                std::thread::Builder::new()
+                    .name(format!("kea-worker-{i}"))
+                    .spawn(move || p.work_loop())
+                    .expect("spawn worker thread"),
+            );
+        }
+        drop(threads);
+        Ok(pool)
+    }
+
+    /// Store a new queued job and wake a worker.
+    pub fn submit(&self, job: &JobRecord) -> Result<(), super::store::StoreError> {
+        {
+            let mut live = self.live.lock().unwrap();
+            self.store.insert_job(job)?;
+            live.insert(job.id.clone(), LiveJob::new(JobStatus::Queued));
+        }
+        self.wake_one();
+        Ok(())
+    }
+
+    pub fn live(&self, id: &str) -> Option<Arc<LiveJob>> {
+        self.live.lock().unwrap().get(id).cloned()
+    }
+
+    pub fn cancel(&self, id: &str) -> Result<CancelOutcome, super::store::StoreError> {
+        let mut live = self.live.lock().unwrap();
+        if self.store.cancel_queued(id, &now_rfc3339())? {
+            if let Some(job) = live.remove(id) {
+                job.tx.send_replace(Snapshot {
+                    status: JobStatus::Cancelled,
+                    progress: job.snapshot().progress,
+                });
+            }
+            return Ok(CancelOutcome::Cancelled);
+        }
+        match self.store.get_job(id)? {
+            None => Ok(CancelOutcome::NotFound),
+            Some(j) if j.status.is_terminal() => Ok(CancelOutcome::AlreadyFinished(j.status)),
+            Some(_) => {
+                if let Some(job) = live.get(id) {
+                    job.cancel.store(true, Ordering::SeqCst);
+                }
+                Ok(CancelOutcome::Requested)
+            }
+        }
+    }
+
+    /// Jobs running now.
+    pub fn busy(&self) -> usize {
+        self.busy.load(Ordering::SeqCst)
+    }
+
+    fn wake_one(&self) {
+        *self.wake.lock().unwrap() += 1;
+        self.cond.notify_one();
+    }
+
+    fn wake_all(&self) {
+        *self.wake.lock().unwrap() += 1;
+        self.cond.notify_all();
+    }
+
+    /// Stop taking jobs; give running ones `grace` to finish, then interrupt and
+    /// re-queue them; join the threads.
+    pub fn shutdown(&self, grace: Duration) {
+        self.state.store(DRAINING, Ordering::SeqCst);
+        self.wake_all();
+        let deadline = Instant::now() + grace;
+        while self.busy() > 0 && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        if self.busy() > 0 {
+            tracing::warn!(
+                running = self.busy(),
+                "grace period over: re-queueing running jobs"
+            );
+        }
+        self.state.store(STOPPING, Ordering::SeqCst);
+        self.wake_all();
+        let threads = std::mem::take(&mut *self.threads.lock().unwrap());
+        for t in threads {
+            let _ = t.join();
+        }
+    }
+
+    fn work_loop(self: Arc<Self>) {
+        while self.state.load(Ordering::SeqCst) == RUNNING {
+            let seen = *self.wake.lock().unwrap();
+            match self.claim() {
+                Ok(Some((job, live))) => {
+                    self.busy.fetch_add(1, Ordering::SeqCst);
+                    self.run_job(job, live);
+                    self.busy.fetch_sub(1, Ordering::SeqCst);
+                }
+                Ok(None) => {
+                    let guard = self.wake.lock().unwrap();
+                    if *guard == seen && self.state.load(Ordering::SeqCst) == RUNNING {
+                        let _ = self.cond.wait_timeout(guard, POLL_EVERY);
+                    }
+                }
+                Err(e) => {
+                    tracing::error!(error = %e, "cannot claim a job");
+                    std::thread::sleep(POLL_EVERY);
+                }
+            }
+        }
+    }
+
+    fn claim(&self) -> Result<Option<(JobRecord, Arc<LiveJob>)>, super::store::StoreError> {
+        let mut live = self.live.lock().unwrap();
+        let Some(job) = self.store.claim_next(&now_rfc3339())? else {
+            return Ok(None);
+        };
+        let entry = live
+            .entry(job.id.clone())
+            .or_insert_with(|| LiveJob::new(JobStatus::Running))
+            .clone();
+        entry.tx.send_replace(Snapshot {
+            status: JobStatus::Running,
+            progress: 0.0,
+        });
+        Ok(Some((job, entry)))
+    }
+
+    fn run_job(&self, job: JobRecord, live: Arc<LiveJob>) {
+        let span = tracing::info_span!("job", id = %job.id, kind = %job.kind);
+        let _enter = span.enter();
+        tracing::info!(attempt = job.attempts, "job started");
+        let started = Instant::now();
+        let stop = Cell::new(None::<Stop>);
+        let result = std::panic::catch_unwind(AssertUnwindSafe(|| {
+            let kind = self.registry.get(&job.kind).ok_or_else(|| {
+                Error::invalid("kind", format!("unknown job kind `{}`", job.kind))
+            })?;
+            let request: serde_json::Value = serde_json::from_str(&job.request_json)
+                .map_err(|e| Error::invalid("", format!("stored request unreadable: {e}")))?;
+            let prepared = kind.prepare(&request)?;
+            let mut last_persist = Instant::now();
+            let mut progress = |fraction: f64| {
+                let fraction = fraction.clamp(0.0, 1.0);
+                live.tx.send_modify(|s| s.progress = fraction);
+                if last_persist.elapsed() >= PERSIST_EVERY {
+                    last_persist = Instant::now();
+                    if let Err(e) = self.store.set_progress(&job.id, fraction) {
+                        tracing::warn!(error = %e, "cannot record progress");
+                    }
+                }
+                let reason = if live.cancel.load(Ordering::Relaxed) {
+                    Some(Stop::Cancelled)
+                } else if self.state.load(Ordering::Relaxed) == STOPPING {
+                    Some(Stop::Shutdown)
+                } else if started.elapsed() > self.job_time_limit {
+                    Some(Stop::TimeLimit)
+                } else {
+                    None
+                };
+                match reason {
+                    Some(r) => {
+                        stop.set(Some(r));
+                        ControlFlow::Break(())
+                    }
+                    None => ControlFlow::Continue(()),
+                }
+            };
+            prepared.run(&mut progress)
+        }));
+        let outcome = match result {
+            Ok(Ok(out)) => Outcome::Succeeded {
+                result_json: out.result_json,
+                traces_csv: out.traces_csv,
+            },
+            Ok(Err(Error::Cancelled)) => match stop.get() {
+                Some(Stop::Shutdown) => {
+                    tracing::info!("interrupted by shutdown: re-queued");
+                    self.forget(&job.id, JobStatus::Queued);
+                    if let Err(e) = self.store.requeue(&job.id) {
+                        tracing::error!(error = %e, "cannot re-queue job");
+                    }
+                    return;
+                }
+                Some(Stop::TimeLimit) => failed(
+                    Problem::new(
+                        StatusCode::UNPROCESSABLE_ENTITY,
+                        kind::TOO_MUCH_WORK,
+                        "the job exceeded its time limit",
+                    )
+                    .detail(format!(
+                        "stopped after {:.0} s (server option --job-time-limit); reduce \
+                         the steps or the state dimension",
+                        self.job_time_limit.as_secs_f64()
+                    )),
+                ),
+                _ => Outcome::Cancelled,
+            },
+            Ok(Err(e)) => failed(Problem::from_core(e)),
+            Err(_) => failed(Problem::internal("the job panicked")),
+        };
+        let status = match &outcome {
+            Outcome::Succeeded { .. } => JobStatus::Succeeded,
+            Outcome::Failed { .. } => JobStatus::Failed,
+            Outcome::Cancelled => JobStatus::Cancelled,
+        };
+        if let Err(e) = self.store.finish_job(&job.id, &outcome, &now_rfc3339()) {
+            tracing::error!(error = %e, "cannot record the job's outcome");
+        }
+        tracing::info!(
+            status = status.as_str(),
+            ms = started.elapsed().as_secs_f64() * 1e3,
+            "job finished"
+        );
+        self.forget(&job.id, status);
+    }
+
+    /// Publish the final state of a live job and drop it from the live set.
+    fn forget(&self, id: &str, status: JobStatus) {
+        if let Some(job) = self.live.lock().unwrap().remove(id) {
+            let progress = if status == JobStatus::Succeeded {
+                1.0
+            } else {
+                job.snapshot().progress
+            };
+            job.tx.send_replace(Snapshot { status, progress });
+        }
+    }
+}
+
+/// A failed job's error document: the problem without its HTTP status.
+fn failed(p: Problem) -> Outcome {
+    let mut v = serde_json::to_value(&p).expect("problem serialises");
+    if let Some(o) = v.as_object_mut() {
+        o.remove("status");
+    }
+    Outcome::Failed {
+        error_json: v.to_string(),
+    }
+}

@@ -63,7 +63,11 @@ impl Error {
         match self {
             Error::Invalid(v) => v.clone(),
             Error::Numerical {
-                path, message, step, t, ..
+                path,
+                message,
+                step,
+                t,
+                ..
             } => vec![FieldError::new(
                 path.clone(),
                 format!("{message} (at step {step}, t = {t})"),

@@ -11,9 +11,9 @@ use std::collections::BTreeMap;
 
 /// Names that are functions or constants in expressions, not parameters.
 const FUNCTIONS: &[&str] = &[
-    "sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "asinh", "acosh",
-    "atanh", "exp", "ln", "log", "log2", "log10", "sqrt", "cbrt", "abs", "signum", "floor",
-    "ceil", "round", "trunc", "fract", "PI", "π", "E",
+    "sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "asinh", "acosh", "atanh",
+    "exp", "ln", "log", "log2", "log10", "sqrt", "cbrt", "abs", "signum", "floor", "ceil", "round",
+    "trunc", "fract", "PI", "π", "E",
 ];
 
 /// Whether `name` is a function or constant of the expression language.
@@ -73,11 +73,14 @@ pub fn compile_entry(
         ));
     }
     check_identifiers(text, params, path, allow_t)?;
-    let plain = expand_exponents(text);
+    let plain = unary_minus_binds_loosely(&expand_exponents(text));
     let expr = FlatEx::<f64>::parse(&plain).map_err(|e| {
         FieldError::new(
             path,
-            format!("cannot parse expression \"{text}\": {}", describe(&e.to_string())),
+            format!(
+                "cannot parse expression \"{text}\": {}",
+                describe(&e.to_string())
+            ),
         )
     })?;
     let mut vars = Vec::with_capacity(expr.var_names().len());
@@ -92,9 +95,9 @@ pub fn compile_entry(
             return Err(unknown(text, name, params, path, allow_t));
         }
     }
-    let value = expr.eval(&vars).map_err(|e| {
-        FieldError::new(path, format!("cannot evaluate \"{text}\": {e}"))
-    })?;
+    let value = expr
+        .eval(&vars)
+        .map_err(|e| FieldError::new(path, format!("cannot evaluate \"{text}\": {e}")))?;
     match t_slot {
         None => {
             if value.is_finite() {
@@ -160,6 +163,29 @@ fn expand_exponents(text: &str) -> String {
             _ => out.push_str(lit),
         }
         i = end;
+    }
+    out
+}
+
+/// exmex binds a unary minus tighter than `^` (`-x^2` = 9 at x = 3); mathematics and
+/// most languages bind it looser (`-x^2` = −9). Rewrite a unary minus as `(-1)*`, except
+/// directly after `^` (`x^-2` stays x^(−2)).
+fn unary_minus_binds_loosely(text: &str) -> String {
+    let mut out = String::with_capacity(text.len() + 8);
+    let mut prev: Option<char> = None;
+    for c in text.chars() {
+        if c == '-' {
+            let unary = matches!(prev, None | Some('(' | ',' | '+' | '-' | '*' | '/'));
+            if unary {
+                out.push_str("(-1)*");
+                prev = Some('*');
+                continue;
+            }
+        }
+        out.push(c);
+        if !c.is_whitespace() {
+            prev = Some(c);
+        }
     }
     out
 }
@@ -358,10 +384,14 @@ mod tests {
 
     #[test]
     fn unknown_parameter_is_named_with_position() {
-        let e = compile_entry(&"s/mass".into(), &params(), "system.a[0][0]", true, 0.0)
-            .unwrap_err();
+        let e =
+            compile_entry(&"s/mass".into(), &params(), "system.a[0][0]", true, 0.0).unwrap_err();
         assert_eq!(e.path, "system.a[0][0]");
-        assert!(e.message.contains("unknown parameter \"mass\""), "{}", e.message);
+        assert!(
+            e.message.contains("unknown parameter \"mass\""),
+            "{}",
+            e.message
+        );
         assert!(e.message.contains("position 3"), "{}", e.message);
     }
 
@@ -369,6 +399,22 @@ mod tests {
     fn exponent_is_not_an_identifier() {
         let e = compile_entry(&"1e-5*m".into(), &params(), "p", true, 0.0).unwrap();
         assert!(matches!(e, Entry::Const(x) if (x - 1e-3).abs() < 1e-15));
+    }
+
+    #[test]
+    fn unary_minus_binds_looser_than_power() {
+        let p = params();
+        let v = |s: &str| match compile_entry(&s.into(), &p, "p", true, 0.0).unwrap() {
+            Entry::Const(x) => x,
+            _ => panic!(),
+        };
+        assert_eq!(v("-2^2"), -4.0);
+        assert_eq!(v("-(1+1)^2"), -4.0);
+        assert_eq!(v("3*-2^2"), -12.0);
+        assert_eq!(v("2^-1"), 0.5);
+        assert_eq!(v("-m"), -100.0);
+        assert_eq!(v("1 - -1"), 2.0);
+        assert_eq!(v("2e-1*10"), 2.0);
     }
 
     #[test]

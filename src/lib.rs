@@ -6,12 +6,16 @@
 //! is also how a caller cancels.
 
 pub mod analysis;
+pub mod decimate;
 pub mod error;
 pub mod expr;
+pub mod linalg;
 pub mod model;
 pub mod presets;
 pub mod report;
 pub mod result;
+pub mod riccati;
+pub mod steps;
 pub mod validate;
 
 pub use error::{Error, FieldError};

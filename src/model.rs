@@ -234,4 +234,3 @@ fn default_trace_points() -> usize {
 fn default_true() -> bool {
     true
 }
-

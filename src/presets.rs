@@ -7,7 +7,10 @@ use serde::Serialize;
 /// (name, JSON text) of every preset, in display order.
 const PRESETS: &[(&str, &str)] = &[
     ("seed-example", include_str!("../presets/seed-example.json")),
-    ("helicopter-range", include_str!("../presets/helicopter-range.json")),
+    (
+        "helicopter-range",
+        include_str!("../presets/helicopter-range.json"),
+    ),
     ("cv-tracker", include_str!("../presets/cv-tracker.json")),
 ];
 

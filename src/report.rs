@@ -36,9 +36,7 @@ pub fn criteria_table(r: &AnalysisResult) -> String {
     let _ = writeln!(
         s,
         "{:<w$} | {:^32} | {:^32}",
-        "",
-        "bound (modulus procedure)",
-        "covariance (exact)"
+        "", "bound (modulus procedure)", "covariance (exact)"
     );
     let _ = writeln!(
         s,
@@ -81,7 +79,11 @@ pub fn criteria_table(r: &AnalysisResult) -> String {
             "steady state reached at step {} (t = {}){}",
             ss.reached_at_step,
             ss.t,
-            if ss.shortcut_used { ", shortcut used" } else { "" }
+            if ss.shortcut_used {
+                ", shortcut used"
+            } else {
+                ""
+            }
         );
     }
     for w in &r.warnings {

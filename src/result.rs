@@ -57,7 +57,8 @@ pub struct StepSelection {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StepTrial {
     pub steps: u64,
-    /// Time-averaged |y_D − y_2D| / max|y| against the previous trial (null for the first).
+    /// Time-averaged max_i |y_D − y_2D| / max|y| against the next refinement 2D
+    /// (null when 2D would exceed the cap).
     pub difference: Option<f64>,
 }
 

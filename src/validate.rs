@@ -1,10 +1,10 @@
 //! Validation: a submitted [`Model`] plus overrides becomes a [`CompiledModel`] or a
 //! list of errors, each naming the field path and what was expected.
 
+use crate::Overrides;
 use crate::error::{Error, FieldError};
 use crate::expr::{Entry, TimeMatrix, compile_const, compile_entry};
 use crate::model::{MODEL_FORMAT_VERSION, Model, Steps, Value};
-use crate::Overrides;
 use std::collections::BTreeMap;
 
 /// Largest accepted number of steps D (beyond this a run would take hours).
@@ -137,9 +137,15 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         if !is_identifier(name) {
             errs.at(&path, "a parameter name must be an identifier (letters, digits, _; not starting with a digit)");
         } else if name == "t" {
-            errs.at(&path, "\"t\" is the time variable and cannot be a parameter");
+            errs.at(
+                &path,
+                "\"t\" is the time variable and cannot be a parameter",
+            );
         } else if crate::expr::is_reserved(name) {
-            errs.at(&path, format!("\"{name}\" is a function name and cannot be a parameter"));
+            errs.at(
+                &path,
+                format!("\"{name}\" is a function name and cannot be a parameter"),
+            );
         }
         if !value.is_finite() {
             errs.at(&path, "expected a finite number");
@@ -153,7 +159,11 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
                 &path,
                 format!(
                     "no parameter \"{name}\" in the model (params: {})",
-                    if known.is_empty() { "none".to_string() } else { known.join(", ") }
+                    if known.is_empty() {
+                        "none".to_string()
+                    } else {
+                        known.join(", ")
+                    }
                 ),
             );
         } else if !value.is_finite() {
@@ -251,9 +261,34 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
     if sys.b.len() == n && l == 0 {
         errs.at("system.b[0]", "b needs at least one column (L ≥ 1)");
     }
-    let b = time_matrix(&sys.b, n, Some(l.max(1)), "system.b", "N", &params, t0, &mut errs);
-    let y0 = const_vector(sys.y0.as_deref(), n, "system.y0", "N", &params, &mut errs, false);
-    let eta0 = const_vector(sys.eta0.as_deref(), n, "system.eta0", "N", &params, &mut errs, true);
+    let b = time_matrix(
+        &sys.b,
+        n,
+        Some(l.max(1)),
+        "system.b",
+        "N",
+        &params,
+        t0,
+        &mut errs,
+    );
+    let y0 = const_vector(
+        sys.y0.as_deref(),
+        n,
+        "system.y0",
+        "N",
+        &params,
+        &mut errs,
+        false,
+    );
+    let eta0 = const_vector(
+        sys.eta0.as_deref(),
+        n,
+        "system.eta0",
+        "N",
+        &params,
+        &mut errs,
+        true,
+    );
     let (w, phi) = noise_cov(
         sys.phi.as_deref(),
         sys.w.as_deref(),
@@ -288,20 +323,36 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
     }
     let noise = match (&meas.gamma, &meas.g) {
         (Some(_), Some(_)) => {
-            errs.at("measurement.g", "give either gamma (n×M) or g (N×M, the seed's form), not both");
+            errs.at(
+                "measurement.g",
+                "give either gamma (n×M) or g (N×M, the seed's form), not both",
+            );
             None
         }
         (None, None) => {
-            errs.at("measurement.gamma", "missing: give gamma (n×M) or g (N×M, the seed's form)");
+            errs.at(
+                "measurement.gamma",
+                "missing: give gamma (n×M) or g (N×M, the seed's form)",
+            );
             None
         }
         (Some(gm), None) => {
             let mcols = gm.first().map(|r| r.len()).unwrap_or(0);
             if mcols == 0 && gm.len() == nm {
-                errs.at("measurement.gamma[0]", "gamma needs at least one column (M ≥ 1)");
+                errs.at(
+                    "measurement.gamma[0]",
+                    "gamma needs at least one column (M ≥ 1)",
+                );
             }
             Some(MeasurementNoise::Gamma(time_matrix(
-                gm, nm, Some(mcols.max(1)), "measurement.gamma", "n", &params, t0, &mut errs,
+                gm,
+                nm,
+                Some(mcols.max(1)),
+                "measurement.gamma",
+                "n",
+                &params,
+                t0,
+                &mut errs,
             )))
         }
         (None, Some(g)) => {
@@ -310,7 +361,14 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
                 errs.at("measurement.g[0]", "g needs at least one column (M ≥ 1)");
             }
             Some(MeasurementNoise::SeedG(time_matrix(
-                g, n, Some(mcols.max(1)), "measurement.g", "N", &params, t0, &mut errs,
+                g,
+                n,
+                Some(mcols.max(1)),
+                "measurement.g",
+                "N",
+                &params,
+                t0,
+                &mut errs,
             )))
         }
     };
@@ -335,7 +393,11 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
                 match (si, mi) {
                     (None, _) => errs.at(
                         &format!("measurement.pairs[{k}].state"),
-                        format!("no state named \"{}\" (states: {})", p.state, sys.states.join(", ")),
+                        format!(
+                            "no state named \"{}\" (states: {})",
+                            p.state,
+                            sys.states.join(", ")
+                        ),
                     ),
                     (_, None) => errs.at(
                         &format!("measurement.pairs[{k}].measurement"),
@@ -380,13 +442,37 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
     if !(cr.confidence > 0.0 && cr.confidence < 1.0) {
         errs.at(
             "criteria.confidence",
-            format!("expected a probability strictly between 0 and 1, got {}", cr.confidence),
+            format!(
+                "expected a probability strictly between 0 and 1, got {}",
+                cr.confidence
+            ),
         );
     }
     let paired: Vec<bool> = pair_of_state.iter().map(|p| p.is_some()).collect();
-    let weights_yz = weights(cr.weights.yz.as_deref(), n, Some(&paired), "criteria.weights.yz", &sys.states, &mut errs);
-    let weights_zx = weights(cr.weights.zx.as_deref(), n, Some(&paired), "criteria.weights.zx", &sys.states, &mut errs);
-    let weights_yx = weights(cr.weights.yx.as_deref(), n, None, "criteria.weights.yx", &sys.states, &mut errs);
+    let weights_yz = weights(
+        cr.weights.yz.as_deref(),
+        n,
+        Some(&paired),
+        "criteria.weights.yz",
+        &sys.states,
+        &mut errs,
+    );
+    let weights_zx = weights(
+        cr.weights.zx.as_deref(),
+        n,
+        Some(&paired),
+        "criteria.weights.zx",
+        &sys.states,
+        &mut errs,
+    );
+    let weights_yx = weights(
+        cr.weights.yx.as_deref(),
+        n,
+        None,
+        "criteria.weights.yx",
+        &sys.states,
+        &mut errs,
+    );
 
     // --- options
     let op = &model.options;
@@ -438,7 +524,10 @@ fn check_names(names: &[String], path: &str, errs: &mut Errors) {
         if name.trim().is_empty() {
             errs.at(&format!("{path}[{i}]"), "a name must not be empty");
         } else if names[..i].contains(name) {
-            errs.at(&format!("{path}[{i}]"), format!("duplicate name \"{name}\""));
+            errs.at(
+                &format!("{path}[{i}]"),
+                format!("duplicate name \"{name}\""),
+            );
         }
     }
 }
@@ -457,7 +546,10 @@ fn check_shape(
     if m.len() != rows {
         errs.at(
             path,
-            format!("has {} rows, expected {rows} ({rows_sym} = {rows})", m.len()),
+            format!(
+                "has {} rows, expected {rows} ({rows_sym} = {rows})",
+                m.len()
+            ),
         );
         ok = false;
     }
@@ -527,7 +619,10 @@ fn time_vector(
     errs: &mut Errors,
 ) -> TimeMatrix {
     if v.len() != n {
-        errs.at(path, format!("has {} entries, expected {n} ({sym} = {n})", v.len()));
+        errs.at(
+            path,
+            format!("has {} entries, expected {n} ({sym} = {n})", v.len()),
+        );
     }
     let mut entries = Vec::with_capacity(n);
     for i in 0..n {
@@ -557,7 +652,10 @@ fn const_vector(
         return vec![0.0; n];
     };
     if v.len() != n {
-        errs.at(path, format!("has {} entries, expected {n} ({sym} = {n})", v.len()));
+        errs.at(
+            path,
+            format!("has {} entries, expected {n} ({sym} = {n})", v.len()),
+        );
         return vec![0.0; n];
     }
     v.iter()
@@ -590,13 +688,24 @@ fn noise_cov(
 ) -> (Vec<f64>, Vec<f64>) {
     match (sko, cov) {
         (Some(_), Some(_)) => {
-            errs.at(cov_path, format!("give either {} or {}, not both", leaf(sko_path), leaf(cov_path)));
+            errs.at(
+                cov_path,
+                format!(
+                    "give either {} or {}, not both",
+                    leaf(sko_path),
+                    leaf(cov_path)
+                ),
+            );
             (vec![0.0; dim * dim], vec![0.0; dim])
         }
         (None, None) => {
             errs.at(
                 sko_path,
-                format!("missing: give the SKOs {} ({sym} entries) or the covariance {}", leaf(sko_path), leaf(cov_path)),
+                format!(
+                    "missing: give the SKOs {} ({sym} entries) or the covariance {}",
+                    leaf(sko_path),
+                    leaf(cov_path)
+                ),
             );
             (vec![0.0; dim * dim], vec![0.0; dim])
         }
@@ -637,7 +746,11 @@ fn noise_cov(
                 }
                 let mat = nalgebra::DMatrix::from_row_slice(dim, dim, &cov);
                 let eig = nalgebra::SymmetricEigen::new(mat);
-                let min = eig.eigenvalues.iter().cloned().fold(f64::INFINITY, f64::min);
+                let min = eig
+                    .eigenvalues
+                    .iter()
+                    .cloned()
+                    .fold(f64::INFINITY, f64::min);
                 let max = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
                 if min < -1e-12 * max.max(f64::MIN_POSITIVE) {
                     errs.at(
@@ -666,13 +779,19 @@ fn weights(
 ) -> Option<Vec<f64>> {
     let w = w?;
     if w.len() != n {
-        errs.at(path, format!("has {} weights, expected one per state ({n})", w.len()));
+        errs.at(
+            path,
+            format!("has {} weights, expected one per state ({n})", w.len()),
+        );
         return None;
     }
     let mut ok = true;
     for (i, x) in w.iter().enumerate() {
         if !(x.is_finite() && *x >= 0.0) {
-            errs.at(&format!("{path}[{i}]"), format!("a weight must be a finite number ≥ 0, got {x}"));
+            errs.at(
+                &format!("{path}[{i}]"),
+                format!("a weight must be a finite number ≥ 0, got {x}"),
+            );
             ok = false;
         } else if *x > 0.0 && defined.is_some_and(|d| !d[i]) {
             errs.at(

@@ -1,0 +1,201 @@
+//! Trace decimation that keeps extremes: steps are grouped in buckets of `bucket`
+//! steps; each bucket emits two rows (its first and last time) and every series puts
+//! its minimum and maximum over the bucket on them, in the order they occurred. So a
+//! spike that lasts one step survives decimation. Memory is O(rows), not O(steps).
+
+/// Extremes of one series inside the current bucket.
+#[derive(Clone, Copy, Debug)]
+struct Extremes {
+    min: f64,
+    min_at: u64,
+    max: f64,
+    max_at: u64,
+    any: bool,
+}
+
+impl Extremes {
+    const EMPTY: Extremes = Extremes {
+        min: f64::INFINITY,
+        min_at: 0,
+        max: f64::NEG_INFINITY,
+        max_at: 0,
+        any: false,
+    };
+}
+
+/// Decimates `series` parallel series sampled at steps 1..=steps.
+#[derive(Clone, Debug)]
+pub struct Decimator {
+    bucket: u64,
+    steps: u64,
+    series: usize,
+    cur: Vec<Extremes>,
+    in_bucket: u64,
+    first_t: f64,
+    last_t: f64,
+    pub t: Vec<f64>,
+    /// One column per series; `None` where a series had no defined value.
+    pub columns: Vec<Vec<Option<f64>>>,
+}
+
+impl Decimator {
+    /// Choose the bucket size so that at most `max_rows` rows are produced.
+    pub fn new(steps: u64, series: usize, max_rows: usize) -> Self {
+        let max_rows = max_rows.max(2) as u64;
+        let bucket = if steps <= max_rows {
+            1
+        } else {
+            steps.div_ceil(max_rows / 2)
+        };
+        let rows = (steps.div_ceil(bucket) * if bucket == 1 { 1 } else { 2 }) as usize;
+        Decimator {
+            bucket,
+            steps,
+            series,
+            cur: vec![Extremes::EMPTY; series],
+            in_bucket: 0,
+            first_t: 0.0,
+            last_t: 0.0,
+            t: Vec::with_capacity(rows),
+            columns: (0..series).map(|_| Vec::with_capacity(rows)).collect(),
+        }
+    }
+
+    pub fn bucket_steps(&self) -> u64 {
+        self.bucket
+    }
+
+    /// Start a step at time t (steps must come in order).
+    #[inline]
+    pub fn begin(&mut self, t: f64) {
+        if self.in_bucket == 0 {
+            self.first_t = t;
+        }
+        self.last_t = t;
+    }
+
+    /// Record series `s` at step `k` (call between `begin` and `end`).
+    #[inline]
+    pub fn put(&mut self, s: usize, k: u64, v: f64) {
+        let e = &mut self.cur[s];
+        e.any = true;
+        if v < e.min {
+            e.min = v;
+            e.min_at = k;
+        }
+        if v > e.max {
+            e.max = v;
+            e.max_at = k;
+        }
+    }
+
+    /// Finish a step; `k` is its index (1-based) and the last is `steps`.
+    #[inline]
+    pub fn end(&mut self, k: u64) {
+        self.in_bucket += 1;
+        if self.in_bucket == self.bucket || k == self.steps {
+            self.flush();
+        }
+    }
+
+    fn flush(&mut self) {
+        let two = self.bucket > 1;
+        self.t.push(self.first_t);
+        if two {
+            self.t.push(self.last_t);
+        }
+        for (e, col) in self.cur.iter_mut().zip(self.columns.iter_mut()) {
+            if !e.any {
+                col.push(None);
+                if two {
+                    col.push(None);
+                }
+            } else if !two {
+                col.push(Some(e.min));
+            } else if e.min_at <= e.max_at {
+                col.push(Some(e.min));
+                col.push(Some(e.max));
+            } else {
+                col.push(Some(e.max));
+                col.push(Some(e.min));
+            }
+            *e = Extremes::EMPTY;
+        }
+        self.in_bucket = 0;
+    }
+
+    pub fn series(&self) -> usize {
+        self.series
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(values: &[f64], rows: usize) -> Decimator {
+        let mut d = Decimator::new(values.len() as u64, 1, rows);
+        for (i, v) in values.iter().enumerate() {
+            let k = i as u64 + 1;
+            d.begin(k as f64);
+            d.put(0, k, *v);
+            d.end(k);
+        }
+        d
+    }
+
+    #[test]
+    fn a_one_step_spike_survives() {
+        let mut v = vec![1.0; 100_000];
+        v[31_337] = 50.0;
+        v[77_777] = -3.0;
+        let d = run(&v, 100);
+        let col: Vec<f64> = d.columns[0].iter().map(|x| x.unwrap()).collect();
+        assert!(d.t.len() <= 100, "{} rows", d.t.len());
+        assert_eq!(col.iter().cloned().fold(f64::MIN, f64::max), 50.0);
+        assert_eq!(col.iter().cloned().fold(f64::MAX, f64::min), -3.0);
+    }
+
+    #[test]
+    fn extremes_keep_time_order_within_a_bucket() {
+        // bucket of 4: [5, 1, 9, 2] -> min 1 (step 2) before max 9 (step 3)
+        // [8, 7, 0, 3] -> max 8 (step 5) before min 0 (step 7)
+        let v = [5.0, 1.0, 9.0, 2.0, 8.0, 7.0, 0.0, 3.0];
+        let d = run(&v, 4);
+        assert_eq!(d.bucket_steps(), 4);
+        let col: Vec<f64> = d.columns[0].iter().map(|x| x.unwrap()).collect();
+        assert_eq!(col, vec![1.0, 9.0, 8.0, 0.0]);
+        assert_eq!(d.t, vec![1.0, 4.0, 5.0, 8.0]);
+    }
+
+    #[test]
+    fn short_runs_are_not_decimated() {
+        let v = [3.0, 1.0, 2.0];
+        let d = run(&v, 10);
+        assert_eq!(d.bucket_steps(), 1);
+        let col: Vec<f64> = d.columns[0].iter().map(|x| x.unwrap()).collect();
+        assert_eq!(col, v.to_vec());
+    }
+
+    #[test]
+    fn every_bucket_extreme_matches_brute_force() {
+        // pseudo-random walk, compare each bucket's min/max with a direct scan
+        let mut x = 0.0f64;
+        let v: Vec<f64> = (0..10_007u64)
+            .map(|k| {
+                x += ((k * 2_654_435_761) % 1000) as f64 / 500.0 - 1.0;
+                x
+            })
+            .collect();
+        let d = run(&v, 200);
+        let b = d.bucket_steps() as usize;
+        let col: Vec<f64> = d.columns[0].iter().map(|x| x.unwrap()).collect();
+        for (i, chunk) in v.chunks(b).enumerate() {
+            let mn = chunk.iter().cloned().fold(f64::MAX, f64::min);
+            let mx = chunk.iter().cloned().fold(f64::MIN, f64::max);
+            let (a, c) = (col[2 * i], col[2 * i + 1]);
+            assert_eq!(a.min(c), mn);
+            assert_eq!(a.max(c), mx);
+        }
+    }
+}

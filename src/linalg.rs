@@ -1,0 +1,156 @@
+//! Small dense kernels on row-major flat slices, written so that the compiler
+//! vectorises them and, when called with a compile-time dimension, unrolls them.
+//! No allocation; callers own the buffers.
+
+/// c (r×p) = a (r×k) · b (k×p).
+#[inline(always)]
+pub fn mul(c: &mut [f64], a: &[f64], b: &[f64], r: usize, k: usize, p: usize) {
+    for (ci, ai) in c[..r * p]
+        .chunks_exact_mut(p)
+        .zip(a[..r * k].chunks_exact(k))
+    {
+        ci.fill(0.0);
+        for (&aik, bk) in ai.iter().zip(b[..k * p].chunks_exact(p)) {
+            for (cij, &bkj) in ci.iter_mut().zip(bk) {
+                *cij += aik * bkj;
+            }
+        }
+    }
+}
+
+/// Symmetric c (r×r) = a (r×k) · bᵀ where b is r×k, plus `add` (r×r, may be empty):
+/// only the upper triangle is computed, then mirrored, so c is exactly symmetric.
+#[inline(always)]
+pub fn mul_abt_sym(c: &mut [f64], a: &[f64], b: &[f64], add: Option<&[f64]>, r: usize, k: usize) {
+    for i in 0..r {
+        let ai = &a[i * k..i * k + k];
+        for j in i..r {
+            let bj = &b[j * k..j * k + k];
+            let mut s = 0.0;
+            for (x, y) in ai.iter().zip(bj) {
+                s += x * y;
+            }
+            if let Some(add) = add {
+                s += add[i * r + j];
+            }
+            c[i * r + j] = s;
+            c[j * r + i] = s;
+        }
+    }
+}
+
+/// In-place Cholesky factorisation of the symmetric positive-definite m×m matrix `q`
+/// (lower triangle holds L on success). Returns false if q is not positive definite.
+#[inline(always)]
+pub fn cholesky(q: &mut [f64], m: usize) -> bool {
+    for j in 0..m {
+        let mut d = q[j * m + j];
+        for k in 0..j {
+            d -= q[j * m + k] * q[j * m + k];
+        }
+        if !(d > 0.0) || !d.is_finite() {
+            return false;
+        }
+        let d = d.sqrt();
+        q[j * m + j] = d;
+        for i in j + 1..m {
+            let mut s = q[i * m + j];
+            for k in 0..j {
+                s -= q[i * m + k] * q[j * m + k];
+            }
+            q[i * m + j] = s / d;
+        }
+    }
+    true
+}
+
+/// Solve L Lᵀ X = S in place for X (m×p), with L from [`cholesky`].
+#[inline(always)]
+pub fn cholesky_solve(l: &[f64], x: &mut [f64], m: usize, p: usize) {
+    // forward: L Y = S
+    for i in 0..m {
+        for k in 0..i {
+            let lik = l[i * m + k];
+            let (head, tail) = x.split_at_mut(i * p);
+            let xk = &head[k * p..k * p + p];
+            for (xi, &xkj) in tail[..p].iter_mut().zip(xk) {
+                *xi -= lik * xkj;
+            }
+        }
+        let d = l[i * m + i];
+        for v in &mut x[i * p..i * p + p] {
+            *v /= d;
+        }
+    }
+    // backward: Lᵀ X = Y
+    for i in (0..m).rev() {
+        for k in i + 1..m {
+            let lki = l[k * m + i];
+            let (head, tail) = x.split_at_mut(k * p);
+            let xk = &tail[..p];
+            for (xi, &xkj) in head[i * p..i * p + p].iter_mut().zip(xk) {
+                *xi -= lki * xkj;
+            }
+        }
+        let d = l[i * m + i];
+        for v in &mut x[i * p..i * p + p] {
+            *v /= d;
+        }
+    }
+}
+
+/// y (r) = a (r×k) · x (k).
+#[inline(always)]
+pub fn mul_vec(y: &mut [f64], a: &[f64], x: &[f64], r: usize, k: usize) {
+    for (yi, ai) in y[..r].iter_mut().zip(a[..r * k].chunks_exact(k)) {
+        let mut s = 0.0;
+        for (p, q) in ai.iter().zip(&x[..k]) {
+            s += p * q;
+        }
+        *yi = s;
+    }
+}
+
+/// Largest relative entry-wise difference max|a−b| / max|a| (0 if both are zero).
+pub fn rel_diff(a: &[f64], b: &[f64]) -> f64 {
+    let mut num: f64 = 0.0;
+    let mut den: f64 = 0.0;
+    for (x, y) in a.iter().zip(b) {
+        num = num.max((x - y).abs());
+        den = den.max(x.abs());
+    }
+    if den == 0.0 {
+        if num == 0.0 { 0.0 } else { f64::INFINITY }
+    } else {
+        num / den
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cholesky_solves_a_known_system() {
+        // q = [[4, 2], [2, 3]]; q x = s for s = [[2, 8], [1, 7]] (columns are RHS)
+        let mut q = vec![4.0, 2.0, 2.0, 3.0];
+        assert!(cholesky(&mut q, 2));
+        let mut x = vec![2.0, 8.0, 1.0, 7.0];
+        cholesky_solve(&q, &mut x, 2, 2);
+        // check q·x = s
+        let qq = [4.0, 2.0, 2.0, 3.0];
+        let mut s = vec![0.0; 4];
+        mul(&mut s, &qq, &x, 2, 2, 2);
+        for (a, b) in s.iter().zip([2.0, 8.0, 1.0, 7.0]) {
+            assert!((a - b).abs() < 1e-14, "{s:?}");
+        }
+    }
+
+    #[test]
+    fn cholesky_rejects_indefinite() {
+        let mut q = vec![1.0, 2.0, 2.0, 1.0];
+        assert!(!cholesky(&mut q, 2));
+        let mut z = vec![0.0];
+        assert!(!cholesky(&mut z, 1));
+    }
+}

@@ -1,0 +1,150 @@
+//! Step-size selection (METHOD §1.2, text before (1.3)): solve the mean equation
+//! (3.3) with D, 2D, 4D, … and stop when the time-averaged difference between
+//! successive solutions, compared on the coarser grid, is below the tolerance
+//! (relative to max|y|), or at the cap. Both solutions run in lockstep, so memory
+//! does not grow with D.
+
+use crate::Progress;
+use crate::error::Error;
+use crate::expr::TimeMatrix;
+use crate::result::{StepSelection, StepTrial};
+use crate::validate::CompiledModel;
+use std::ops::ControlFlow;
+
+pub struct Selected {
+    pub chosen: u64,
+    pub selection: StepSelection,
+}
+
+/// One Euler step of the mean (3.3) at time t with step dt.
+fn mean_step(
+    a: &mut TimeMatrix,
+    u: &mut TimeMatrix,
+    y: &mut [f64],
+    tmp: &mut [f64],
+    t: f64,
+    dt: f64,
+    k: u64,
+) -> Result<(), Error> {
+    let n = y.len();
+    let err = |p: &str| Error::Numerical {
+        step: k,
+        t,
+        path: p.to_string(),
+        message: "the expression is not finite here".into(),
+    };
+    a.update(t).map_err(err)?;
+    u.update(t).map_err(err)?;
+    for i in 0..n {
+        let mut s = 0.0;
+        for j in 0..n {
+            s += a.values[i * n + j] * y[j];
+        }
+        tmp[i] = y[i] + (s + u.values[i]) * dt;
+    }
+    y.copy_from_slice(tmp);
+    Ok(())
+}
+
+pub fn select_steps(
+    m: &CompiledModel,
+    tolerance: f64,
+    initial: u64,
+    max: u64,
+    progress: &mut dyn Progress,
+) -> Result<Selected, Error> {
+    let n = m.n_states();
+    let span = m.t_end - m.t0;
+    let mut history = Vec::new();
+    let mut d = initial.min(max);
+    loop {
+        if 2 * d > max {
+            // Cannot refine further within the cap: use the finest allowed.
+            history.push(StepTrial {
+                steps: d,
+                difference: None,
+            });
+            return Ok(Selected {
+                chosen: d,
+                selection: StepSelection {
+                    tolerance,
+                    max_steps: max,
+                    converged: false,
+                    history,
+                },
+            });
+        }
+        let (mut ac, mut uc) = (m.a.clone(), m.u.clone());
+        let (mut af, mut uf) = (m.a.clone(), m.u.clone());
+        let mut yc = m.y0.clone();
+        let mut yf = m.y0.clone();
+        let mut tmp = vec![0.0; n];
+        let dtc = span / d as f64;
+        let dtf = dtc / 2.0;
+        let mut sum = 0.0;
+        let mut ymax = yc.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        for k in 1..=d {
+            mean_step(
+                &mut ac,
+                &mut uc,
+                &mut yc,
+                &mut tmp,
+                m.t0 + (k - 1) as f64 * dtc,
+                dtc,
+                k,
+            )?;
+            for h in 0..2u64 {
+                let kf = 2 * k - 1 + h;
+                mean_step(
+                    &mut af,
+                    &mut uf,
+                    &mut yf,
+                    &mut tmp,
+                    m.t0 + (kf - 1) as f64 * dtf,
+                    dtf,
+                    kf,
+                )?;
+            }
+            let mut worst = 0.0f64;
+            for i in 0..n {
+                worst = worst.max((yc[i] - yf[i]).abs());
+                ymax = ymax.max(yf[i].abs()).max(yc[i].abs());
+            }
+            sum += worst;
+            if !sum.is_finite() {
+                return Err(Error::Numerical {
+                    step: k,
+                    t: m.t0 + k as f64 * dtc,
+                    path: "system.a".into(),
+                    message: "the mean state overflowed during step-size selection".into(),
+                });
+            }
+            if k % crate::analysis::PROGRESS_EVERY == 0
+                && let ControlFlow::Break(()) = progress.report(0.0)
+            {
+                return Err(Error::Cancelled);
+            }
+        }
+        let diff = if ymax > 0.0 {
+            sum / d as f64 / ymax
+        } else {
+            0.0
+        };
+        history.push(StepTrial {
+            steps: d,
+            difference: Some(diff),
+        });
+        if diff <= tolerance {
+            return Ok(Selected {
+                chosen: d,
+                selection: StepSelection {
+                    tolerance,
+                    max_steps: max,
+                    converged: true,
+                    history,
+                },
+            });
+        }
+        d *= 2;
+    }
+}

@@ -7,8 +7,9 @@
 
 use crate::decimate::Decimator;
 use crate::error::Error;
-use crate::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym, mul_vec, rel_diff};
+use crate::linalg::{mul, mul_abt_sym, mul_vec, rel_diff};
 use crate::result::*;
+use crate::riccati::JosephStep;
 use crate::steps::select_steps;
 use crate::validate::{CompiledModel, MeasurementNoise, StepPlan};
 use crate::{Progress, riccati};
@@ -276,14 +277,12 @@ impl<'m, const N: usize> Engine<'m, N> {
         let mut chi = vec![0.0; n]; // χ(t0) = 0 (3.18)
         let mut xi = vec![0.0; n];
         let mut tmp_nn = vec![0.0; n * n];
-        let mut r_pred = vec![0.0; n * n]; // r_k
-        let mut s_cr = vec![0.0; nm * n]; // S = C r
-        let mut q = vec![0.0; nm * nm];
-        let mut x_solve = vec![0.0; nm * n]; // pᵀ = q⁻¹ S
-        let mut gain = vec![0.0; n * nm]; // p_k
-        let mut gain_prev = vec![0.0; n * nm];
-        let mut mm = vec![0.0; n * n]; // M = h r = r − p S
-        let mut e_nm = vec![0.0; n * nm];
+        let mut joseph = JosephStep::new(n, nm);
+        let mut schedule = m.schedule.clone();
+        let mut avail = vec![true; nm];
+        let mut c_nz_k: Vec<(usize, usize, f64)> = Vec::with_capacity(c_nz.len());
+        let mut rv_k = vec![0.0; nm * nm];
+        let mut gain_k = vec![0.0; n * nm];
         let mut abs_h = vec![0.0; n * n]; // |I − pC|
         let mut abs_p = vec![0.0; n * nm];
         let mut tmp_n = vec![0.0; n];
@@ -352,27 +351,46 @@ impl<'m, const N: usize> Engine<'m, N> {
             }
 
             if frozen_at.is_none() {
-                // (2.1) r_k = A R Aᵀ + B
-                mul(&mut tmp_nn, &big_a, &big_r, n, n, n);
-                mul_abt_sym(&mut r_pred, &tmp_nn, &big_a, Some(&big_b), n, n);
-                // S = C r ; (2.3) q = S Cᵀ + Rv
-                s_cr.fill(0.0);
-                for &(j, i, c) in &c_nz {
-                    for (s, r) in s_cr[j * n..j * n + n]
-                        .iter_mut()
-                        .zip(&r_pred[i * n..i * n + n])
-                    {
-                        *s += c * r;
+                // Measurements available at this step (all, unless scheduled).
+                let all = match schedule.as_mut() {
+                    None => true,
+                    Some(sc) => sc
+                        .mask(k, t_k, &mut avail)
+                        .map_err(|p| time_err(&p, k, t_k))?,
+                };
+                let ok = if all {
+                    joseph.step(&mut big_r, &big_a, &big_b, &c_nz, &rv, nm)
+                } else {
+                    // Compact C and Rv to the available rows.
+                    let mut idx = Vec::with_capacity(nm);
+                    for (j, a) in avail.iter().enumerate() {
+                        if *a {
+                            idx.push(j);
+                        }
                     }
-                }
-                q.copy_from_slice(&rv);
-                for &(l, i, c) in &c_nz {
-                    for j in 0..nm {
-                        q[j * nm + l] += c * s_cr[j * n + i];
+                    let nk = idx.len();
+                    c_nz_k.clear();
+                    for &(j, i, c) in &c_nz {
+                        if let Some(jj) = idx.iter().position(|x| *x == j) {
+                            c_nz_k.push((jj, i, c));
+                        }
                     }
-                }
-                // (2.5) p = r Cᵀ q⁻¹ : pᵀ = q⁻¹ S by Cholesky (never an explicit inverse)
-                if !cholesky(&mut q, nm) {
+                    for (a, &ja) in idx.iter().enumerate() {
+                        for (b, &jb) in idx.iter().enumerate() {
+                            rv_k[a * nk + b] = rv[ja * nm + jb];
+                        }
+                    }
+                    let ok = joseph.step(&mut big_r, &big_a, &big_b, &c_nz_k, &rv_k, nk);
+                    gain_k[..n * nk].copy_from_slice(&joseph.gain[..n * nk]);
+                    joseph.gain[..n * nm].fill(0.0);
+                    for i in 0..n {
+                        for (a, &j) in idx.iter().enumerate() {
+                            joseph.gain[i * nm + j] = gain_k[i * nk + a];
+                        }
+                    }
+                    ok
+                };
+                if !ok {
                     return Err(Error::Numerical {
                         step: k,
                         t: t_k,
@@ -380,51 +398,11 @@ impl<'m, const N: usize> Engine<'m, N> {
                         message: "the innovation covariance q = C r Cᵀ + Γ V Γᵀ is singular (not positive definite): a measurement has no error and its direction of the state is already known exactly; give non-zero psi/V or eta0".into(),
                     });
                 }
-                x_solve.copy_from_slice(&s_cr);
-                cholesky_solve(&q, &mut x_solve, nm, n);
-                gain_prev.copy_from_slice(&gain);
-                for i in 0..n {
-                    for j in 0..nm {
-                        gain[i * nm + j] = x_solve[j * n + i];
-                    }
-                }
-                // Joseph form (2.7): R = h r hᵀ + p Rv pᵀ with h = I − pC.
-                // M = h r = r − p S; h r hᵀ = M − (M Cᵀ) pᵀ; R = M + (p Rv − M Cᵀ) pᵀ.
-                mul(&mut mm, &gain, &s_cr, n, nm, n);
-                for (x, r) in mm.iter_mut().zip(&r_pred) {
-                    *x = r - *x;
-                }
-                mul(&mut e_nm, &gain, &rv, n, nm, nm);
-                for &(l, i, c) in &c_nz {
-                    for a in 0..n {
-                        e_nm[a * nm + l] -= c * mm[a * n + i];
-                    }
-                }
-                // R = M + E pᵀ, symmetric: upper triangle mirrored
-                mul_abt_sym(&mut big_r, &e_nm, &gain, None, n, nm);
-                for i in 0..n {
-                    for j in i..n {
-                        // M is h r (not symmetric in rounding); symmetrise its part
-                        let v = big_r[i * n + j] + 0.5 * (mm[i * n + j] + mm[j * n + i]);
-                        big_r[i * n + j] = v;
-                        big_r[j * n + i] = v;
-                    }
-                }
                 // |I − pC| and |p| for the bound (3.19)
-                for i in 0..n {
-                    for j in 0..n {
-                        tmp_nn[i * n + j] = if i == j { 1.0 } else { 0.0 };
-                    }
-                }
-                for &(l, j, c) in &c_nz {
-                    for i in 0..n {
-                        tmp_nn[i * n + j] -= gain[i * nm + l] * c;
-                    }
-                }
-                for (h, x) in abs_h.iter_mut().zip(&tmp_nn) {
+                for (h, x) in abs_h.iter_mut().zip(&joseph.h) {
                     *h = x.abs();
                 }
-                for (ap, g) in abs_p.iter_mut().zip(&gain) {
+                for (ap, g) in abs_p.iter_mut().zip(&joseph.gain[..n * nm]) {
                     *ap = g.abs();
                 }
                 for i in 0..n {
@@ -440,9 +418,9 @@ impl<'m, const N: usize> Engine<'m, N> {
                 }
                 // Steady state: r_k within STEADY_TOL of r∞ (then R, p are stationary too).
                 if let Some(r_inf) = &r_inf {
-                    if steady_at.is_none() && rel_diff(r_inf, &r_pred) <= STEADY_TOL {
+                    if steady_at.is_none() && rel_diff(r_inf, &joseph.r_pred) <= STEADY_TOL {
                         steady_at = Some(k);
-                        steady_cov = Some((big_r.clone(), gain.clone()));
+                        steady_cov = Some((big_r.clone(), joseph.gain[..n * nm].to_vec()));
                         if m.steady_state_shortcut {
                             frozen_at = Some(k);
                         }
@@ -494,6 +472,14 @@ impl<'m, const N: usize> Engine<'m, N> {
                     dec.put(base + S_RYX, k, eta[i] / chi[i]);
                 }
                 if let Some(j) = pair[i] {
+                    if !avail[j] {
+                        // No measured information at this step: excluded from YZ/ZX.
+                        bound.yz[i].excluded += 1;
+                        bound.zx[i].excluded += 1;
+                        cov.yz[i].excluded += 1;
+                        cov.zx[i].excluded += 1;
+                        continue;
+                    }
                     let (zb, zc) = (zeta[j], meas_sko[j]);
                     bound.yz[i].add(eta[i], zb);
                     bound.zx[i].add(zb, chi[i]);
@@ -541,8 +527,8 @@ impl<'m, const N: usize> Engine<'m, N> {
         let zeta_state: Vec<f64> = zeta.clone();
         let final_ = Final {
             covariance: to_rows(&big_r, n),
-            gain: to_rows(&gain, nm),
-            predicted_covariance: to_rows(&r_pred, n),
+            gain: to_rows(&joseph.gain[..n * nm], nm),
+            predicted_covariance: to_rows(&joseph.r_pred, n),
             eta: eta.clone(),
             zeta: zeta_state.clone(),
             chi: chi.clone(),
@@ -566,7 +552,6 @@ impl<'m, const N: usize> Engine<'m, N> {
         if !invariant && m.steady_state_shortcut {
             // Nothing to say: the shortcut applies to time-invariant models only.
         }
-        let _ = gain_prev;
         Ok(AnalysisResult {
             steps: self.steps,
             dt,

@@ -15,6 +15,8 @@ pub mod presets;
 pub mod report;
 pub mod result;
 pub mod riccati;
+pub mod schedule;
+pub mod simulation;
 pub mod steps;
 pub mod validate;
 

@@ -159,9 +159,29 @@ pub struct Measurement {
     /// Full measurement-error covariance V (M×M), instead of `psi`.
     #[serde(default, rename = "V", skip_serializing_if = "Option::is_none")]
     pub v: Option<Vec<Vec<Value>>>,
+    /// When each measurement is available (n entries, null = always); absent = always.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub schedule: Option<Vec<Option<Schedule>>>,
     /// Explicit state↔measurement pairs; when absent they are inferred from C.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pairs: Option<Vec<Pair>>,
+}
+
+/// Availability of one measurement: exactly one of `every`, `when`, `unavailable`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Schedule {
+    /// Available at every k-th step (k ≡ offset mod every).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub every: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub offset: Option<u64>,
+    /// Available where this expression in t (and params) is > 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub when: Option<Value>,
+    /// Unavailable inside these closed intervals [t_from, t_to].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unavailable: Option<Vec<[f64; 2]>>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -64,3 +64,135 @@ pub fn dare_doubling(
     }
     None
 }
+
+use crate::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym};
+
+/// Work buffers and outputs of one step of the filter's covariance recursion
+/// (2.1)–(2.7) in Joseph form. Allocated once; `step` allocates nothing.
+#[derive(Clone, Debug)]
+pub struct JosephStep {
+    n: usize,
+    tmp: Vec<f64>,
+    /// r_k, the predicted (a-priori) covariance (2.1).
+    pub r_pred: Vec<f64>,
+    s_cr: Vec<f64>,
+    /// After `step`: the Cholesky factor of q_k (lower triangle), nm_k×nm_k.
+    pub q_chol: Vec<f64>,
+    x: Vec<f64>,
+    mm: Vec<f64>,
+    e: Vec<f64>,
+    /// p_k, N×nm_k (2.5), for the measurements used at this step.
+    pub gain: Vec<f64>,
+    /// I − p_k C (N×N).
+    pub h: Vec<f64>,
+}
+
+impl JosephStep {
+    pub fn new(n: usize, nm: usize) -> Self {
+        JosephStep {
+            n,
+            tmp: vec![0.0; n * n],
+            r_pred: vec![0.0; n * n],
+            s_cr: vec![0.0; nm * n],
+            q_chol: vec![0.0; nm * nm],
+            x: vec![0.0; nm * n],
+            mm: vec![0.0; n * n],
+            e: vec![0.0; n * nm],
+            gain: vec![0.0; n * nm],
+            h: vec![0.0; n * n],
+        }
+    }
+
+    /// One step: from R_{k−1} (`big_r`, overwritten with R_k), A_{k−1}, B_{k−1}, the
+    /// measurements' non-zeros of C as (row, col, value) with rows 0..nm, and Rv_k
+    /// (nm×nm). Returns false if q_k is not positive definite.
+    ///
+    ///     r = A R Aᵀ + B                       (2.1)
+    ///     q = C r Cᵀ + Rv                      (2.3)
+    ///     p = r Cᵀ q⁻¹   (Cholesky solve)      (2.5)
+    ///     R = h r hᵀ + p Rv pᵀ,  h = I − pC    (2.7), Joseph form
+    /// computed as M = h r = r − p S (S = C r), h r hᵀ = M − M Cᵀ pᵀ,
+    /// R = M + (p Rv − M Cᵀ) pᵀ, upper triangle mirrored so R stays symmetric.
+    #[inline(always)]
+    pub fn step(
+        &mut self,
+        big_r: &mut [f64],
+        big_a: &[f64],
+        big_b: &[f64],
+        c_nz: &[(usize, usize, f64)],
+        rv: &[f64],
+        nm: usize,
+    ) -> bool {
+        let n = self.n;
+        mul(&mut self.tmp, big_a, big_r, n, n, n);
+        mul_abt_sym(&mut self.r_pred, &self.tmp, big_a, Some(big_b), n, n);
+        if nm == 0 {
+            big_r[..n * n].copy_from_slice(&self.r_pred[..n * n]);
+            for i in 0..n {
+                for j in 0..n {
+                    self.h[i * n + j] = if i == j { 1.0 } else { 0.0 };
+                }
+            }
+            return true;
+        }
+        let s_cr = &mut self.s_cr[..nm * n];
+        s_cr.fill(0.0);
+        for &(j, i, c) in c_nz {
+            for (s, r) in s_cr[j * n..j * n + n]
+                .iter_mut()
+                .zip(&self.r_pred[i * n..i * n + n])
+            {
+                *s += c * r;
+            }
+        }
+        let q = &mut self.q_chol[..nm * nm];
+        q.copy_from_slice(&rv[..nm * nm]);
+        for &(l, i, c) in c_nz {
+            for j in 0..nm {
+                q[j * nm + l] += c * s_cr[j * n + i];
+            }
+        }
+        if !cholesky(q, nm) {
+            return false;
+        }
+        let x = &mut self.x[..nm * n];
+        x.copy_from_slice(s_cr);
+        cholesky_solve(q, x, nm, n);
+        let gain = &mut self.gain[..n * nm];
+        for i in 0..n {
+            for j in 0..nm {
+                gain[i * nm + j] = x[j * n + i];
+            }
+        }
+        mul(&mut self.mm, gain, s_cr, n, nm, n);
+        for (m, r) in self.mm.iter_mut().zip(&self.r_pred) {
+            *m = r - *m;
+        }
+        let e = &mut self.e[..n * nm];
+        mul(e, gain, rv, n, nm, nm);
+        for &(l, i, c) in c_nz {
+            for a in 0..n {
+                e[a * nm + l] -= c * self.mm[a * n + i];
+            }
+        }
+        mul_abt_sym(big_r, e, gain, None, n, nm);
+        for i in 0..n {
+            for j in i..n {
+                let v = big_r[i * n + j] + 0.5 * (self.mm[i * n + j] + self.mm[j * n + i]);
+                big_r[i * n + j] = v;
+                big_r[j * n + i] = v;
+            }
+        }
+        for i in 0..n {
+            for j in 0..n {
+                self.h[i * n + j] = if i == j { 1.0 } else { 0.0 };
+            }
+        }
+        for &(l, j, c) in c_nz {
+            for i in 0..n {
+                self.h[i * n + j] -= gain[i * nm + l] * c;
+            }
+        }
+        true
+    }
+}

@@ -52,6 +52,8 @@ pub struct CompiledModel {
     /// V, M×M; ψ_m = sqrt(V_mm).
     pub v: Vec<f64>,
     pub psi: Vec<f64>,
+    /// Measurement availability; None = every measurement at every step.
+    pub schedule: Option<crate::schedule::Schedules>,
     /// For each state, its paired measurement (METHOD §1.1).
     pub pair_of_state: Vec<Option<usize>>,
     /// Weights per criterion (N each); None = equal over the states where defined.
@@ -100,7 +102,10 @@ impl CompiledModel {
     }
     /// Whether the covariance recursion's inputs (a, b, Γ) do not depend on t.
     pub fn is_time_invariant(&self) -> bool {
-        self.a.is_constant() && self.b.is_constant() && self.noise.matrix().is_constant()
+        self.a.is_constant()
+            && self.b.is_constant()
+            && self.noise.matrix().is_constant()
+            && self.schedule.is_none()
     }
 }
 
@@ -382,6 +387,11 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         &mut errs,
     );
 
+    let schedule = meas
+        .schedule
+        .as_ref()
+        .and_then(|s| crate::schedule::compile(s, nm, &params, t0, &mut errs.0));
+
     // --- pairs (METHOD §1.1)
     let mut pair_of_state: Vec<Option<usize>> = vec![None; n];
     match &meas.pairs {
@@ -503,6 +513,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         phi,
         v,
         psi,
+        schedule,
         pair_of_state,
         weights_yz,
         weights_zx,

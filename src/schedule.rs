@@ -1,0 +1,143 @@
+//! Measurement schedules: when each measurement is available (METHOD §2, "measurements
+//! arrive rarely, the prediction runs every step"). At a step where a measurement is
+//! missing, the filter update uses only the available rows of C; with none available
+//! the filtered covariance is the predicted one (R_k = r_k, p_k = 0).
+
+use crate::error::FieldError;
+use crate::expr::{Entry, TimeFn, compile_entry};
+use crate::model::Schedule;
+use std::collections::BTreeMap;
+
+#[derive(Clone, Debug)]
+pub enum Availability {
+    Always,
+    Never,
+    /// Available at steps k with k ≡ offset (mod every).
+    Every {
+        every: u64,
+        offset: u64,
+    },
+    /// Available where the expression in t is > 0.
+    When(TimeFn, String),
+    /// Unavailable inside any of these closed intervals of t.
+    Unavailable(Vec<(f64, f64)>),
+}
+
+#[derive(Clone, Debug)]
+pub struct Schedules {
+    pub items: Vec<Availability>,
+}
+
+impl Schedules {
+    /// Fill `out[j]` with whether measurement j is available at step k (time t).
+    /// Returns whether all are available; Err(path) if a `when` expression is not finite.
+    #[inline]
+    pub fn mask(&mut self, k: u64, t: f64, out: &mut [bool]) -> Result<bool, String> {
+        let mut all = true;
+        for (o, a) in out.iter_mut().zip(self.items.iter_mut()) {
+            *o = match a {
+                Availability::Always => true,
+                Availability::Never => false,
+                Availability::Every { every, offset } => k % *every == *offset % *every,
+                Availability::When(f, path) => {
+                    let v = f.eval(t);
+                    if !v.is_finite() {
+                        return Err(path.clone());
+                    }
+                    v > 0.0
+                }
+                Availability::Unavailable(iv) => !iv.iter().any(|(a, b)| t >= *a && t <= *b),
+            };
+            all &= *o;
+        }
+        Ok(all)
+    }
+}
+
+/// Compile `measurement.schedule` (n entries, null = always available).
+pub fn compile(
+    sched: &[Option<Schedule>],
+    nm: usize,
+    params: &BTreeMap<String, f64>,
+    t0: f64,
+    errs: &mut Vec<FieldError>,
+) -> Option<Schedules> {
+    let base = "measurement.schedule";
+    if sched.len() != nm {
+        errs.push(FieldError::new(
+            base,
+            format!(
+                "has {} entries, expected one per measurement ({nm}); use null for always",
+                sched.len()
+            ),
+        ));
+        return None;
+    }
+    let mut items = Vec::with_capacity(nm);
+    for (j, s) in sched.iter().enumerate() {
+        let path = format!("{base}[{j}]");
+        let Some(s) = s else {
+            items.push(Availability::Always);
+            continue;
+        };
+        let given =
+            s.every.is_some() as u8 + s.when.is_some() as u8 + s.unavailable.is_some() as u8;
+        if given != 1 {
+            errs.push(FieldError::new(
+                &path,
+                "give exactly one of every (a step count), when (an expression in t, available where > 0) or unavailable (a list of [t_from, t_to] intervals)",
+            ));
+            items.push(Availability::Always);
+            continue;
+        }
+        if s.offset.is_some() && s.every.is_none() {
+            errs.push(FieldError::new(
+                format!("{path}.offset"),
+                "offset goes with every",
+            ));
+        }
+        if let Some(every) = s.every {
+            if every == 0 {
+                errs.push(FieldError::new(
+                    format!("{path}.every"),
+                    "must be at least 1",
+                ));
+                items.push(Availability::Always);
+            } else {
+                items.push(Availability::Every {
+                    every,
+                    offset: s.offset.unwrap_or(0),
+                });
+            }
+        } else if let Some(when) = &s.when {
+            let p = format!("{path}.when");
+            match compile_entry(when, params, &p, true, t0) {
+                Ok(Entry::Const(v)) => items.push(if v > 0.0 {
+                    Availability::Always
+                } else {
+                    Availability::Never
+                }),
+                Ok(Entry::Time(f)) => items.push(Availability::When(f, p)),
+                Err(e) => {
+                    errs.push(e);
+                    items.push(Availability::Always);
+                }
+            }
+        } else if let Some(iv) = &s.unavailable {
+            let mut out = Vec::with_capacity(iv.len());
+            for (i, [a, b]) in iv.iter().enumerate() {
+                if !(a.is_finite() && b.is_finite() && a <= b) {
+                    errs.push(FieldError::new(
+                        format!("{path}.unavailable[{i}]"),
+                        format!(
+                            "expected [t_from, t_to] with finite t_from ≤ t_to, got [{a}, {b}]"
+                        ),
+                    ));
+                }
+                out.push((*a, *b));
+            }
+            items.push(Availability::Unavailable(out));
+        }
+    }
+    Some(Schedules { items })
+}

@@ -1,0 +1,1520 @@
+//! Monte Carlo: real against potential accuracy (METHOD §1.8, seed 000 steps 21–24,
+//! seed 004's figure). R imitations of the a-priori state, the measurements and the
+//! filter; per step and state, the sample SKOs of the a-priori, measured and filtered
+//! errors beside the potential SKO sqrt(diag R_k) and the bound χ_k; the criteria set
+//! `monte_carlo`; consistency (average NEES and NIS with their χ² bands, a verdict per
+//! state).
+//!
+//! Design: step-major. Time is cut into chunks of [`CHUNK_STEPS`] steps. For a chunk,
+//! the [`Plan`] runs the Riccati recursion once (it is the same for every run) and
+//! stores that chunk's inputs and gains; then every block of runs advances through the
+//! chunk (in parallel through an [`Executor`]) and returns per-step sums; the sums are
+//! combined in block order. Runs are split into blocks by `runs` alone, never by the
+//! thread count, and run r draws from its own ChaCha8 stream (seed, stream r), so the
+//! result is bit-identical for a given seed whatever the executor. Memory is
+//! O(R·N + blocks·chunk), independent of D.
+
+use crate::error::{Error, FieldError};
+use crate::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym, mul_vec};
+use crate::result::*;
+use crate::validate::{CompiledModel, MeasurementNoise};
+use crate::{Model, Overrides, Progress};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::ops::ControlFlow;
+
+/// Largest accepted number of runs R.
+pub const MAX_RUNS: u64 = 100_000;
+/// Largest accepted work runs × steps × N² (about a minute on one core at 1e10).
+pub const MAX_WORK: f64 = 1e11;
+/// Steps per chunk: the Riccati is computed for a chunk, then all blocks advance.
+pub const CHUNK_STEPS: usize = 256;
+/// At most this many blocks of runs (more runs make bigger blocks).
+const MAX_BLOCKS: usize = 64;
+/// At least this many runs per block.
+const MIN_BLOCK_RUNS: usize = 16;
+/// Two-sided probability of the χ² acceptance bands.
+pub const BAND_PROBABILITY: f64 = 0.95;
+
+/// Runs independent items and returns their results in item order. A parallel
+/// implementation must give the same results as [`Sequential`] (the items do not
+/// share state), so the simulation is deterministic whatever the executor.
+pub trait Executor {
+    fn map<T: Send, U: Send, F: Fn(T) -> U + Sync>(&self, items: Vec<T>, f: F) -> Vec<U>;
+}
+
+/// One item after the other, on the caller's thread.
+pub struct Sequential;
+
+impl Executor for Sequential {
+    fn map<T: Send, U: Send, F: Fn(T) -> U + Sync>(&self, items: Vec<T>, f: F) -> Vec<U> {
+        items.into_iter().map(f).collect()
+    }
+}
+
+/// What the filter is compared with (METHOD §1.8).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Truth {
+    /// Seed 000's reading: the truth is the mean y; measurements are C y + ΓΦ.
+    Mean,
+    /// The Kalman reading (seed 004): the truth is the imitated process Y;
+    /// measurements are C Y + ΓΦ. With it the Riccati R_k is the filter's exact
+    /// error covariance.
+    Process,
+}
+
+/// How the model error F is drawn (METHOD §1.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ModelError {
+    /// F ~ (0, W) drawn afresh at every step.
+    White,
+    /// F ~ (0, W) drawn once per run: a constant bias.
+    Constant,
+}
+
+/// A Monte Carlo request (without the model).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimulationRequest {
+    /// Number of runs R.
+    pub runs: u64,
+    /// Seed of the random streams; the same seed gives bit-identical results.
+    #[serde(default)]
+    pub seed: u64,
+    #[serde(default = "default_truth")]
+    pub truth: Truth,
+    #[serde(default = "default_model_error")]
+    pub model_error: ModelError,
+    /// Rows of the traces (each row: bucket averages); the model's option when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trace_points: Option<usize>,
+}
+
+fn default_truth() -> Truth {
+    Truth::Process
+}
+fn default_model_error() -> ModelError {
+    ModelError::White
+}
+
+impl SimulationRequest {
+    pub fn new(runs: u64, seed: u64) -> Self {
+        SimulationRequest {
+            runs,
+            seed,
+            truth: Truth::Process,
+            model_error: ModelError::White,
+            trace_points: None,
+        }
+    }
+}
+
+/// The Monte Carlo result (JSON via serde).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SimulationResult {
+    pub request: SimulationRequest,
+    pub steps: u64,
+    pub dt: f64,
+    pub t0: f64,
+    pub t_end: f64,
+    pub states: Vec<String>,
+    pub measurements: Vec<String>,
+    /// y_B and z_B (1.5), (3.21) of the analysis, used by every criteria set.
+    pub y_max: Vec<f64>,
+    pub z_max: Vec<f64>,
+    /// The three criteria sets side by side: `bound`, `covariance`, `monte_carlo`.
+    pub criteria: CriteriaSets,
+    pub consistency: Consistency,
+    /// Sample and potential SKOs at the last step D.
+    #[serde(rename = "final")]
+    pub final_: SimulationFinal,
+    pub traces: SimulationTraces,
+    pub timing: Timing,
+    pub warnings: Vec<String>,
+}
+
+/// Consistency of the potential accuracy with the simulated one.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Consistency {
+    /// Probability of the χ² acceptance bands (two-sided).
+    pub band_probability: f64,
+    /// Average NEES (1/R) Σ e_kᵀ R_k⁻¹ e_k of the filtered error.
+    pub nees: ConsistencyStat,
+    /// Average NIS (1/R) Σ ν_kᵀ q_k⁻¹ ν_k of the innovations (available measurements).
+    pub nis: ConsistencyStat,
+    pub per_state: Vec<StateVerdict>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ConsistencyStat {
+    /// Degrees of freedom of one run at one step (N for NEES; the number of
+    /// available measurements for NIS, here at the last step).
+    pub dof: f64,
+    /// The statistic averaged over runs and over the steps where it is defined.
+    pub time_average: Option<f64>,
+    /// The acceptance band of the run-average at one step: χ²_{R·dof} quantiles / R.
+    pub band: [f64; 2],
+    /// Fraction of the steps whose run-average lies inside its band (≈ the band
+    /// probability when consistent; steps are correlated, so it varies).
+    pub fraction_in_band: Option<f64>,
+    /// Steps where it is undefined (R_k or q_k singular, or nothing measured).
+    pub undefined_steps: u64,
+    pub verdict: Verdict,
+}
+
+/// Per state: the sample variance of the filtered error against R_ii.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StateVerdict {
+    pub state: String,
+    /// Time average of (sample variance / R_ii) over the steps with R_ii > 0.
+    pub variance_ratio: Option<f64>,
+    /// The band of one step's ratio for R runs: χ²_R quantiles / R. The time average
+    /// of correlated steps is at least as tight, so this band is conservative.
+    pub band: [f64; 2],
+    /// Fraction of the steps whose ratio lies inside the band.
+    pub fraction_in_band: Option<f64>,
+    /// Sample mean of the filtered error over runs and steps, in units of sqrt(R_ii)
+    /// (a bias check; ≈ 0 when consistent).
+    pub normalised_bias: Option<f64>,
+    pub verdict: Verdict,
+}
+
+/// Plain verdict: is the potential (Riccati) accuracy believable?
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Verdict {
+    /// The real errors agree with the potential ones.
+    Consistent,
+    /// The real errors are larger than the potential ones: the Riccati promises more.
+    Optimistic,
+    /// The real errors are smaller than the potential ones.
+    Pessimistic,
+    /// Nothing to judge (no step where the statistic is defined).
+    Undefined,
+}
+
+impl Verdict {
+    fn of(value: Option<f64>, band: [f64; 2]) -> Verdict {
+        match value {
+            None => Verdict::Undefined,
+            Some(v) if v > band[1] => Verdict::Optimistic,
+            Some(v) if v < band[0] => Verdict::Pessimistic,
+            Some(_) => Verdict::Consistent,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SimulationFinal {
+    /// Sample SKOs at step D: a-priori (Y − y), measured (paired; null if the
+    /// measurement is not available at D), filtered (X − truth).
+    pub a_priori_sko: Vec<f64>,
+    pub measured_sko: Vec<Option<f64>>,
+    pub filtered_sko: Vec<f64>,
+    /// sqrt(diag R_D) and the bound χ_D (3.19).
+    pub potential_sko: Vec<f64>,
+    pub chi: Vec<f64>,
+}
+
+/// Traces: each row is the average over a bucket of `bucket_steps` steps (variances
+/// are averaged, then square-rooted), at the bucket's last time.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SimulationTraces {
+    pub bucket_steps: u64,
+    pub t: Vec<f64>,
+    pub states: Vec<SimulationStateTrace>,
+    /// Average NEES per row (null where undefined) and its per-step band.
+    pub nees: Vec<Option<f64>>,
+    pub nis: Vec<Option<f64>>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SimulationStateTrace {
+    pub state: String,
+    /// Sample SKO of the a-priori error Y − y.
+    pub a_priori_sko: Vec<f64>,
+    /// Exact open-loop SKO sqrt(P^Y_ii) (what a_priori_sko estimates).
+    pub open_loop_sko: Vec<f64>,
+    /// Sample SKO of the paired measurement's error ΓΦ (null rows: not available).
+    pub measured_sko: Option<Vec<Option<f64>>>,
+    /// Sample SKO and sample mean of the filtered error X − truth.
+    pub filtered_sko: Vec<f64>,
+    pub filtered_mean: Vec<f64>,
+    /// Potential SKO sqrt(R_ii) and the bound χ (3.19).
+    pub potential_sko: Vec<f64>,
+    pub chi: Vec<f64>,
+}
+
+/// Validate a request against a compiled model (paths: `runs`, `trace_points`, …).
+pub fn check_request(req: &SimulationRequest, model: &CompiledModel) -> Result<(), Error> {
+    let mut errs = Vec::new();
+    if req.runs < 2 {
+        errs.push(FieldError::new(
+            "runs",
+            "at least 2 runs are needed for sample SKOs",
+        ));
+    } else if req.runs > MAX_RUNS {
+        errs.push(FieldError::new(
+            "runs",
+            format!("{} runs is more than the limit of {MAX_RUNS}", req.runs),
+        ));
+    }
+    if let Some(tp) = req.trace_points
+        && !(2..=crate::validate::MAX_TRACE_POINTS).contains(&tp)
+    {
+        errs.push(FieldError::new(
+            "trace_points",
+            format!("expected 2 to {} rows", crate::validate::MAX_TRACE_POINTS),
+        ));
+    }
+    let w = work(req.runs, model.max_steps(), model.n_states());
+    if errs.is_empty() && w > MAX_WORK {
+        errs.push(FieldError::new(
+            "runs",
+            format!(
+                "runs × steps × N² = {} × {} × {} = {w:.3e} is more than the limit of {MAX_WORK:.0e}; use fewer runs or steps",
+                req.runs,
+                model.max_steps(),
+                model.n_states().pow(2)
+            ),
+        ));
+    }
+    if errs.is_empty() {
+        Ok(())
+    } else {
+        Err(Error::Invalid(errs))
+    }
+}
+
+/// runs × steps × N²: the simulation's cost in multiply-adds, up to a constant.
+pub fn work(runs: u64, steps: u64, n: usize) -> f64 {
+    runs as f64 * steps as f64 * (n * n) as f64
+}
+
+/// Validate, analyse (for the `bound` and `covariance` sets and y_B), and simulate.
+pub fn simulate<E: Executor>(
+    model: &Model,
+    set: &Overrides,
+    req: &SimulationRequest,
+    exec: &E,
+    progress: &mut dyn Progress,
+) -> Result<SimulationResult, Error> {
+    let compiled = crate::validate::compile(model, set)?;
+    check_request(req, &compiled)?;
+    // The analysis takes a small share of the work; report it as the first 5 %.
+    let mut scaled = |f: f64| progress.report(0.05 * f);
+    let analysis = crate::analysis::run(&compiled, &mut scaled)?;
+    run(&compiled, &analysis, req, exec, &mut |f: f64| {
+        progress.report(0.05 + 0.95 * f)
+    })
+}
+
+/// Simulate a compiled model, given its analysis (D, y_B, z_B, the other sets).
+pub fn run<E: Executor>(
+    model: &CompiledModel,
+    analysis: &AnalysisResult,
+    req: &SimulationRequest,
+    exec: &E,
+    progress: &mut dyn Progress,
+) -> Result<SimulationResult, Error> {
+    check_request(req, model)?;
+    match model.n_states() {
+        1 => run_n::<1, E>(model, analysis, req, exec, progress),
+        2 => run_n::<2, E>(model, analysis, req, exec, progress),
+        3 => run_n::<3, E>(model, analysis, req, exec, progress),
+        4 => run_n::<4, E>(model, analysis, req, exec, progress),
+        5 => run_n::<5, E>(model, analysis, req, exec, progress),
+        6 => run_n::<6, E>(model, analysis, req, exec, progress),
+        7 => run_n::<7, E>(model, analysis, req, exec, progress),
+        8 => run_n::<8, E>(model, analysis, req, exec, progress),
+        _ => run_n::<0, E>(model, analysis, req, exec, progress),
+    }
+}
+
+/// Whether measurement j is available at step k (time t_k).
+#[inline]
+fn available(_model: &CompiledModel, _j: usize, _k: u64) -> bool {
+    // All measurements at every step until the core's measurement schedules land.
+    true
+}
+
+/// Dimensions shared by the plan and the blocks.
+#[derive(Clone, Copy, Debug)]
+struct Dims {
+    n: usize,
+    nm: usize,
+    nl: usize,
+    ms: usize,
+}
+
+/// Layout of one step's inputs in a chunk (offsets into a flat f64 record).
+#[derive(Clone, Copy, Debug)]
+struct Layout {
+    a: usize,      // A_{k−1}, N×N
+    u: usize,      // u_{k−1}Δt, N
+    bd: usize,     // b_{k−1}Δt, N×L
+    gamma: usize,  // Γ_k, n×M
+    gain: usize,   // p_k, N×n (zero columns for unavailable measurements)
+    avail: usize,  // n flags (1.0 / 0.0)
+    y: usize,      // mean y_k, N
+    r_chol: usize, // Cholesky factor of R_k, N×N (valid if flag)
+    q_chol: usize, // Cholesky factor of q_k, masked, n×n
+    flags: usize,  // [R_k factor valid, q_k factor valid, measurements available]
+    size: usize,
+}
+
+impl Layout {
+    fn new(d: Dims) -> Self {
+        let mut o = 0;
+        let mut take = |len: usize| {
+            let at = o;
+            o += len;
+            at
+        };
+        let a = take(d.n * d.n);
+        let u = take(d.n);
+        let bd = take(d.n * d.nl);
+        let gamma = take(d.nm * d.ms);
+        let gain = take(d.n * d.nm);
+        let avail = take(d.nm);
+        let y = take(d.n);
+        let r_chol = take(d.n * d.n);
+        let q_chol = take(d.nm * d.nm);
+        let flags = take(3);
+        Layout {
+            a,
+            u,
+            bd,
+            gamma,
+            gain,
+            avail,
+            y,
+            r_chol,
+            q_chol,
+            flags,
+            size: o,
+        }
+    }
+}
+
+/// Per-step sums a block returns, per step: Σ(Y−y)²_i, Σe²_i, Σe_i (N each),
+/// Σ(ΓΦ)²_j (n), Σ NEES, Σ NIS.
+#[derive(Clone, Copy, Debug)]
+struct SumLayout {
+    apriori: usize,
+    filt2: usize,
+    filt1: usize,
+    meas2: usize,
+    nees: usize,
+    nis: usize,
+    size: usize,
+}
+
+impl SumLayout {
+    fn new(d: Dims) -> Self {
+        SumLayout {
+            apriori: 0,
+            filt2: d.n,
+            filt1: 2 * d.n,
+            meas2: 3 * d.n,
+            nees: 3 * d.n + d.nm,
+            nis: 3 * d.n + d.nm + 1,
+            size: 3 * d.n + d.nm + 2,
+        }
+    }
+}
+
+/// The deterministic part, advanced once per step for all runs: time functions, the
+/// mean (3.3), the Riccati recursion (2.1)–(2.7) with the schedule, the bound
+/// (3.16)–(3.19) and the open-loop covariance.
+struct Plan<'m> {
+    m: &'m CompiledModel,
+    d: Dims,
+    dt: f64,
+    a_fn: crate::expr::TimeMatrix,
+    u_fn: crate::expr::TimeMatrix,
+    b_fn: crate::expr::TimeMatrix,
+    noise_fn: MeasurementNoise,
+    c_nz: Vec<(usize, usize, f64)>,
+    big_a: Vec<f64>,
+    u_dt: Vec<f64>,
+    bd: Vec<f64>,
+    big_b: Vec<f64>,
+    b_phi: Vec<f64>,
+    gamma: Vec<f64>,
+    rv: Vec<f64>,
+    zeta: Vec<f64>,
+    y: Vec<f64>,
+    big_r: Vec<f64>,
+    p_y: Vec<f64>,
+    chi: Vec<f64>,
+    gain: Vec<f64>,
+    avail: Vec<bool>,
+    // work buffers
+    tmp_nn: Vec<f64>,
+    tmp_nn2: Vec<f64>,
+    r_pred: Vec<f64>,
+    s_cr: Vec<f64>,
+    q: Vec<f64>,
+    x_solve: Vec<f64>,
+    xi: Vec<f64>,
+    tmp_n: Vec<f64>,
+}
+
+impl<'m> Plan<'m> {
+    fn new(m: &'m CompiledModel, steps: u64) -> Self {
+        let n = m.n_states();
+        let d = Dims {
+            n,
+            nm: m.n_measurements(),
+            nl: m.b.cols,
+            ms: m.noise.sources(),
+        };
+        let c_nz = (0..d.nm)
+            .flat_map(|j| (0..n).map(move |i| (j, i)))
+            .filter_map(|(j, i)| {
+                let v = m.c[j * n + i];
+                (v != 0.0).then_some((j, i, v))
+            })
+            .collect();
+        let mut big_r = vec![0.0; n * n];
+        for i in 0..n {
+            big_r[i * n + i] = m.eta0[i] * m.eta0[i];
+        }
+        Plan {
+            m,
+            d,
+            dt: (m.t_end - m.t0) / steps as f64,
+            a_fn: m.a.clone(),
+            u_fn: m.u.clone(),
+            b_fn: m.b.clone(),
+            noise_fn: m.noise.clone(),
+            c_nz,
+            big_a: vec![0.0; n * n],
+            u_dt: vec![0.0; n],
+            bd: vec![0.0; n * d.nl],
+            big_b: vec![0.0; n * n],
+            b_phi: vec![0.0; n],
+            gamma: vec![0.0; d.nm * d.ms],
+            rv: vec![0.0; d.nm * d.nm],
+            zeta: vec![0.0; d.nm],
+            y: m.y0.clone(),
+            p_y: big_r.clone(),
+            big_r,
+            chi: vec![0.0; n],
+            gain: vec![0.0; n * d.nm],
+            avail: vec![true; d.nm],
+            tmp_nn: vec![0.0; n * n],
+            tmp_nn2: vec![0.0; n * n],
+            r_pred: vec![0.0; n * n],
+            s_cr: vec![0.0; d.nm * n],
+            q: vec![0.0; d.nm * d.nm],
+            x_solve: vec![0.0; d.nm * n],
+            xi: vec![0.0; n],
+            tmp_n: vec![0.0; n],
+        }
+    }
+
+    /// Advance to step k and write its record (layout `lay`) into `rec`.
+    fn step(&mut self, k: u64, lay: &Layout, rec: &mut [f64]) -> Result<(), Error> {
+        let Dims { n, nm, nl, ms } = self.d;
+        let m = self.m;
+        let dt = self.dt;
+        let t_prev = m.t0 + (k - 1) as f64 * dt;
+        let t_k = m.t0 + k as f64 * dt;
+        let err = |path: &str, t: f64| Error::Numerical {
+            step: k,
+            t,
+            path: path.to_string(),
+            message: "the expression is not finite here".to_string(),
+        };
+        // (1.11)–(1.15): A, uΔt, bΔt at t_{k−1}; Γ at t_k.
+        if k == 1 || !self.a_fn.is_constant() {
+            self.a_fn.update(t_prev).map_err(|p| err(p, t_prev))?;
+            for i in 0..n {
+                for j in 0..n {
+                    self.big_a[i * n + j] =
+                        self.a_fn.values[i * n + j] * dt + if i == j { 1.0 } else { 0.0 };
+                }
+            }
+        }
+        if k == 1 || !self.u_fn.is_constant() {
+            self.u_fn.update(t_prev).map_err(|p| err(p, t_prev))?;
+            for i in 0..n {
+                self.u_dt[i] = self.u_fn.values[i] * dt;
+            }
+        }
+        if k == 1 || !self.b_fn.is_constant() {
+            self.b_fn.update(t_prev).map_err(|p| err(p, t_prev))?;
+            for (d, s) in self.bd.iter_mut().zip(&self.b_fn.values) {
+                *d = s * dt;
+            }
+            let mut bw = vec![0.0; n * nl];
+            mul(&mut bw, &self.bd, &m.w, n, nl, nl);
+            mul_abt_sym(&mut self.big_b, &bw, &self.bd, None, n, nl);
+            for i in 0..n {
+                self.b_phi[i] = (0..nl).map(|l| self.bd[i * nl + l].abs() * m.phi[l]).sum();
+            }
+        }
+        if k == 1 || !self.noise_fn.matrix().is_constant() {
+            match &mut self.noise_fn {
+                MeasurementNoise::Gamma(g) => {
+                    g.update(t_k).map_err(|p| err(p, t_k))?;
+                    self.gamma.copy_from_slice(&g.values);
+                }
+                MeasurementNoise::SeedG(g) => {
+                    g.update(t_k).map_err(|p| err(p, t_k))?;
+                    mul(&mut self.gamma, &m.c, &g.values, nm, n, ms);
+                }
+            }
+            let mut gv = vec![0.0; nm * ms];
+            mul(&mut gv, &self.gamma, &m.v, nm, ms, ms);
+            mul_abt_sym(&mut self.rv, &gv, &self.gamma, None, nm, ms);
+            for j in 0..nm {
+                self.zeta[j] = (0..ms)
+                    .map(|l| self.gamma[j * ms + l].abs() * m.psi[l])
+                    .sum();
+            }
+        }
+        let mut n_avail = 0;
+        for j in 0..nm {
+            self.avail[j] = available(m, j, k);
+            n_avail += self.avail[j] as usize;
+        }
+
+        // (3.3) y_k = A y + uΔt
+        mul_vec(&mut self.tmp_n, &self.big_a, &self.y, n, n);
+        for i in 0..n {
+            self.y[i] = self.tmp_n[i] + self.u_dt[i];
+        }
+        // (2.1) r = A R Aᵀ + B
+        mul(&mut self.tmp_nn, &self.big_a, &self.big_r, n, n, n);
+        mul_abt_sym(
+            &mut self.r_pred,
+            &self.tmp_nn,
+            &self.big_a,
+            Some(&self.big_b),
+            n,
+            n,
+        );
+        // S = C r; (2.3) q = S Cᵀ + Rv. An unavailable measurement j gets S_j = 0 and
+        // q_jj = 1 with no coupling: its gain column is then exactly zero and the
+        // other columns are the Kalman gain of the available measurements alone.
+        self.s_cr.fill(0.0);
+        for &(j, i, c) in &self.c_nz {
+            if self.avail[j] {
+                for (s, r) in self.s_cr[j * n..j * n + n]
+                    .iter_mut()
+                    .zip(&self.r_pred[i * n..i * n + n])
+                {
+                    *s += c * r;
+                }
+            }
+        }
+        self.q.copy_from_slice(&self.rv);
+        for &(l, i, c) in &self.c_nz {
+            for j in 0..nm {
+                self.q[j * nm + l] += c * self.s_cr[j * n + i];
+            }
+        }
+        for j in 0..nm {
+            if !self.avail[j] {
+                for l in 0..nm {
+                    self.q[j * nm + l] = 0.0;
+                    self.q[l * nm + j] = 0.0;
+                }
+                self.q[j * nm + j] = 1.0;
+            }
+        }
+        let q_ok = nm == 0 || cholesky(&mut self.q, nm);
+        if !q_ok {
+            return Err(Error::Numerical {
+                step: k,
+                t: t_k,
+                path: "measurement".into(),
+                message: "the innovation covariance q = C r Cᵀ + Γ V Γᵀ is singular (not positive definite); give non-zero psi/V or eta0".into(),
+            });
+        }
+        // (2.5) pᵀ = q⁻¹ S
+        self.x_solve.copy_from_slice(&self.s_cr);
+        if nm > 0 {
+            cholesky_solve(&self.q, &mut self.x_solve, nm, n);
+        }
+        for i in 0..n {
+            for j in 0..nm {
+                self.gain[i * nm + j] = self.x_solve[j * n + i];
+            }
+        }
+        // (2.7) Joseph form R = h r hᵀ + p Rv pᵀ, h = I − pC (available columns only:
+        // unavailable gain columns are zero, so they drop out of both terms).
+        // h
+        for i in 0..n {
+            for j in 0..n {
+                self.tmp_nn[i * n + j] = if i == j { 1.0 } else { 0.0 };
+            }
+        }
+        for &(l, j, c) in &self.c_nz {
+            for i in 0..n {
+                self.tmp_nn[i * n + j] -= self.gain[i * nm + l] * c;
+            }
+        }
+        mul(&mut self.tmp_nn2, &self.tmp_nn, &self.r_pred, n, n, n); // h r
+        mul_abt_sym(&mut self.big_r, &self.tmp_nn2, &self.tmp_nn, None, n, n); // h r hᵀ
+        if nm > 0 {
+            let mut prv = vec![0.0; n * nm];
+            mul(&mut prv, &self.gain, &self.rv, n, nm, nm);
+            let mut add = vec![0.0; n * n];
+            mul_abt_sym(&mut add, &prv, &self.gain, None, n, nm);
+            for (r, a) in self.big_r.iter_mut().zip(&add) {
+                *r += a;
+            }
+        }
+        // P^Y = A P Aᵀ + B
+        mul(&mut self.tmp_nn2, &self.big_a, &self.p_y, n, n, n);
+        mul_abt_sym(
+            &mut self.p_y,
+            &self.tmp_nn2,
+            &self.big_a,
+            Some(&self.big_b),
+            n,
+            n,
+        );
+        // Bound (3.18)–(3.19): ξ = |A| χ, χ = |h| ξ + |p| ζ
+        for i in 0..n {
+            self.xi[i] = (0..n)
+                .map(|j| self.big_a[i * n + j].abs() * self.chi[j])
+                .sum();
+        }
+        for i in 0..n {
+            let mut s: f64 = (0..n)
+                .map(|j| self.tmp_nn[i * n + j].abs() * self.xi[j])
+                .sum();
+            for j in 0..nm {
+                s += self.gain[i * nm + j].abs() * self.zeta[j];
+            }
+            self.chi[i] = s;
+        }
+        if !self.big_r.iter().all(|v| v.is_finite()) || !self.y.iter().all(|v| v.is_finite()) {
+            return Err(Error::Numerical {
+                step: k,
+                t: t_k,
+                path: "system".into(),
+                message: "the filtered covariance or the mean overflowed: the model diverges faster than f64 can follow on this interval".into(),
+            });
+        }
+
+        // The record for the blocks.
+        rec[lay.a..lay.a + n * n].copy_from_slice(&self.big_a);
+        rec[lay.u..lay.u + n].copy_from_slice(&self.u_dt);
+        rec[lay.bd..lay.bd + n * nl].copy_from_slice(&self.bd);
+        rec[lay.gamma..lay.gamma + nm * ms].copy_from_slice(&self.gamma);
+        rec[lay.gain..lay.gain + n * nm].copy_from_slice(&self.gain);
+        for j in 0..nm {
+            rec[lay.avail + j] = if self.avail[j] { 1.0 } else { 0.0 };
+        }
+        rec[lay.y..lay.y + n].copy_from_slice(&self.y);
+        let rc = &mut rec[lay.r_chol..lay.r_chol + n * n];
+        rc.copy_from_slice(&self.big_r);
+        let r_ok = cholesky(rc, n);
+        rec[lay.q_chol..lay.q_chol + nm * nm].copy_from_slice(&self.q);
+        rec[lay.flags] = if r_ok { 1.0 } else { 0.0 };
+        rec[lay.flags + 1] = if n_avail > 0 { 1.0 } else { 0.0 };
+        rec[lay.flags + 2] = n_avail as f64;
+        Ok(())
+    }
+}
+
+/// A block of runs: their imitated states and filters, and their random streams.
+struct Block {
+    /// Index of the first run.
+    first_run: u64,
+    runs: usize,
+    /// Y (imitated a-priori state), X (estimate), F (constant model error), each
+    /// runs × dim.
+    y: Vec<f64>,
+    x: Vec<f64>,
+    f_const: Vec<f64>,
+    rngs: Vec<ChaCha8Rng>,
+}
+
+/// Read-only inputs shared by all blocks in a chunk.
+struct Shared<'a> {
+    d: Dims,
+    lay: Layout,
+    sl: SumLayout,
+    truth: Truth,
+    model_error: ModelError,
+    c_nz: &'a [(usize, usize, f64)],
+    /// Lower-triangular square roots of W (L×L) and V (M×M).
+    w_sqrt: &'a [f64],
+    v_sqrt: &'a [f64],
+}
+
+#[inline(always)]
+fn normal(rng: &mut ChaCha8Rng) -> f64 {
+    StandardNormal.sample(rng)
+}
+
+/// z = S ξ with S lower-triangular (dim×dim), ξ standard normal.
+#[inline(always)]
+fn draw(rng: &mut ChaCha8Rng, s: &[f64], dim: usize, xi: &mut [f64], z: &mut [f64]) {
+    for v in xi[..dim].iter_mut() {
+        *v = normal(rng);
+    }
+    for i in 0..dim {
+        let mut acc = 0.0;
+        for j in 0..=i {
+            acc += s[i * dim + j] * xi[j];
+        }
+        z[i] = acc;
+    }
+}
+
+impl Block {
+    fn new(first_run: u64, runs: usize, seed: u64, m: &CompiledModel, sh: &Shared) -> Self {
+        let Dims { n, nl, .. } = sh.d;
+        let mut y = vec![0.0; runs * n];
+        let x: Vec<f64> = (0..runs).flat_map(|_| m.y0.iter().copied()).collect();
+        let mut f_const = vec![0.0; runs * nl];
+        let mut xi = vec![0.0; nl.max(n)];
+        let mut rngs = Vec::with_capacity(runs);
+        for r in 0..runs {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            rng.set_stream(first_run + r as u64);
+            // Y_0 ~ (y0, diag η0²) (step 7), then the constant model error if any.
+            for i in 0..n {
+                y[r * n + i] = m.y0[i] + m.eta0[i] * normal(&mut rng);
+            }
+            if sh.model_error == ModelError::Constant {
+                let mut f = vec![0.0; nl];
+                draw(&mut rng, sh.w_sqrt, nl, &mut xi, &mut f);
+                f_const[r * nl..r * nl + nl].copy_from_slice(&f);
+            }
+            rngs.push(rng);
+        }
+        Block {
+            first_run,
+            runs,
+            y,
+            x,
+            f_const,
+            rngs,
+        }
+    }
+
+    /// Advance every run through a chunk of `steps` records; return the per-step sums
+    /// (steps × `SumLayout::size`).
+    fn advance<const N: usize>(&mut self, sh: &Shared, chunk: &[f64], steps: usize) -> Vec<f64> {
+        let d = sh.d;
+        let n = if N == 0 { d.n } else { N };
+        let (nm, nl, ms) = (d.nm, d.nl, d.ms);
+        let lay = sh.lay;
+        let sl = sh.sl;
+        let mut sums = vec![0.0; steps * sl.size];
+        let mut f = vec![0.0; nl];
+        let mut phi = vec![0.0; ms];
+        let mut xi = vec![0.0; nl.max(ms)];
+        let mut noise = vec![0.0; nm];
+        let mut h = vec![0.0; n];
+        let mut y_new = vec![0.0; n];
+        let mut truth = vec![0.0; n];
+        let mut nu = vec![0.0; nm];
+        let mut e = vec![0.0; n];
+        let mut w = vec![0.0; n.max(nm)];
+        for r in 0..self.runs {
+            let rng = &mut self.rngs[r];
+            let y = &mut self.y[r * n..r * n + n];
+            let x = &mut self.x[r * n..r * n + n];
+            let fc = &self.f_const[r * nl..r * nl + nl];
+            for s in 0..steps {
+                let rec = &chunk[s * lay.size..(s + 1) * lay.size];
+                let out = &mut sums[s * sl.size..(s + 1) * sl.size];
+                let a = &rec[lay.a..lay.a + n * n];
+                let u = &rec[lay.u..lay.u + n];
+                let bd = &rec[lay.bd..lay.bd + n * nl];
+                let ym = &rec[lay.y..lay.y + n];
+                // Step 21: Y_k = A Y + uΔt + bΔt F (F white or constant).
+                match sh.model_error {
+                    ModelError::White => draw(rng, sh.w_sqrt, nl, &mut xi, &mut f),
+                    ModelError::Constant => f.copy_from_slice(fc),
+                }
+                mul_vec(&mut y_new, a, y, n, n);
+                for i in 0..n {
+                    let mut bf = 0.0;
+                    for l in 0..nl {
+                        bf += bd[i * nl + l] * f[l];
+                    }
+                    y_new[i] += u[i] + bf;
+                }
+                y.copy_from_slice(&y_new);
+                match sh.truth {
+                    Truth::Process => truth.copy_from_slice(y),
+                    Truth::Mean => truth.copy_from_slice(ym),
+                }
+                // Step 22: Z_k = C·truth + Γ_k Φ (Φ drawn every step, used where available).
+                draw(rng, sh.v_sqrt, ms, &mut xi, &mut phi);
+                mul_vec(
+                    &mut noise,
+                    &rec[lay.gamma..lay.gamma + nm * ms],
+                    &phi,
+                    nm,
+                    ms,
+                );
+                // (2.8) H = A X + uΔt; (2.10) X = H + p (Z − C H)
+                mul_vec(&mut h, a, x, n, n);
+                for i in 0..n {
+                    h[i] += u[i];
+                }
+                nu.copy_from_slice(&noise);
+                for &(j, i, c) in sh.c_nz {
+                    nu[j] += c * (truth[i] - h[i]);
+                }
+                for j in 0..nm {
+                    if rec[lay.avail + j] == 0.0 {
+                        nu[j] = 0.0;
+                    }
+                }
+                let gain = &rec[lay.gain..lay.gain + n * nm];
+                for i in 0..n {
+                    let mut s2 = 0.0;
+                    for j in 0..nm {
+                        s2 += gain[i * nm + j] * nu[j];
+                    }
+                    x[i] = h[i] + s2;
+                }
+                // Errors and their sums.
+                for i in 0..n {
+                    let ea = y[i] - ym[i];
+                    out[sl.apriori + i] += ea * ea;
+                    e[i] = x[i] - truth[i];
+                    out[sl.filt2 + i] += e[i] * e[i];
+                    out[sl.filt1 + i] += e[i];
+                }
+                for j in 0..nm {
+                    out[sl.meas2 + j] += noise[j] * noise[j];
+                }
+                // NEES = ‖L⁻¹ e‖² with R_k = L Lᵀ.
+                if rec[lay.flags] != 0.0 {
+                    out[sl.nees] += forward_norm2(&rec[lay.r_chol..], &e, &mut w, n);
+                }
+                // NIS = ‖Lq⁻¹ ν‖² (ν = 0 for unavailable measurements, q masked).
+                if rec[lay.flags + 1] != 0.0 {
+                    out[sl.nis] += forward_norm2(&rec[lay.q_chol..], &nu, &mut w, nm);
+                }
+            }
+        }
+        sums
+    }
+}
+
+/// ‖L⁻¹ v‖² for lower-triangular L (dim×dim, row-major).
+#[inline(always)]
+fn forward_norm2(l: &[f64], v: &[f64], w: &mut [f64], dim: usize) -> f64 {
+    let mut s = 0.0;
+    for i in 0..dim {
+        let mut acc = v[i];
+        for k in 0..i {
+            acc -= l[i * dim + k] * w[k];
+        }
+        let wi = acc / l[i * dim + i];
+        w[i] = wi;
+        s += wi * wi;
+    }
+    s
+}
+
+/// Lower-triangular S with S Sᵀ = cov for a positive semi-definite cov (dim×dim):
+/// Cholesky, with a zero column where a pivot is zero (a degenerate direction).
+fn sqrt_psd(cov: &[f64], dim: usize) -> Vec<f64> {
+    let mut l = vec![0.0; dim * dim];
+    let scale = (0..dim).map(|i| cov[i * dim + i].abs()).fold(0.0, f64::max);
+    for j in 0..dim {
+        let mut d = cov[j * dim + j];
+        for k in 0..j {
+            d -= l[j * dim + k] * l[j * dim + k];
+        }
+        if d <= 1e-14 * scale {
+            continue; // column j stays zero
+        }
+        let d = d.sqrt();
+        l[j * dim + j] = d;
+        for i in j + 1..dim {
+            let mut s = cov[i * dim + j];
+            for k in 0..j {
+                s -= l[i * dim + k] * l[j * dim + k];
+            }
+            l[i * dim + j] = s / d;
+        }
+    }
+    l
+}
+
+/// χ²_dof quantiles for the two-sided band, divided by `scale`.
+fn chi2_band(dof: f64, scale: f64) -> [f64; 2] {
+    use statrs::distribution::{ChiSquared, ContinuousCDF};
+    if !(dof > 0.0) {
+        return [f64::NAN, f64::NAN];
+    }
+    let c = ChiSquared::new(dof).expect("positive dof");
+    let lo = (1.0 - BAND_PROBABILITY) / 2.0;
+    [c.inverse_cdf(lo) / scale, c.inverse_cdf(1.0 - lo) / scale]
+}
+
+/// Running average of one criterion (3.24), as in the analysis.
+#[derive(Clone, Copy, Debug, Default)]
+struct Avg {
+    sum: f64,
+    count: u64,
+    excluded: u64,
+}
+
+impl Avg {
+    fn add(&mut self, num: f64, den: f64) {
+        let f = num / den;
+        if den > 0.0 && f.is_finite() {
+            self.sum += f;
+            self.count += 1;
+        } else {
+            self.excluded += 1;
+        }
+    }
+    fn mean(&self) -> Option<f64> {
+        (self.count > 0).then(|| self.sum / self.count as f64)
+    }
+}
+
+/// Bucket averages of variances for the traces.
+struct Rows {
+    bucket: u64,
+    steps: u64,
+    series: usize,
+    sum: Vec<f64>,
+    count: Vec<u64>,
+    in_bucket: u64,
+    t: Vec<f64>,
+    cols: Vec<Vec<Option<f64>>>,
+}
+
+impl Rows {
+    fn new(steps: u64, series: usize, max_rows: usize) -> Self {
+        let bucket = steps.div_ceil(max_rows.max(1) as u64).max(1);
+        Rows {
+            bucket,
+            steps,
+            series,
+            sum: vec![0.0; series],
+            count: vec![0; series],
+            in_bucket: 0,
+            t: Vec::new(),
+            cols: vec![Vec::new(); series],
+        }
+    }
+    fn put(&mut self, s: usize, v: f64) {
+        self.sum[s] += v;
+        self.count[s] += 1;
+    }
+    fn end(&mut self, k: u64, t: f64) {
+        self.in_bucket += 1;
+        if self.in_bucket == self.bucket || k == self.steps {
+            self.t.push(t);
+            for s in 0..self.series {
+                self.cols[s].push((self.count[s] > 0).then(|| self.sum[s] / self.count[s] as f64));
+                self.sum[s] = 0.0;
+                self.count[s] = 0;
+            }
+            self.in_bucket = 0;
+        }
+    }
+}
+
+// Trace series per state (variances are averaged, SKOs derived at the end).
+const T_APRIORI: usize = 0;
+const T_OPEN: usize = 1;
+const T_MEAS: usize = 2;
+const T_FILT: usize = 3;
+const T_MEAN: usize = 4;
+const T_POT: usize = 5;
+const T_CHI: usize = 6;
+const T_SERIES: usize = 7;
+
+fn run_n<const N: usize, E: Executor>(
+    m: &CompiledModel,
+    analysis: &AnalysisResult,
+    req: &SimulationRequest,
+    exec: &E,
+    progress: &mut dyn Progress,
+) -> Result<SimulationResult, Error> {
+    let steps = analysis.steps;
+    let runs = req.runs as usize;
+    let mut plan = Plan::new(m, steps);
+    let d = plan.d;
+    let n = d.n;
+    let nm = d.nm;
+    let lay = Layout::new(d);
+    let sl = SumLayout::new(d);
+    let w_sqrt = sqrt_psd(&m.w, d.nl);
+    let v_sqrt = sqrt_psd(&m.v, d.ms);
+    let c_nz = plan.c_nz.clone();
+    let sh = Shared {
+        d,
+        lay,
+        sl,
+        truth: req.truth,
+        model_error: req.model_error,
+        c_nz: &c_nz,
+        w_sqrt: &w_sqrt,
+        v_sqrt: &v_sqrt,
+    };
+    // Blocks depend on R only.
+    let n_blocks = runs.div_ceil(MIN_BLOCK_RUNS).clamp(1, MAX_BLOCKS);
+    let per_block = runs.div_ceil(n_blocks);
+    let mut blocks: Vec<Block> = (0..n_blocks)
+        .map(|b| {
+            let first = b * per_block;
+            let len = per_block.min(runs.saturating_sub(first));
+            (first, len)
+        })
+        .filter(|&(_, len)| len > 0)
+        .map(|(first, len)| Block::new(first as u64, len, req.seed, m, &sh))
+        .collect();
+
+    let rf = runs as f64;
+    let nees_band = chi2_band(rf * n as f64, rf);
+    let nis_bands: Vec<[f64; 2]> = (0..=nm).map(|a| chi2_band(rf * a as f64, rf)).collect();
+    let var_band = chi2_band(rf, rf);
+    let pair = &m.pair_of_state;
+
+    let trace_points = req.trace_points.unwrap_or(m.trace_points);
+    let mut rows = Rows::new(steps, n * T_SERIES + 2, trace_points);
+    let mut mc = (
+        vec![Avg::default(); n],
+        vec![Avg::default(); n],
+        vec![Avg::default(); n],
+    );
+    let mut nees_sum = 0.0;
+    let mut nees_count = 0u64;
+    let mut nees_in = 0u64;
+    let mut nis_sum = 0.0;
+    let mut nis_dof_sum = 0.0;
+    let mut nis_count = 0u64;
+    let mut nis_in = 0u64;
+    let mut ratio_sum = vec![0.0; n];
+    let mut ratio_count = vec![0u64; n];
+    let mut ratio_in = vec![0u64; n];
+    let mut bias_sum = vec![0.0; n];
+    let mut last_nis_dof = 0.0;
+    let mut final_ = SimulationFinal {
+        a_priori_sko: vec![0.0; n],
+        measured_sko: vec![None; n],
+        filtered_sko: vec![0.0; n],
+        potential_sko: vec![0.0; n],
+        chi: vec![0.0; n],
+    };
+
+    let mut chunk = vec![0.0; CHUNK_STEPS * lay.size];
+    let mut pot = vec![0.0; CHUNK_STEPS * n];
+    let mut chi = vec![0.0; CHUNK_STEPS * n];
+    let mut open = vec![0.0; CHUNK_STEPS * n];
+    let mut k0 = 1u64;
+    while k0 <= steps {
+        let len = (steps - k0 + 1).min(CHUNK_STEPS as u64) as usize;
+        for s in 0..len {
+            let k = k0 + s as u64;
+            plan.step(k, &lay, &mut chunk[s * lay.size..(s + 1) * lay.size])?;
+            for i in 0..n {
+                pot[s * n + i] = plan.big_r[i * n + i].max(0.0);
+                chi[s * n + i] = plan.chi[i];
+                open[s * n + i] = plan.p_y[i * n + i].max(0.0);
+            }
+        }
+        let chunk_ref = &chunk[..len * lay.size];
+        let results: Vec<(Block, Vec<f64>)> = exec.map(blocks, |mut b| {
+            let s = b.advance::<N>(&sh, chunk_ref, len);
+            (b, s)
+        });
+        // Combine in block order (deterministic).
+        let mut total = vec![0.0; len * sl.size];
+        blocks = Vec::with_capacity(results.len());
+        for (b, s) in results {
+            for (t, v) in total.iter_mut().zip(&s) {
+                *t += v;
+            }
+            blocks.push(b);
+        }
+        for s in 0..len {
+            let k = k0 + s as u64;
+            let t_k = m.t0 + k as f64 * plan.dt;
+            let tot = &total[s * sl.size..(s + 1) * sl.size];
+            let rec = &chunk[s * lay.size..(s + 1) * lay.size];
+            for i in 0..n {
+                let va = tot[sl.apriori + i] / rf;
+                let vf = tot[sl.filt2 + i] / rf;
+                let mean_f = tot[sl.filt1 + i] / rf;
+                let p = pot[s * n + i];
+                let base = i * T_SERIES;
+                rows.put(base + T_APRIORI, va);
+                rows.put(base + T_OPEN, open[s * n + i]);
+                rows.put(base + T_FILT, vf);
+                rows.put(base + T_MEAN, mean_f);
+                rows.put(base + T_POT, p);
+                rows.put(base + T_CHI, chi[s * n + i]);
+                let (eta_s, chi_s) = (va.sqrt(), vf.sqrt());
+                mc.2[i].add(eta_s, chi_s);
+                let meas = pair[i]
+                    .and_then(|j| (rec[lay.avail + j] != 0.0).then(|| tot[sl.meas2 + j] / rf));
+                if let Some(j) = pair[i] {
+                    match meas {
+                        Some(vm) => {
+                            rows.put(base + T_MEAS, vm);
+                            mc.0[i].add(eta_s, vm.sqrt());
+                            mc.1[i].add(vm.sqrt(), chi_s);
+                        }
+                        None => {
+                            // Not measured at this step: nothing to compare with.
+                            mc.0[i].excluded += 1;
+                            mc.1[i].excluded += 1;
+                        }
+                    }
+                    let _ = j;
+                }
+                if p > 0.0 {
+                    let ratio = vf / p;
+                    ratio_sum[i] += ratio;
+                    ratio_count[i] += 1;
+                    if ratio >= var_band[0] && ratio <= var_band[1] {
+                        ratio_in[i] += 1;
+                    }
+                    bias_sum[i] += mean_f / p.sqrt();
+                }
+                if k == steps {
+                    final_.a_priori_sko[i] = eta_s;
+                    final_.filtered_sko[i] = chi_s;
+                    final_.measured_sko[i] = meas.map(f64::sqrt);
+                    final_.potential_sko[i] = p.sqrt();
+                    final_.chi[i] = chi[s * n + i];
+                }
+            }
+            if rec[lay.flags] != 0.0 {
+                let v = tot[sl.nees] / rf;
+                rows.put(n * T_SERIES, v);
+                nees_sum += v;
+                nees_count += 1;
+                if v >= nees_band[0] && v <= nees_band[1] {
+                    nees_in += 1;
+                }
+            }
+            if rec[lay.flags + 1] != 0.0 {
+                let a = rec[lay.flags + 2] as usize;
+                let v = tot[sl.nis] / rf;
+                rows.put(n * T_SERIES + 1, v);
+                nis_sum += v;
+                nis_dof_sum += a as f64;
+                nis_count += 1;
+                let band = nis_bands[a];
+                if v >= band[0] && v <= band[1] {
+                    nis_in += 1;
+                }
+                if k == steps {
+                    last_nis_dof = a as f64;
+                }
+            }
+            rows.end(k, t_k);
+        }
+        k0 += len as u64;
+        if let ControlFlow::Break(()) = progress.report((k0 - 1) as f64 / steps as f64) {
+            return Err(Error::Cancelled);
+        }
+    }
+
+    // --- assemble
+    let monte_carlo = criteria_set(m, &mc, &analysis.y_max, &analysis.z_max);
+    let mut criteria = analysis.criteria.clone();
+    criteria.monte_carlo = Some(monte_carlo);
+
+    let frac = |inside: u64, count: u64| (count > 0).then(|| inside as f64 / count as f64);
+    let nees_avg = (nees_count > 0).then(|| nees_sum / nees_count as f64);
+    // For NEES the band of the time average is judged with the one-step band
+    // (conservative, as for the per-state ratios).
+    let nees = ConsistencyStat {
+        dof: n as f64,
+        time_average: nees_avg,
+        band: nees_band,
+        fraction_in_band: frac(nees_in, nees_count),
+        undefined_steps: steps - nees_count,
+        verdict: Verdict::of(nees_avg, nees_band),
+    };
+    let nis_avg = (nis_count > 0).then(|| nis_sum / nis_count as f64);
+    // NIS normalised per degree of freedom when availability varies: compare the
+    // average NIS with the average dof via the band for the typical dof.
+    let nis_dof = if nis_count > 0 {
+        nis_dof_sum / nis_count as f64
+    } else {
+        last_nis_dof
+    };
+    let nis_band = chi2_band(rf * nis_dof, rf);
+    let nis = ConsistencyStat {
+        dof: nis_dof,
+        time_average: nis_avg,
+        band: nis_band,
+        fraction_in_band: frac(nis_in, nis_count),
+        undefined_steps: steps - nis_count,
+        verdict: Verdict::of(nis_avg, nis_band),
+    };
+    let per_state = (0..n)
+        .map(|i| {
+            let ratio = (ratio_count[i] > 0).then(|| ratio_sum[i] / ratio_count[i] as f64);
+            StateVerdict {
+                state: m.states[i].clone(),
+                variance_ratio: ratio,
+                band: var_band,
+                fraction_in_band: frac(ratio_in[i], ratio_count[i]),
+                normalised_bias: (ratio_count[i] > 0).then(|| bias_sum[i] / ratio_count[i] as f64),
+                verdict: Verdict::of(ratio, var_band),
+            }
+        })
+        .collect();
+
+    let Rows {
+        t, cols, bucket, ..
+    } = rows;
+    let mut cols: Vec<Option<Vec<Option<f64>>>> = cols.into_iter().map(Some).collect();
+    let mut take = |s: usize| cols[s].take().unwrap_or_default();
+    let sqrt_col = |v: Vec<Option<f64>>| -> Vec<f64> {
+        v.into_iter()
+            .map(|x| x.unwrap_or(0.0).max(0.0).sqrt())
+            .collect()
+    };
+    let plain =
+        |v: Vec<Option<f64>>| -> Vec<f64> { v.into_iter().map(|x| x.unwrap_or(0.0)).collect() };
+    let mut states = Vec::with_capacity(n);
+    for i in 0..n {
+        let base = i * T_SERIES;
+        let meas = take(base + T_MEAS);
+        states.push(SimulationStateTrace {
+            state: m.states[i].clone(),
+            a_priori_sko: sqrt_col(take(base + T_APRIORI)),
+            open_loop_sko: sqrt_col(take(base + T_OPEN)),
+            measured_sko: pair[i].map(|_| {
+                meas.into_iter()
+                    .map(|x| x.map(|v| v.max(0.0).sqrt()))
+                    .collect()
+            }),
+            filtered_sko: sqrt_col(take(base + T_FILT)),
+            filtered_mean: plain(take(base + T_MEAN)),
+            potential_sko: sqrt_col(take(base + T_POT)),
+            // χ is an SKO already: its bucket average is kept as is.
+            chi: plain(take(base + T_CHI)),
+        });
+    }
+    let nees_tr = take(n * T_SERIES);
+    let nis_tr = take(n * T_SERIES + 1);
+    let mut warnings = analysis.warnings.clone();
+    if req.model_error == ModelError::Constant {
+        warnings.push("model_error = \"constant\": the Riccati assumes white model error, so the filter is not matched to the simulated process".into());
+    }
+    if req.truth == Truth::Mean {
+        warnings.push("truth = \"mean\" (seed 000's reading): the filtered error excludes the model error, so it is not expected to match R_k".into());
+    }
+    Ok(SimulationResult {
+        request: req.clone(),
+        steps,
+        dt: plan.dt,
+        t0: m.t0,
+        t_end: m.t_end,
+        states: m.states.clone(),
+        measurements: m.measurements.clone(),
+        y_max: analysis.y_max.clone(),
+        z_max: analysis.z_max.clone(),
+        criteria,
+        consistency: Consistency {
+            band_probability: BAND_PROBABILITY,
+            nees,
+            nis,
+            per_state,
+        },
+        final_,
+        traces: SimulationTraces {
+            bucket_steps: bucket,
+            t,
+            states,
+            nees: nees_tr,
+            nis: nis_tr,
+        },
+        timing: Timing::default(),
+        warnings,
+    })
+}
+
+/// The `monte_carlo` criteria set (3.20)–(3.26) from the sample SKOs, with the
+/// analysis's y_B and z_B.
+fn criteria_set(
+    m: &CompiledModel,
+    s: &(Vec<Avg>, Vec<Avg>, Vec<Avg>),
+    y_max: &[f64],
+    z_max: &[f64],
+) -> CriteriaSet {
+    let n = m.n_states();
+    let mut per_state = Vec::with_capacity(n);
+    for i in 0..n {
+        let pair = m.pair_of_state[i];
+        let yb = y_max[i];
+        let mut undefined = BTreeMap::new();
+        let zb = pair.map(|j| z_max[j]);
+        let mut finish = |name: &str, avg: &Avg, factor: Option<f64>, paired: bool| {
+            let why = if !paired {
+                Some(format!(
+                    "state \"{}\" has no paired measurement",
+                    m.states[i]
+                ))
+            } else if yb == 0.0 {
+                Some(format!(
+                    "y_B = 0: the mean of \"{}\" is identically zero",
+                    m.states[i]
+                ))
+            } else if factor.is_none() {
+                Some("z_B = 0: the mean measurement is identically zero".to_string())
+            } else if avg.count == 0 {
+                Some("every step has a zero denominator in the monte_carlo set".to_string())
+            } else {
+                None
+            };
+            match why {
+                Some(w) => {
+                    undefined.insert(name.to_string(), w);
+                    None
+                }
+                None => avg.mean().zip(factor).map(|(v, f)| v * f),
+            }
+        };
+        let f_yz = zb.filter(|z| *z > 0.0).map(|z| z / yb);
+        let f_zx = zb.filter(|z| *z > 0.0).map(|z| yb / z);
+        let yz = finish("yz", &s.0[i], f_yz, pair.is_some());
+        let zx = finish("zx", &s.1[i], f_zx, pair.is_some());
+        let yx = finish("yx", &s.2[i], Some(1.0), true);
+        per_state.push(StateCriteria {
+            state: m.states[i].clone(),
+            measurement: pair.map(|j| m.measurements[j].clone()),
+            yz,
+            zx,
+            yx,
+            undefined,
+            excluded_steps: ExcludedSteps {
+                yz: s.0[i].excluded,
+                zx: s.1[i].excluded,
+                yx: s.2[i].excluded,
+            },
+        });
+    }
+    let mut undefined = BTreeMap::new();
+    let mut weighted = |name: &str, given: Option<&Vec<f64>>, values: Vec<Option<f64>>| {
+        let defined = values.iter().filter(|v| v.is_some()).count();
+        let w: Vec<f64> = match given {
+            Some(w) => w.clone(),
+            None if defined > 0 => values
+                .iter()
+                .map(|v| {
+                    if v.is_some() {
+                        1.0 / defined as f64
+                    } else {
+                        0.0
+                    }
+                })
+                .collect(),
+            None => vec![0.0; values.len()],
+        };
+        let bad = (0..values.len()).find(|&i| w[i] > 0.0 && values[i].is_none());
+        let v = if defined == 0 {
+            undefined.insert(
+                name.to_string(),
+                "the criterion is undefined for every state".into(),
+            );
+            None
+        } else if let Some(i) = bad {
+            undefined.insert(
+                name.to_string(),
+                format!(
+                    "the criterion is undefined for weighted state \"{}\"",
+                    m.states[i]
+                ),
+            );
+            None
+        } else {
+            Some(
+                (0..values.len())
+                    .map(|i| w[i] * values[i].unwrap_or(0.0))
+                    .sum(),
+            )
+        };
+        (w, v)
+    };
+    let (w_yz, yz) = weighted(
+        "yz",
+        m.weights_yz.as_ref(),
+        per_state.iter().map(|p| p.yz).collect(),
+    );
+    let (w_zx, zx) = weighted(
+        "zx",
+        m.weights_zx.as_ref(),
+        per_state.iter().map(|p| p.zx).collect(),
+    );
+    let (w_yx, yx) = weighted(
+        "yx",
+        m.weights_yx.as_ref(),
+        per_state.iter().map(|p| p.yx).collect(),
+    );
+    CriteriaSet {
+        per_state,
+        weighted: Weighted {
+            yz,
+            zx,
+            yx,
+            weights: WeightsOut {
+                yz: w_yz,
+                zx: w_zx,
+                yx: w_yx,
+            },
+            undefined,
+        },
+    }
+}
+
+/// Traces of a simulation as CSV: t, then per state the sample and potential SKOs.
+pub fn traces_csv(r: &SimulationResult) -> String {
+    use std::fmt::Write;
+    let mut s = String::from("t");
+    for st in &r.traces.states {
+        let name = &st.state;
+        write!(
+            s,
+            ",{name}.a_priori_sko,{name}.open_loop_sko,{name}.measured_sko,{name}.filtered_sko,{name}.filtered_mean,{name}.potential_sko,{name}.chi"
+        )
+        .unwrap();
+    }
+    s.push_str(",nees,nis\n");
+    let opt = |v: Option<f64>| v.map(|x| format!("{x:e}")).unwrap_or_default();
+    for (row, t) in r.traces.t.iter().enumerate() {
+        write!(s, "{t:e}").unwrap();
+        for st in &r.traces.states {
+            let meas = st.measured_sko.as_ref().and_then(|m| m[row]);
+            write!(
+                s,
+                ",{:e},{:e},{},{:e},{:e},{:e},{:e}",
+                st.a_priori_sko[row],
+                st.open_loop_sko[row],
+                opt(meas),
+                st.filtered_sko[row],
+                st.filtered_mean[row],
+                st.potential_sko[row],
+                st.chi[row]
+            )
+            .unwrap();
+        }
+        writeln!(s, ",{},{}", opt(r.traces.nees[row]), opt(r.traces.nis[row])).unwrap();
+    }
+    s
+}

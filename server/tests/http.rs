@@ -1,0 +1,564 @@
+//! The real server over HTTP: every route, errors, auth, jobs, persistence.
+
+mod common;
+
+use common::{Server, long_model, preset, without_timing};
+use serde_json::{Value, json};
+use std::process::Command;
+use std::time::Duration;
+
+const LONG: Duration = Duration::from_secs(120);
+
+fn tmp() -> tempfile::TempDir {
+    tempfile::tempdir().unwrap()
+}
+
+#[test]
+fn health_and_presets() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    let h = s.get("/healthz");
+    assert_eq!(h.status, 200);
+    assert_eq!(
+        h.json(),
+        json!({"status": "ok", "version": env!("CARGO_PKG_VERSION")})
+    );
+
+    let list = s.get("/v1/presets");
+    assert_eq!(list.status, 200);
+    let names: Vec<String> = list.json()["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(names, kea_core::presets::names());
+    assert_eq!(list.json()["items"][2]["states"], 2);
+
+    let one = s.get("/v1/presets/cv-tracker");
+    assert_eq!(one.status, 200);
+    assert_eq!(one.content_type, "application/json");
+    assert_eq!(one.text, kea_core::presets::get_json("cv-tracker").unwrap());
+
+    let missing = s.get("/v1/presets/nope");
+    assert_eq!(missing.status, 404);
+    assert_eq!(missing.content_type, "application/problem+json");
+    assert_eq!(missing.json()["status"], 404);
+}
+
+#[test]
+fn models_are_stored_listed_paged_and_deleted() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    let mut ids = Vec::new();
+    for name in ["seed-example", "helicopter-range", "cv-tracker"] {
+        let r = s.post("/v1/models", &preset(name));
+        assert_eq!(r.status, 201, "{}", r.text);
+        let id = r.json()["id"].as_str().unwrap().to_string();
+        assert_eq!(
+            r.location.as_deref(),
+            Some(format!("/v1/models/{id}").as_str())
+        );
+        ids.push(id);
+    }
+    let got = s.get(&format!("/v1/models/{}", ids[2]));
+    assert_eq!(got.status, 200);
+    assert_eq!(got.json()["model"], preset("cv-tracker"));
+    assert_eq!(got.json()["name"], "Constant-velocity tracker (textbook)");
+
+    // Newest first, two per page.
+    let p1 = s.get("/v1/models?limit=2").json();
+    let page_ids = |p: &Value| -> Vec<String> {
+        p["items"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|m| m["id"].as_str().unwrap().to_string())
+            .collect()
+    };
+    assert_eq!(page_ids(&p1), vec![ids[2].clone(), ids[1].clone()]);
+    let cursor = p1["next_cursor"].as_str().unwrap();
+    let p2 = s.get(&format!("/v1/models?limit=2&cursor={cursor}")).json();
+    assert_eq!(page_ids(&p2), vec![ids[0].clone()]);
+    assert_eq!(p2["next_cursor"], Value::Null);
+
+    assert_eq!(s.delete(&format!("/v1/models/{}", ids[0])).status, 204);
+    assert_eq!(s.get(&format!("/v1/models/{}", ids[0])).status, 404);
+    assert_eq!(s.delete(&format!("/v1/models/{}", ids[0])).status, 404);
+    assert_eq!(page_ids(&s.get("/v1/models").json()).len(), 2);
+}
+
+/// `kea analyze --json` for a preset with overrides.
+fn cli_result(preset_name: &str, set: &[&str]) -> Value {
+    let file = common::repo()
+        .join("presets")
+        .join(format!("{preset_name}.json"));
+    let mut cmd = Command::new(common::KEA);
+    cmd.arg("analyze").arg(file).arg("--json");
+    for s in set {
+        cmd.arg("--set").arg(s);
+    }
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn analyze_sync_and_job_equal_the_cli() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    for (name, set_cli, set_json) in [
+        (
+            "cv-tracker",
+            vec!["q=2", "r=0.25"],
+            json!({"q": 2, "r": 0.25}),
+        ),
+        ("helicopter-range", vec![], json!({})),
+    ] {
+        let cli = without_timing(cli_result(name, &set_cli));
+        let sync = s.post(
+            "/v1/analyze",
+            &json!({"model": preset(name), "set": set_json}),
+        );
+        assert_eq!(sync.status, 200, "{}", sync.text);
+        assert!(sync.json()["timing"]["wall_ms"].as_f64().unwrap() > 0.0);
+        assert_eq!(without_timing(sync.json()), cli, "sync analysis of {name}");
+
+        // By stored model id, as a job.
+        let id = s.post("/v1/models", &preset(name)).json()["id"].clone();
+        let job = s.post(
+            "/v1/jobs",
+            &json!({"kind": "analysis", "model_id": id, "set": set_json}),
+        );
+        assert_eq!(job.status, 202, "{}", job.text);
+        let job_id = job.json()["id"].as_str().unwrap().to_string();
+        assert_eq!(
+            job.location.as_deref(),
+            Some(format!("/v1/jobs/{job_id}").as_str())
+        );
+        let done = s.wait_finished(&job_id, LONG);
+        assert_eq!(done["status"], "succeeded", "{done}");
+        assert_eq!(done["progress"], 1.0);
+        let result = s.get(&format!("/v1/jobs/{job_id}/result"));
+        assert_eq!(result.status, 200);
+        assert_eq!(without_timing(result.json()), cli, "job analysis of {name}");
+
+        let csv = s.get(&format!("/v1/jobs/{job_id}/traces.csv"));
+        assert_eq!(csv.status, 200);
+        assert!(csv.content_type.starts_with("text/csv"));
+        let header = csv.text.lines().next().unwrap();
+        assert!(header.starts_with("t,"), "{header}");
+        let rows = csv.text.lines().count() - 1;
+        assert_eq!(rows, cli["traces"]["t"].as_array().unwrap().len());
+    }
+}
+
+#[test]
+fn jobs_list_events_and_status_filter() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    let id = s
+        .post(
+            "/v1/jobs",
+            &json!({"kind": "analysis", "model": preset("cv-tracker")}),
+        )
+        .json()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let events = s.events(&format!("/v1/jobs/{id}/events"));
+    let (last_event, last) = events.last().unwrap();
+    assert_eq!(last_event, "status");
+    assert_eq!(last["status"], "succeeded");
+    assert_eq!(last["id"], id.as_str());
+    for (e, d) in &events[..events.len() - 1] {
+        assert_eq!(e, "progress");
+        assert!(matches!(d["status"].as_str(), Some("queued" | "running")));
+    }
+    let job = s.get(&format!("/v1/jobs/{id}")).json();
+    for member in [
+        "id",
+        "kind",
+        "status",
+        "progress",
+        "created_at",
+        "started_at",
+        "finished_at",
+    ] {
+        assert!(!job[member].is_null(), "{member} in {job}");
+    }
+    let ok = s.get("/v1/jobs?status=succeeded").json();
+    assert_eq!(ok["items"][0]["id"], id.as_str());
+    let none = s.get("/v1/jobs?status=failed").json();
+    assert_eq!(none["items"], json!([]));
+    let bad = s.get("/v1/jobs?status=done");
+    assert_eq!(bad.status, 400);
+    assert_eq!(bad.error_paths(), vec!["status"]);
+}
+
+#[test]
+fn cancel_running_and_queued_jobs() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &["--workers", "1"]);
+    let submit = |m: Value| {
+        let r = s.post("/v1/jobs", &json!({"kind": "analysis", "model": m}));
+        assert_eq!(r.status, 202, "{}", r.text);
+        r.json()["id"].as_str().unwrap().to_string()
+    };
+    let running = submit(long_model(200_000_000));
+    let queued = submit(preset("cv-tracker"));
+    s.wait_job(&running, LONG, |j| {
+        j["status"] == "running" && j["progress"].as_f64().unwrap() > 0.0
+    });
+    // Unfinished: no result yet.
+    let early = s.get(&format!("/v1/jobs/{running}/result"));
+    assert_eq!(early.status, 409);
+    assert_eq!(s.get(&format!("/v1/jobs/{running}/traces.csv")).status, 409);
+
+    // The queued one is cancelled at once; the running one at its next progress report.
+    let c = s.delete(&format!("/v1/jobs/{queued}"));
+    assert_eq!(c.status, 200, "{}", c.text);
+    assert_eq!(c.json()["status"], "cancelled");
+    let c = s.delete(&format!("/v1/jobs/{running}"));
+    assert_eq!(c.status, 200, "{}", c.text);
+    let done = s.wait_finished(&running, LONG);
+    assert_eq!(done["status"], "cancelled");
+    assert!(done["progress"].as_f64().unwrap() < 1.0);
+    assert_eq!(s.get(&format!("/v1/jobs/{running}/result")).status, 409);
+    assert_eq!(s.delete(&format!("/v1/jobs/{running}")).status, 409);
+    let events = s.events(&format!("/v1/jobs/{queued}/events"));
+    assert_eq!(events.len(), 1);
+    assert_eq!(events[0].0, "status");
+    assert_eq!(events[0].1["status"], "cancelled");
+    assert_eq!(s.delete("/v1/jobs/no-such-job").status, 404);
+}
+
+#[test]
+fn two_hundred_concurrent_jobs_all_complete_correctly() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    let q = |i: usize| 0.5 + i as f64 / 100.0;
+    let ids: Vec<(usize, String)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..8)
+            .map(|t| {
+                let s = &s;
+                scope.spawn(move || {
+                    (0..25)
+                        .map(|k| {
+                            let i = t * 25 + k;
+                            let body = json!({"kind": "analysis", "model": preset("cv-tracker"), "set": {"q": q(i)}});
+                            let r = s.post("/v1/jobs", &body);
+                            assert_eq!(r.status, 202, "{}", r.text);
+                            (i, r.json()["id"].as_str().unwrap().to_string())
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap())
+            .collect()
+    });
+    assert_eq!(ids.len(), 200);
+    for (i, id) in &ids {
+        let job = s.wait_finished(id, LONG);
+        assert_eq!(job["status"], "succeeded", "{job}");
+        let got = without_timing(s.get(&format!("/v1/jobs/{id}/result")).json());
+        let want = s.post(
+            "/v1/analyze",
+            &json!({"model": preset("cv-tracker"), "set": {"q": q(*i)}}),
+        );
+        assert_eq!(got, without_timing(want.json()), "job {i}");
+    }
+}
+
+#[test]
+fn a_job_survives_a_crash_and_finishes_after_restart() {
+    let dir = tmp();
+    let mut s = Server::start(dir.path(), &["--workers", "1"]);
+    let model = long_model(4_000_000);
+    let id = s
+        .post("/v1/jobs", &json!({"kind": "analysis", "model": model}))
+        .json()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let queued = s
+        .post(
+            "/v1/jobs",
+            &json!({"kind": "analysis", "model": preset("cv-tracker")}),
+        )
+        .json()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let first = s.wait_job(&id, LONG, |j| {
+        j["status"] == "running" && j["progress"].as_f64().unwrap() > 0.0
+    });
+    assert!(first["progress"].as_f64().unwrap() < 1.0, "{first}");
+    s.kill();
+
+    let s = Server::start(dir.path(), &["--workers", "1"]);
+    let done = s.wait_finished(&id, LONG);
+    assert_eq!(done["status"], "succeeded", "{done}");
+    assert_ne!(done["started_at"], first["started_at"], "it was run again");
+    let result = s.get(&format!("/v1/jobs/{id}/result")).json();
+    assert_eq!(result["steps"], 4_000_000);
+    assert_eq!(s.wait_finished(&queued, LONG)["status"], "succeeded");
+}
+
+#[test]
+fn graceful_shutdown_requeues_and_restart_finishes() {
+    let dir = tmp();
+    let mut s = Server::start(dir.path(), &["--workers", "1", "--shutdown-grace", "0"]);
+    let id = s
+        .post(
+            "/v1/jobs",
+            &json!({"kind": "analysis", "model": long_model(4_000_000)}),
+        )
+        .json()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    s.wait_job(&id, LONG, |j| {
+        j["status"] == "running" && j["progress"].as_f64().unwrap() > 0.0
+    });
+    assert!(
+        s.terminate(Duration::from_secs(30)),
+        "kea serve exits on SIGTERM"
+    );
+    let s = Server::start(dir.path(), &["--workers", "1"]);
+    assert_eq!(s.wait_finished(&id, LONG)["status"], "succeeded");
+}
+
+#[test]
+fn auth_on_and_off() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &["--token", "s3cret"]);
+    // With the token (the harness sends it), everything works.
+    assert_eq!(s.get("/v1/presets").status, 200);
+    // Without, or wrong: 401 problem with a challenge; health stays open.
+    let none = s.get_with("/v1/presets", &[]);
+    assert_eq!(none.status, 401);
+    assert_eq!(none.content_type, "application/problem+json");
+    let wrong = s.get_with("/v1/jobs", &[("authorization", "Bearer nope")]);
+    assert_eq!(wrong.status, 401);
+    assert_eq!(s.get_with("/healthz", &[]).status, 200);
+    drop(s);
+
+    let open = Server::start(tmp().path(), &[]);
+    assert_eq!(open.get_with("/v1/presets", &[]).status, 200);
+}
+
+#[test]
+fn refuses_a_public_address_without_a_token() {
+    let dir = tmp();
+    let out = Command::new(common::KEA)
+        .args(["serve", "--addr", "0.0.0.0:0", "--data-dir"])
+        .arg(dir.path())
+        .env_remove("KEA_TOKEN")
+        .env_remove("KEA_ALLOW_NO_TOKEN")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("without a token"), "{err}");
+}
+
+#[test]
+fn limits_sync_work_and_absurd_work() {
+    let dir = tmp();
+    let s = Server::start(
+        dir.path(),
+        &["--sync-work-limit", "1e5", "--max-work", "1e9"],
+    );
+    let r = s.post("/v1/analyze", &json!({"model": long_model(100_000)}));
+    assert_eq!(r.status, 422, "{}", r.text);
+    assert_eq!(r.json()["type"], "urn:kea:problem:use-a-job");
+    assert_eq!(r.error_paths(), vec!["model.time.steps"]);
+    assert!(r.text.contains("POST /v1/jobs"), "{}", r.text);
+    let r = s.post(
+        "/v1/jobs",
+        &json!({"kind": "analysis", "model": long_model(1_000_000_000)}),
+    );
+    assert_eq!(r.status, 422, "{}", r.text);
+    assert_eq!(r.json()["type"], "urn:kea:problem:too-much-work");
+}
+
+#[test]
+fn time_limit_fails_a_job() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &["--job-time-limit", "0"]);
+    let id = s
+        .post(
+            "/v1/jobs",
+            &json!({"kind": "analysis", "model": long_model(2_000_000)}),
+        )
+        .json()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let done = s.wait_finished(&id, LONG);
+    assert_eq!(done["status"], "failed");
+    assert_eq!(done["error"]["type"], "urn:kea:problem:too-much-work");
+    assert!(
+        done["error"]["title"]
+            .as_str()
+            .unwrap()
+            .contains("time limit")
+    );
+}
+
+/// Bad requests: each gets the right 4xx, a problem document and the field paths.
+#[test]
+fn bad_request_corpus() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &["--max-body-bytes", "100000"]);
+    let cv = preset("cv-tracker");
+    let with = |path: &str, value: Value| {
+        let mut m = cv.clone();
+        let mut cur = &mut m;
+        let parts: Vec<&str> = path.split('.').collect();
+        for p in &parts[..parts.len() - 1] {
+            cur = &mut cur[*p];
+        }
+        cur[*parts.last().unwrap()] = value;
+        m
+    };
+    let json_cases: Vec<(&str, Value, u16, Vec<&str>)> = vec![
+        ("/v1/analyze", json!([1, 2]), 422, vec![""]),
+        ("/v1/analyze", json!({}), 422, vec!["model"]),
+        (
+            "/v1/analyze",
+            json!({"model": cv, "extra": 1}),
+            422,
+            vec!["extra"],
+        ),
+        (
+            "/v1/analyze",
+            json!({"model": cv, "set": {"q": "x"}}),
+            422,
+            vec!["set.q"],
+        ),
+        (
+            "/v1/analyze",
+            json!({"model": cv, "set": [1]}),
+            422,
+            vec!["set"],
+        ),
+        (
+            "/v1/analyze",
+            json!({"model": cv, "set": {"nope": 1}}),
+            422,
+            vec!["set.nope"],
+        ),
+        (
+            "/v1/analyze",
+            json!({"model": with("time.t_end", json!("soon"))}),
+            422,
+            vec!["model.time.t_end"],
+        ),
+        (
+            "/v1/analyze",
+            json!({"model": with("system.a", json!([[0, 1], [0]]))}),
+            422,
+            vec!["model.system.a[1]"],
+        ),
+        (
+            "/v1/analyze",
+            json!({"model": cv, "model_id": "x"}),
+            422,
+            vec!["model_id"],
+        ),
+        (
+            "/v1/analyze",
+            json!({"model_id": "missing"}),
+            422,
+            vec!["model_id"],
+        ),
+        ("/v1/analyze", json!({"model_id": 7}), 422, vec!["model_id"]),
+        ("/v1/jobs", json!({"model": cv}), 422, vec!["kind"]),
+        (
+            "/v1/jobs",
+            json!({"kind": "alchemy", "model": cv}),
+            422,
+            vec!["kind"],
+        ),
+        (
+            "/v1/jobs",
+            json!({"kind": 3, "model": cv}),
+            422,
+            vec!["kind"],
+        ),
+        (
+            "/v1/jobs",
+            json!({"kind": "analysis", "model": with("measurement.psi", json!(["-r"]))}),
+            422,
+            vec![],
+        ),
+        ("/v1/models", json!({"time": 1}), 422, vec!["time"]),
+        (
+            "/v1/models",
+            with("system.states", json!("x")),
+            422,
+            vec!["system.states"],
+        ),
+    ];
+    for (path, body, status, paths) in json_cases {
+        let r = s.post(path, &body);
+        assert_eq!(r.status, status, "POST {path} {body}: {}", r.text);
+        assert_eq!(r.content_type, "application/problem+json", "{}", r.text);
+        assert_eq!(r.json()["status"], status);
+        if !paths.is_empty() {
+            assert_eq!(r.error_paths(), paths, "POST {path} {body}");
+        } else {
+            assert!(!r.error_paths().is_empty(), "{}", r.text);
+        }
+    }
+    // Not JSON, wrong media type, too large.
+    let r = s.post_raw("/v1/analyze", "application/json", "{\"model\": ");
+    assert_eq!(
+        (r.status, r.error_paths()),
+        (400, vec![String::new()]),
+        "{}",
+        r.text
+    );
+    assert_eq!(r.json()["type"], "urn:kea:problem:malformed-json");
+    let r = s.post_raw("/v1/jobs", "text/plain", "{}");
+    assert_eq!(r.status, 415, "{}", r.text);
+    let big = format!("{{\"pad\": \"{}\"}}", "x".repeat(200_000));
+    let r = s.post_raw("/v1/models", "application/json", &big);
+    assert_eq!(r.status, 413, "{}", r.text);
+    assert_eq!(r.content_type, "application/problem+json");
+    // Unknown things.
+    for path in [
+        "/v1/jobs/nope",
+        "/v1/jobs/nope/result",
+        "/v1/jobs/nope/traces.csv",
+        "/v1/jobs/nope/events",
+        "/v1/models/nope",
+        "/v1/nothing",
+    ] {
+        let r = s.get(path);
+        assert_eq!(r.status, 404, "GET {path}: {}", r.text);
+        assert_eq!(r.content_type, "application/problem+json");
+    }
+    let r = s.get("/v1/models?limit=0");
+    assert_eq!(
+        (r.status, r.error_paths()),
+        (400, vec!["limit".to_string()])
+    );
+    let r = s.get("/v1/models?color=red");
+    assert_eq!(
+        (r.status, r.error_paths()),
+        (400, vec!["color".to_string()])
+    );
+    let r = s.delete("/v1/presets");
+    assert_eq!(r.status, 405, "{}", r.text);
+    assert_eq!(r.content_type, "application/problem+json");
+}

@@ -7,7 +7,7 @@
 
 use crate::decimate::Decimator;
 use crate::error::Error;
-use crate::linalg::{mul, mul_abt_sym, mul_vec, rel_diff};
+use crate::linalg::{cov_rel_diff, mul, mul_abt_sym, mul_vec};
 use crate::result::*;
 use crate::riccati::JosephStep;
 use crate::steps::select_steps;
@@ -19,8 +19,9 @@ use std::ops::ControlFlow;
 /// Steps between progress reports / cancellation checks.
 pub const PROGRESS_EVERY: u64 = 1 << 14;
 /// The shortcut freezes the Riccati recursion once r_k is this close (relative) to
-/// the stationary solution r∞ of the DARE.
-const STEADY_TOL: f64 = 1e-14;
+/// the stationary solution r∞ of the DARE (rounding keeps a slowly contracting
+/// recursion from getting much closer).
+const STEADY_TOL: f64 = 1e-13;
 
 /// Run the analysis of a compiled model.
 pub fn run(model: &CompiledModel, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
@@ -293,6 +294,10 @@ impl<'m, const N: usize> Engine<'m, N> {
         let mut dec = Decimator::new(self.steps, n * SERIES, m.trace_points);
 
         let mut frozen_at: Option<u64> = None;
+        // The bound (|A| element-wise) or the open-loop covariance can overflow while
+        // the filter itself is fine; the affected criteria then become null.
+        let mut bound_diverged: Option<(u64, f64)> = None;
+        let mut open_diverged: Option<(u64, f64)> = None;
         let mut steady_at: Option<u64> = None;
         let mut steady_cov: Option<(Vec<f64>, Vec<f64>)> = None;
 
@@ -418,7 +423,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                 }
                 // Steady state: r_k within STEADY_TOL of r∞ (then R, p are stationary too).
                 if let Some(r_inf) = &r_inf {
-                    if steady_at.is_none() && rel_diff(r_inf, &joseph.r_pred) <= STEADY_TOL {
+                    if steady_at.is_none() && cov_rel_diff(&joseph.r_pred, r_inf, n) <= STEADY_TOL {
                         steady_at = Some(k);
                         steady_cov = Some((big_r.clone(), joseph.gain[..n * nm].to_vec()));
                         if m.steady_state_shortcut {
@@ -429,47 +434,55 @@ impl<'m, const N: usize> Engine<'m, N> {
             }
 
             // Open-loop covariance P^Y = A P Aᵀ + B (§1.5, exact second moments)
-            mul(&mut tmp_nn, &big_a, &p_y, n, n, n);
-            mul_abt_sym(&mut p_y, &tmp_nn, &big_a, Some(&big_b), n, n);
+            if open_diverged.is_none() {
+                mul(&mut tmp_nn, &big_a, &p_y, n, n, n);
+                mul_abt_sym(&mut p_y, &tmp_nn, &big_a, Some(&big_b), n, n);
+                if !(0..n).all(|i| p_y[i * n + i].is_finite()) {
+                    open_diverged = Some((k, t_k));
+                }
+            }
 
             // Bound propagation (3.16)–(3.19)
-            mul_vec(&mut tmp_n, &abs_a, &eta, n, n);
-            for i in 0..n {
-                eta[i] = tmp_n[i] + b_phi[i];
-            }
-            mul_vec(&mut xi, &abs_a, &chi, n, n);
-            mul_vec(&mut chi, &abs_h, &xi, n, n);
-            for i in 0..n {
-                let mut s = 0.0;
-                for j in 0..nm {
-                    s += abs_p[i * nm + j] * zeta[j];
+            if bound_diverged.is_none() {
+                mul_vec(&mut tmp_n, &abs_a, &eta, n, n);
+                for i in 0..n {
+                    eta[i] = tmp_n[i] + b_phi[i];
                 }
-                chi[i] += s;
+                mul_vec(&mut xi, &abs_a, &chi, n, n);
+                mul_vec(&mut chi, &abs_h, &xi, n, n);
+                for i in 0..n {
+                    let mut s = 0.0;
+                    for j in 0..nm {
+                        s += abs_p[i * nm + j] * zeta[j];
+                    }
+                    chi[i] += s;
+                }
+                if !eta.iter().chain(chi.iter()).all(|v| v.is_finite()) {
+                    bound_diverged = Some((k, t_k));
+                }
             }
-            if !eta.iter().all(|v| v.is_finite()) || !p_y.iter().all(|v| v.is_finite()) {
-                return Err(Error::Numerical {
-                    step: k,
-                    t: t_k,
-                    path: "system".into(),
-                    message: "the a-priori error bound overflowed: the model diverges faster than f64 can follow on this interval".into(),
-                });
-            }
+            let bound_ok = bound_diverged.is_none();
+            let open_ok = open_diverged.is_none();
 
             // Criteria (3.23)–(3.24) as ratios; traces.
             dec.begin(t_k);
             for i in 0..n {
                 let pot = big_r[i * n + i].max(0.0).sqrt();
                 let open = p_y[i * n + i].max(0.0).sqrt();
-                bound.yx[i].add(eta[i], chi[i]);
-                cov.yx[i].add(open, pot);
                 let base = i * SERIES;
                 dec.put(base + S_Y, k, y[i]);
-                dec.put(base + S_ETA, k, eta[i]);
-                dec.put(base + S_CHI, k, chi[i]);
                 dec.put(base + S_POT, k, pot);
-                dec.put(base + S_OPEN, k, open);
-                if chi[i] > 0.0 {
-                    dec.put(base + S_RYX, k, eta[i] / chi[i]);
+                if bound_ok {
+                    bound.yx[i].add(eta[i], chi[i]);
+                    dec.put(base + S_ETA, k, eta[i]);
+                    dec.put(base + S_CHI, k, chi[i]);
+                    if chi[i] > 0.0 {
+                        dec.put(base + S_RYX, k, eta[i] / chi[i]);
+                    }
+                }
+                if open_ok {
+                    cov.yx[i].add(open, pot);
+                    dec.put(base + S_OPEN, k, open);
                 }
                 if let Some(j) = pair[i] {
                     if !avail[j] {
@@ -481,17 +494,21 @@ impl<'m, const N: usize> Engine<'m, N> {
                         continue;
                     }
                     let (zb, zc) = (zeta[j], meas_sko[j]);
-                    bound.yz[i].add(eta[i], zb);
-                    bound.zx[i].add(zb, chi[i]);
-                    cov.yz[i].add(open, zc);
-                    cov.zx[i].add(zc, pot);
                     dec.put(base + S_ZETA, k, zb);
                     dec.put(base + S_MEAS, k, zc);
-                    if zb > 0.0 {
-                        dec.put(base + S_RYZ, k, eta[i] / zb);
+                    cov.zx[i].add(zc, pot);
+                    if bound_ok {
+                        bound.yz[i].add(eta[i], zb);
+                        bound.zx[i].add(zb, chi[i]);
+                        if zb > 0.0 {
+                            dec.put(base + S_RYZ, k, eta[i] / zb);
+                        }
+                        if chi[i] > 0.0 {
+                            dec.put(base + S_RZX, k, zb / chi[i]);
+                        }
                     }
-                    if chi[i] > 0.0 {
-                        dec.put(base + S_RZX, k, zb / chi[i]);
+                    if open_ok {
+                        cov.yz[i].add(open, zc);
                     }
                 }
             }
@@ -510,8 +527,38 @@ impl<'m, const N: usize> Engine<'m, N> {
             .map(|j| (0..n).map(|i| m.c[j * n + i].abs() * y_max[i]).sum())
             .collect();
         let lambda = laplace_lambda(m.confidence);
-        let bound_set = criteria_set(m, &bound, &y_max, &z_max, "bound");
-        let cov_set = criteria_set(m, &cov, &y_max, &z_max, "covariance");
+        let bound_why = bound_diverged.map(|(k, t)| format!(
+            "the bound (modulus procedure) overflowed at step {k} (t = {t}): |A| taken element-wise grows where A does not (oscillatory or feedback dynamics), so the bound is not informative here; see the covariance set"
+        ));
+        let open_why = open_diverged.map(|(k, t)| {
+            format!("the open-loop (a-priori) covariance overflowed at step {k} (t = {t})")
+        });
+        if let Some(w) = &bound_why {
+            warnings.push(w.clone());
+        }
+        if let Some(w) = &open_why {
+            warnings.push(w.clone());
+        }
+        let bound_set = criteria_set(
+            m,
+            &bound,
+            &y_max,
+            &z_max,
+            "bound",
+            [
+                bound_why.as_deref(),
+                bound_why.as_deref(),
+                bound_why.as_deref(),
+            ],
+        );
+        let cov_set = criteria_set(
+            m,
+            &cov,
+            &y_max,
+            &z_max,
+            "covariance",
+            [open_why.as_deref(), None, open_why.as_deref()],
+        );
         let traces = build_traces(m, dec, &y_max, &z_max);
         let to_rows = |v: &[f64], cols: usize| -> Vec<Vec<f64>> {
             v.chunks_exact(cols.max(1)).map(|r| r.to_vec()).collect()
@@ -600,6 +647,7 @@ fn criteria_set(
     y_max: &[f64],
     z_max: &[f64],
     set: &str,
+    invalid: [Option<&str>; 3],
 ) -> CriteriaSet {
     let n = m.n_states();
     let mut per_state = Vec::with_capacity(n);
@@ -648,9 +696,18 @@ fn criteria_set(
         let zb = pair.map(|j| z_max[j]);
         let f_yz = zb.filter(|z| *z > 0.0).map(|z| z / yb);
         let f_zx = zb.filter(|z| *z > 0.0).map(|z| yb / z);
-        let yz = finish("yz", &s.yz[i], f_yz, pair.is_some());
-        let zx = finish("zx", &s.zx[i], f_zx, pair.is_some());
-        let yx = finish("yx", &s.yx[i], Some(1.0), true);
+        let mut yz = finish("yz", &s.yz[i], f_yz, pair.is_some());
+        let mut zx = finish("zx", &s.zx[i], f_zx, pair.is_some());
+        let mut yx = finish("yx", &s.yx[i], Some(1.0), true);
+        for ((name, v), why) in [("yz", &mut yz), ("zx", &mut zx), ("yx", &mut yx)]
+            .into_iter()
+            .zip(invalid)
+        {
+            if let Some(why) = why {
+                *v = None;
+                undefined.insert(name.to_string(), why.to_string());
+            }
+        }
         per_state.push(StateCriteria {
             state: m.states[i].clone(),
             measurement: pair.map(|j| m.measurements[j].clone()),

@@ -8,6 +8,7 @@
 pub mod analysis;
 pub mod decimate;
 pub mod error;
+pub mod exec;
 pub mod expr;
 pub mod linalg;
 pub mod model;
@@ -18,6 +19,7 @@ pub mod riccati;
 pub mod schedule;
 pub mod simulation;
 pub mod steps;
+pub mod synthesis;
 pub mod validate;
 
 pub use error::{Error, FieldError};

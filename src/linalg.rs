@@ -126,6 +126,27 @@ pub fn rel_diff(a: &[f64], b: &[f64]) -> f64 {
     }
 }
 
+/// Largest difference of two covariances relative to their diagonal scale:
+/// max_ij |a_ij − b_ij| / sqrt(b_ii b_jj) (entries with a zero scale must be equal).
+pub fn cov_rel_diff(a: &[f64], b: &[f64], n: usize) -> f64 {
+    let mut worst: f64 = 0.0;
+    for i in 0..n {
+        for j in 0..n {
+            let d = (a[i * n + j] - b[i * n + j]).abs();
+            let scale = (b[i * n + i] * b[j * n + j]).abs().sqrt();
+            let r = if scale > 0.0 {
+                d / scale
+            } else if d == 0.0 {
+                0.0
+            } else {
+                f64::INFINITY
+            };
+            worst = worst.max(r);
+        }
+    }
+    worst
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -336,13 +336,6 @@ pub fn run<E: Executor>(
     }
 }
 
-/// Whether measurement j is available at step k (time t_k).
-#[inline]
-fn available(_model: &CompiledModel, _j: usize, _k: u64) -> bool {
-    // All measurements at every step until the core's measurement schedules land.
-    true
-}
-
 /// Dimensions shared by the plan and the blocks.
 #[derive(Clone, Copy, Debug)]
 struct Dims {
@@ -440,6 +433,7 @@ struct Plan<'m> {
     u_fn: crate::expr::TimeMatrix,
     b_fn: crate::expr::TimeMatrix,
     noise_fn: MeasurementNoise,
+    schedule: Option<crate::schedule::Schedules>,
     c_nz: Vec<(usize, usize, f64)>,
     big_a: Vec<f64>,
     u_dt: Vec<f64>,
@@ -494,6 +488,7 @@ impl<'m> Plan<'m> {
             u_fn: m.u.clone(),
             b_fn: m.b.clone(),
             noise_fn: m.noise.clone(),
+            schedule: m.schedule.clone(),
             c_nz,
             big_a: vec![0.0; n * n],
             u_dt: vec![0.0; n],
@@ -581,11 +576,13 @@ impl<'m> Plan<'m> {
                     .sum();
             }
         }
-        let mut n_avail = 0;
-        for j in 0..nm {
-            self.avail[j] = available(m, j, k);
-            n_avail += self.avail[j] as usize;
+        // The measurement schedule at step k (time t_k).
+        if let Some(sched) = &mut self.schedule {
+            sched
+                .mask(k, t_k, &mut self.avail)
+                .map_err(|p| err(&p, t_k))?;
         }
+        let n_avail = self.avail.iter().filter(|a| **a).count();
 
         // (3.3) y_k = A y + uΔt
         mul_vec(&mut self.tmp_n, &self.big_a, &self.y, n, n);
@@ -731,8 +728,6 @@ impl<'m> Plan<'m> {
 
 /// A block of runs: their imitated states and filters, and their random streams.
 struct Block {
-    /// Index of the first run.
-    first_run: u64,
     runs: usize,
     /// Y (imitated a-priori state), X (estimate), F (constant model error), each
     /// runs × dim.
@@ -798,7 +793,6 @@ impl Block {
             rngs.push(rng);
         }
         Block {
-            first_run,
             runs,
             y,
             x,

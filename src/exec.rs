@@ -1,0 +1,40 @@
+//! Executors: how a batch of independent computations (e.g. the points of a synthesis
+//! grid) is run. The core only knows [`Sequential`]; adapters that may use threads
+//! (the server's rayon pool) implement [`Executor`] themselves, so the core stays free
+//! of threads and still builds for wasm.
+//!
+//! Contract: `map` returns the results in the order of `items`, and each result
+//! depends only on its item, so a computation gives identical answers whatever the
+//! number of threads.
+
+/// Runs a function over a batch of items, preserving order.
+pub trait Executor: Sync {
+    /// `f` applied to every item; `result[i] = f(items[i])`.
+    fn map<T: Send, R: Send, F: Fn(T) -> R + Sync>(&self, items: Vec<T>, f: F) -> Vec<R>;
+
+    /// How many items run at once (a batching hint only: it never changes a result).
+    fn threads(&self) -> usize {
+        1
+    }
+}
+
+/// One item after another on the calling thread (the core's default, and the browser's).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Sequential;
+
+impl Executor for Sequential {
+    fn map<T: Send, R: Send, F: Fn(T) -> R + Sync>(&self, items: Vec<T>, f: F) -> Vec<R> {
+        items.into_iter().map(f).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sequential_preserves_order() {
+        assert_eq!(Sequential.map(vec![3, 1, 2], |x| x * 10), vec![30, 10, 20]);
+        assert_eq!(Sequential.threads(), 1);
+    }
+}

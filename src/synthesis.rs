@@ -1,0 +1,1362 @@
+//! Synthesis (METHOD §1.7, (3.27)): the error levels that reach a desired filtering
+//! effect, e.g. F_YX ≥ F*_YX. Three modes, each built on repeated analyses
+//! ([`crate::analyze`]) with parameter overrides:
+//!
+//! - `seed_search` — the seed's section-4 procedure, faithfully: nested loops over the
+//!   params from their upper bounds, multiplying by shrink factors < 1, stopping at the
+//!   first point that meets the target (or reporting failure with the seed's advice);
+//! - `bisect` — the boundary value of one param (the loosest one that still meets the
+//!   target) by bisection on a log scale, with a monotonicity check;
+//! - `grid` — criteria tables over up to three params (the seed's Table 2), cells that
+//!   meet the target marked, and the cheapest qualifying cell under a cost order.
+//!
+//! Every answer is verified by a fresh analysis. The points of a batch run through an
+//! [`Executor`], so adapters may run them in parallel; every answer (and the number of
+//! analyses) is independent of the number of threads. The core has no clock: it
+//! counts analyses, the adapters fill `timing.wall_ms`.
+
+use crate::exec::Executor;
+use crate::model::Model;
+use crate::result::{AnalysisResult, Timing};
+use crate::{Error, FieldError, NoProgress, Overrides, Progress};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::ops::ControlFlow;
+
+/// Largest number of points a seed search or a grid may have.
+pub const MAX_POINTS: usize = 10_000;
+/// Largest number of params of a grid (rows × columns × pages).
+pub const MAX_GRID_PARAMS: usize = 3;
+/// How much looser than the bisection answer the verification's "looser" point is.
+pub const LOOSER_FACTOR: f64 = 1.01;
+/// Relative tolerance of the monotonicity check (rounding of equal criteria).
+const MONOTONE_TOL: f64 = 1e-9;
+
+// ---------------------------------------------------------------- request
+
+/// A synthesis request: a model, a target, one mode.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SynthesisRequest {
+    pub model: Model,
+    /// Overrides applied at every point (the mode's params are set on top).
+    #[serde(default)]
+    pub set: Overrides,
+    pub target: Target,
+    pub mode: Mode,
+}
+
+/// The desired effect: `criterion` of `set`, weighted (3.25) or for one `state`
+/// (3.24), at least `threshold`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Target {
+    pub criterion: Criterion,
+    #[serde(default)]
+    pub set: CriteriaSetName,
+    /// A state name; absent: the weighted criterion.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub state: Option<String>,
+    pub threshold: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Criterion {
+    Yz,
+    Zx,
+    Yx,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CriteriaSetName {
+    #[default]
+    Bound,
+    Covariance,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    SeedSearch(SeedSearch),
+    Bisect(Bisect),
+    Grid(Grid),
+}
+
+/// The seed's procedure: params are nested loops, the first one outermost.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SeedSearch {
+    pub params: Vec<RangeParam>,
+    /// Points analysed per batch (in parallel natively). Fixed by the request, never by
+    /// the thread count, so the number of analyses is reproducible; after the first
+    /// qualifying point the rest of its batch is discarded.
+    #[serde(default = "default_batch")]
+    pub batch: usize,
+}
+
+fn default_batch() -> usize {
+    4
+}
+
+/// A param's range [low, high] and shrink factor k < 1: values high, high·k, high·k², …
+/// down to low.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RangeParam {
+    pub name: String,
+    pub low: f64,
+    pub high: f64,
+    pub shrink: f64,
+}
+
+/// The boundary value of one param in [low, high] (0 < low < high) where the target
+/// starts to be met.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Bisect {
+    pub param: String,
+    pub low: f64,
+    pub high: f64,
+    /// Stop when the bracket's ratio high/low − 1 is at most this (< 0.01).
+    #[serde(default = "default_rel_tol")]
+    pub rel_tol: f64,
+    /// Log-spaced points (ends included) analysed first to bracket the boundary and
+    /// check monotonicity.
+    #[serde(default = "default_probes")]
+    pub probes: usize,
+}
+
+fn default_rel_tol() -> f64 {
+    1e-3
+}
+fn default_probes() -> usize {
+    9
+}
+
+/// A sweep over up to three params: rows × columns (× pages).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Grid {
+    pub params: Vec<GridParam>,
+    /// Which direction of which param is cheaper, most important first; the cheapest
+    /// qualifying cell is the lexicographically cheapest one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cost_order: Option<Vec<CostKey>>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridParam {
+    pub name: String,
+    pub values: Vec<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CostKey {
+    pub name: String,
+    pub cheaper: Cheaper,
+}
+
+/// Which values of a param cost less (e.g. a larger sensor SKO is a cheaper sensor).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Cheaper {
+    Higher,
+    Lower,
+}
+
+// ---------------------------------------------------------------- result
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SynthesisResult {
+    pub target: Target,
+    pub status: Status,
+    /// One or two sentences: the answer, or why there is none and what to do.
+    pub message: String,
+    /// The point found (seed_search, bisect) or the cheapest qualifying cell (grid).
+    pub answer: Option<Point>,
+    pub verification: Option<Verification>,
+    pub details: Details,
+    /// Analyses run, verification included.
+    pub analyses: u64,
+    /// Steps D of each analysis.
+    pub steps: u64,
+    /// Filled by the caller (the core has no clock).
+    pub timing: Timing,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Status {
+    /// An answer was found and verified.
+    Found,
+    /// No point meets the target (the seed's failure: widen the ranges or lower it).
+    NotFound,
+    /// Bisection: both ends meet the target, the boundary lies outside the range.
+    WholeRangeMeets,
+    /// Bisection: the criterion is not monotonic in the param; no answer is given.
+    NonMonotonic,
+    /// Grid without a cost order: the table is the answer.
+    Table,
+}
+
+/// One analysed point: the params set, the three criteria of the target's set and
+/// scope, the targeted value and whether it meets the threshold.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Point {
+    pub params: BTreeMap<String, f64>,
+    pub yz: Option<f64>,
+    pub zx: Option<f64>,
+    pub yx: Option<f64>,
+    /// The targeted criterion (null when undefined, see `note`).
+    pub value: Option<f64>,
+    pub meets: bool,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+/// The answer re-analysed; for bisection also a point 1 % looser, which must miss.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Verification {
+    pub point: Point,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub looser: Option<Point>,
+    /// The answer meets the target (and the looser point, if any, misses it).
+    pub passed: bool,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Details {
+    SeedSearch(SeedSearchOut),
+    Bisect(BisectOut),
+    Grid(GridOut),
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SeedSearchOut {
+    /// Each param's values in the order visited.
+    pub levels: Vec<GridParam>,
+    /// Points of the search space.
+    pub points_total: usize,
+    /// The points in the seed's order, up to and including the one found.
+    pub visited: Vec<Point>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BisectOut {
+    pub param: String,
+    /// Which end of the range meets the target.
+    pub meets_side: Option<Side>,
+    /// The final bracket [meets, misses] (ordered as values).
+    pub bracket: Option<[f64; 2]>,
+    pub iterations: u32,
+    /// Every analysed point of the search, sorted by the param.
+    pub evaluations: Vec<Point>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Side {
+    Low,
+    High,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GridOut {
+    pub params: Vec<GridParam>,
+    /// Row-major: the first param varies slowest.
+    pub cells: Vec<GridCell>,
+    /// Index of the cheapest qualifying cell (with a cost order).
+    pub cheapest: Option<Vec<usize>>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GridCell {
+    /// Index into each param's values.
+    pub index: Vec<usize>,
+    pub point: Point,
+}
+
+// ---------------------------------------------------------------- parsing, validation
+
+/// Parse a request from JSON, with serde errors located at their field path.
+pub fn request_from_value(value: serde_json::Value) -> Result<SynthesisRequest, Error> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let path = e.path().to_string();
+        let path = if path == "." { String::new() } else { path };
+        Error::invalid(path, e.into_inner().to_string())
+    })
+}
+
+pub fn request_from_json(text: &str) -> Result<SynthesisRequest, Error> {
+    let value: serde_json::Value = serde_json::from_str(text)
+        .map_err(|e| Error::invalid("", format!("not valid JSON: {e}")))?;
+    request_from_value(value)
+}
+
+/// Check a request without running it; every problem found, at its path.
+pub fn validate(req: &SynthesisRequest) -> Result<(), Error> {
+    let mut errs: Vec<FieldError> = Vec::new();
+    if let Err(e) = crate::check(&req.model, &req.set) {
+        errs.extend(locate_model_errors(e).field_errors());
+    }
+    let t = &req.target;
+    if !(t.threshold.is_finite() && t.threshold > 0.0) {
+        errs.push(FieldError::new(
+            "target.threshold",
+            "expected a finite number > 0 (criteria are ratios; > 1 means an effect)",
+        ));
+    }
+    if let Some(s) = &t.state
+        && !req.model.system.states.contains(s)
+    {
+        errs.push(FieldError::new(
+            "target.state",
+            format!(
+                "no state \"{s}\" in the model (states: {}); omit it for the weighted criterion",
+                req.model.system.states.join(", ")
+            ),
+        ));
+    }
+    let param_check = |name: &str, path: String, errs: &mut Vec<FieldError>| {
+        if !req.model.params.contains_key(name) {
+            let known: Vec<&str> = req.model.params.keys().map(|s| s.as_str()).collect();
+            errs.push(FieldError::new(
+                path,
+                format!(
+                    "no parameter \"{name}\" in the model (params: {})",
+                    if known.is_empty() {
+                        "none".into()
+                    } else {
+                        known.join(", ")
+                    }
+                ),
+            ));
+        }
+    };
+    match &req.mode {
+        Mode::SeedSearch(s) => {
+            let base = "mode.seed_search";
+            if s.params.is_empty() {
+                errs.push(FieldError::new(
+                    format!("{base}.params"),
+                    "give at least one param range",
+                ));
+            }
+            if s.batch == 0 || s.batch > 1024 {
+                errs.push(FieldError::new(
+                    format!("{base}.batch"),
+                    "expected 1..=1024",
+                ));
+            }
+            let mut total: usize = 1;
+            for (i, p) in s.params.iter().enumerate() {
+                let path = format!("{base}.params[{i}]");
+                param_check(&p.name, format!("{path}.name"), &mut errs);
+                duplicate_check(s.params.iter().map(|p| &p.name), i, &path, &mut errs);
+                let mut ok = true;
+                if !(p.low.is_finite() && p.low > 0.0) {
+                    errs.push(FieldError::new(
+                        format!("{path}.low"),
+                        "expected a finite number > 0 (values shrink toward it)",
+                    ));
+                    ok = false;
+                }
+                if !(p.high.is_finite() && p.high > 0.0) {
+                    errs.push(FieldError::new(
+                        format!("{path}.high"),
+                        "expected a finite number > 0",
+                    ));
+                    ok = false;
+                } else if ok && p.high < p.low {
+                    errs.push(FieldError::new(
+                        format!("{path}.high"),
+                        format!("must be ≥ low = {}", p.low),
+                    ));
+                    ok = false;
+                }
+                if !(p.shrink > 0.0 && p.shrink < 1.0) {
+                    errs.push(FieldError::new(
+                        format!("{path}.shrink"),
+                        "expected a factor in (0, 1): the search goes from high down to low",
+                    ));
+                    ok = false;
+                }
+                if ok {
+                    let n = level_count(p);
+                    if n > MAX_POINTS {
+                        errs.push(FieldError::new(
+                            format!("{path}.shrink"),
+                            format!("{n} levels from high to low; at most {MAX_POINTS}"),
+                        ));
+                    }
+                    total = total.saturating_mul(n);
+                }
+            }
+            if total > MAX_POINTS {
+                errs.push(FieldError::new(
+                    format!("{base}.params"),
+                    format!("{total} points in the search space; at most {MAX_POINTS}"),
+                ));
+            }
+        }
+        Mode::Bisect(b) => {
+            let base = "mode.bisect";
+            param_check(&b.param, format!("{base}.param"), &mut errs);
+            let low_ok = b.low.is_finite() && b.low > 0.0;
+            if !low_ok {
+                errs.push(FieldError::new(
+                    format!("{base}.low"),
+                    "expected a finite number > 0 (bisection is on a log scale)",
+                ));
+            }
+            if !(b.high.is_finite() && b.high > 0.0) {
+                errs.push(FieldError::new(
+                    format!("{base}.high"),
+                    "expected a finite number > 0 (bisection is on a log scale)",
+                ));
+            } else if low_ok && b.high <= b.low {
+                errs.push(FieldError::new(
+                    format!("{base}.high"),
+                    format!("must be > low = {}", b.low),
+                ));
+            }
+            if !(b.rel_tol >= 1e-12 && b.rel_tol < 0.01) {
+                errs.push(FieldError::new(
+                    format!("{base}.rel_tol"),
+                    "expected a number in [1e-12, 0.01) (the answer is verified 1 % looser)",
+                ));
+            }
+            if !(2..=64).contains(&b.probes) {
+                errs.push(FieldError::new(
+                    format!("{base}.probes"),
+                    "expected 2..=64 (log-spaced points, ends included)",
+                ));
+            }
+        }
+        Mode::Grid(g) => {
+            let base = "mode.grid";
+            if g.params.is_empty() || g.params.len() > MAX_GRID_PARAMS {
+                errs.push(FieldError::new(
+                    format!("{base}.params"),
+                    format!(
+                        "expected 1 to {MAX_GRID_PARAMS} params (rows, columns, pages), got {}",
+                        g.params.len()
+                    ),
+                ));
+            }
+            let mut total: usize = 1;
+            for (i, p) in g.params.iter().enumerate() {
+                let path = format!("{base}.params[{i}]");
+                param_check(&p.name, format!("{path}.name"), &mut errs);
+                duplicate_check(g.params.iter().map(|p| &p.name), i, &path, &mut errs);
+                if p.values.is_empty() {
+                    errs.push(FieldError::new(
+                        format!("{path}.values"),
+                        "give at least one value",
+                    ));
+                }
+                for (j, v) in p.values.iter().enumerate() {
+                    if !v.is_finite() {
+                        errs.push(FieldError::new(
+                            format!("{path}.values[{j}]"),
+                            "expected a finite number",
+                        ));
+                    }
+                }
+                total = total.saturating_mul(p.values.len().max(1));
+            }
+            if total > MAX_POINTS {
+                errs.push(FieldError::new(
+                    format!("{base}.params"),
+                    format!("{total} cells; at most {MAX_POINTS}"),
+                ));
+            }
+            if let Some(order) = &g.cost_order {
+                for (i, k) in order.iter().enumerate() {
+                    let path = format!("{base}.cost_order[{i}]");
+                    if !g.params.iter().any(|p| p.name == k.name) {
+                        errs.push(FieldError::new(
+                            format!("{path}.name"),
+                            format!(
+                                "\"{}\" is not a param of the grid ({})",
+                                k.name,
+                                g.params
+                                    .iter()
+                                    .map(|p| p.name.as_str())
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            ),
+                        ));
+                    }
+                    duplicate_check(order.iter().map(|k| &k.name), i, &path, &mut errs);
+                }
+            }
+        }
+    }
+    if errs.is_empty() {
+        Ok(())
+    } else {
+        Err(Error::Invalid(errs))
+    }
+}
+
+fn duplicate_check<'a>(
+    names: impl Iterator<Item = &'a String>,
+    i: usize,
+    path: &str,
+    errs: &mut Vec<FieldError>,
+) {
+    let names: Vec<&String> = names.collect();
+    if names[..i].contains(&names[i]) {
+        errs.push(FieldError::new(
+            format!("{path}.name"),
+            format!("\"{}\" is listed twice", names[i]),
+        ));
+    }
+}
+
+/// Model errors under `model`, override errors (`set.q`) as they are.
+fn locate_model_errors(e: Error) -> Error {
+    match e {
+        Error::Invalid(v) => Error::Invalid(
+            v.into_iter()
+                .map(|f| {
+                    if f.path == "set" || f.path.starts_with("set.") {
+                        f
+                    } else {
+                        Error::Invalid(vec![f])
+                            .with_prefix("model")
+                            .field_errors()
+                            .remove(0)
+                    }
+                })
+                .collect(),
+        ),
+        other => other.with_prefix("model"),
+    }
+}
+
+/// The values of a seed-search param: high, high·k, high·k², … while ≥ low (the low
+/// bound counts as reached within a relative 1e-9, so 0.5·0.5² = 0.125 is included).
+pub fn levels(p: &RangeParam) -> Vec<f64> {
+    let mut out = Vec::new();
+    let mut v = p.high;
+    while v >= p.low * (1.0 - 1e-9) && out.len() <= MAX_POINTS {
+        out.push(v);
+        v *= p.shrink;
+    }
+    out
+}
+
+fn level_count(p: &RangeParam) -> usize {
+    levels(p).len()
+}
+
+/// The seed's visiting order: nested loops, the first param outermost, each from its
+/// upper bound down. Each point lists one value per param.
+pub fn seed_order(params: &[RangeParam]) -> Vec<Vec<f64>> {
+    let levels: Vec<Vec<f64>> = params.iter().map(levels).collect();
+    cartesian(&levels)
+}
+
+/// Row-major cartesian product (the first list varies slowest).
+fn cartesian(lists: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let mut out = vec![Vec::new()];
+    for list in lists {
+        let mut next = Vec::with_capacity(out.len() * list.len());
+        for prefix in &out {
+            for &v in list {
+                let mut p = prefix.clone();
+                p.push(v);
+                next.push(p);
+            }
+        }
+        out = next;
+    }
+    out
+}
+
+/// Index of the first value meeting the threshold: the seed's stopping rule.
+pub fn first_meeting(values: &[Option<f64>], threshold: f64) -> Option<usize> {
+    values
+        .iter()
+        .position(|v| v.is_some_and(|v| v >= threshold))
+}
+
+/// Analyses a request will run at most (for work estimates and progress).
+pub fn planned_analyses(req: &SynthesisRequest) -> u64 {
+    match &req.mode {
+        Mode::SeedSearch(s) => seed_order(&s.params).len() as u64 + 1,
+        Mode::Grid(g) => {
+            g.params
+                .iter()
+                .map(|p| p.values.len() as u64)
+                .product::<u64>()
+                + 1
+        }
+        Mode::Bisect(b) => b.probes as u64 + bisect_iterations_max(b) as u64 + 2,
+    }
+}
+
+/// Bisection halves the log-width of the bracket; at most this many halvings bring a
+/// probe interval down to rel_tol.
+fn bisect_iterations_max(b: &Bisect) -> u32 {
+    if !(b.low > 0.0 && b.high > b.low && b.rel_tol > 0.0 && b.probes >= 2) {
+        return 0;
+    }
+    let width = (b.high / b.low).ln() / (b.probes - 1) as f64;
+    let goal = b.rel_tol.ln_1p();
+    (width / goal).log2().ceil().max(0.0) as u32 + 1
+}
+
+// ---------------------------------------------------------------- evaluation
+
+struct Ctx<'a> {
+    model: &'a Model,
+    set: &'a Overrides,
+    target: &'a Target,
+    state_index: Option<usize>,
+    /// Planned analyses (for the progress fraction) and analyses done.
+    total: u64,
+    done: u64,
+    steps: u64,
+}
+
+impl Ctx<'_> {
+    /// One analysis at `params` (on top of `set`). Pure: usable from any thread.
+    fn eval(
+        &self,
+        params: &[(String, f64)],
+        progress: &mut dyn Progress,
+    ) -> Result<(Point, u64), Error> {
+        let mut set = self.set.clone();
+        for (k, v) in params {
+            set.insert(k.clone(), *v);
+        }
+        let r = crate::analyze(self.model, &set, progress).map_err(|e| {
+            let at = describe(params);
+            match locate_model_errors(e) {
+                Error::Invalid(v) => Error::Invalid(
+                    v.into_iter()
+                        .map(|f| FieldError::new(f.path, format!("{} (at {at})", f.message)))
+                        .collect(),
+                ),
+                Error::Numerical {
+                    step,
+                    t,
+                    path,
+                    message,
+                } => Error::Numerical {
+                    step,
+                    t,
+                    path,
+                    message: format!("{message} (at {at})"),
+                },
+                Error::Cancelled => Error::Cancelled,
+            }
+        })?;
+        Ok((self.point(params, &r), r.steps))
+    }
+
+    fn point(&self, params: &[(String, f64)], r: &AnalysisResult) -> Point {
+        let set = match self.target.set {
+            CriteriaSetName::Bound => &r.criteria.bound,
+            CriteriaSetName::Covariance => &r.criteria.covariance,
+        };
+        let (yz, zx, yx, undefined) = match self.state_index {
+            Some(i) => {
+                let s = &set.per_state[i];
+                (s.yz, s.zx, s.yx, &s.undefined)
+            }
+            None => {
+                let w = &set.weighted;
+                (w.yz, w.zx, w.yx, &w.undefined)
+            }
+        };
+        let (value, key) = match self.target.criterion {
+            Criterion::Yz => (yz, "yz"),
+            Criterion::Zx => (zx, "zx"),
+            Criterion::Yx => (yx, "yx"),
+        };
+        let note = if value.is_none() {
+            Some(
+                undefined
+                    .get(key)
+                    .cloned()
+                    .unwrap_or_else(|| "the criterion is undefined".into()),
+            )
+        } else {
+            None
+        };
+        Point {
+            params: params.iter().cloned().collect(),
+            yz,
+            zx,
+            yx,
+            value,
+            meets: value.is_some_and(|v| v >= self.target.threshold),
+            note,
+        }
+    }
+
+    /// Analyse a batch of points, in order. A single point runs on the calling thread
+    /// with fine-grained progress; a larger batch goes to the executor, with progress
+    /// and cancellation checked between batches.
+    fn batch<E: Executor>(
+        &mut self,
+        exec: &E,
+        points: Vec<Vec<(String, f64)>>,
+        progress: &mut dyn Progress,
+    ) -> Result<Vec<Point>, Error> {
+        let n = points.len() as u64;
+        let total = self.total.max(1) as f64;
+        let results = if points.len() == 1 {
+            let done = self.done as f64;
+            let mut sub = |f: f64| progress.report(((done + f) / total).min(1.0));
+            vec![self.eval(&points[0], &mut sub)]
+        } else {
+            if progress.report(self.done as f64 / total).is_break() {
+                return Err(Error::Cancelled);
+            }
+            let this = &*self;
+            exec.map(points, |p| this.eval(&p, &mut NoProgress))
+        };
+        self.done += n;
+        let mut out = Vec::with_capacity(results.len());
+        for r in results {
+            let (p, steps) = r?;
+            self.steps = steps;
+            out.push(p);
+        }
+        if let ControlFlow::Break(()) = progress.report((self.done as f64 / total).min(1.0)) {
+            return Err(Error::Cancelled);
+        }
+        Ok(out)
+    }
+}
+
+fn describe(params: &[(String, f64)]) -> String {
+    params
+        .iter()
+        .map(|(k, v)| format!("{k} = {v}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn fmt_params(p: &BTreeMap<String, f64>) -> String {
+    p.iter()
+        .map(|(k, v)| format!("{k} = {}", fmt_num(*v)))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn fmt_num(x: f64) -> String {
+    if x != 0.0 && (x.abs() < 1e-3 || x.abs() >= 1e6) {
+        format!("{x:.4e}")
+    } else {
+        format!("{}", (x * 1e6).round() / 1e6)
+    }
+}
+
+fn crit_name(t: &Target) -> String {
+    let c = match t.criterion {
+        Criterion::Yz => "YZ",
+        Criterion::Zx => "ZX",
+        Criterion::Yx => "YX",
+    };
+    let set = match t.set {
+        CriteriaSetName::Bound => "bound",
+        CriteriaSetName::Covariance => "covariance",
+    };
+    match &t.state {
+        Some(s) => format!("f_{c}({s}, {set})"),
+        None => format!("F_{c} ({set})"),
+    }
+}
+
+fn fmt_value(v: Option<f64>) -> String {
+    v.map_or("undefined".into(), |v| format!("{v:.4}"))
+}
+
+// ---------------------------------------------------------------- the modes
+
+/// Run a synthesis request. Points of a batch go through `exec`; the answer does not
+/// depend on its thread count.
+pub fn synthesize<E: Executor>(
+    req: &SynthesisRequest,
+    exec: &E,
+    progress: &mut dyn Progress,
+) -> Result<SynthesisResult, Error> {
+    validate(req)?;
+    let state_index = req
+        .target
+        .state
+        .as_ref()
+        .and_then(|s| req.model.system.states.iter().position(|x| x == s));
+    let mut ctx = Ctx {
+        model: &req.model,
+        set: &req.set,
+        target: &req.target,
+        state_index,
+        total: planned_analyses(req),
+        done: 0,
+        steps: 0,
+    };
+    let (status, message, answer, verification, details) = match &req.mode {
+        Mode::SeedSearch(s) => seed_search(&mut ctx, exec, s, progress)?,
+        Mode::Bisect(b) => bisect(&mut ctx, exec, b, progress)?,
+        Mode::Grid(g) => grid(&mut ctx, exec, g, progress)?,
+    };
+    Ok(SynthesisResult {
+        target: req.target.clone(),
+        status,
+        message,
+        answer,
+        verification,
+        details,
+        analyses: ctx.done,
+        steps: ctx.steps,
+        timing: Timing::default(),
+    })
+}
+
+type ModeOut = (Status, String, Option<Point>, Option<Verification>, Details);
+
+fn named(names: &[String], values: &[f64]) -> Vec<(String, f64)> {
+    names.iter().cloned().zip(values.iter().copied()).collect()
+}
+
+/// Re-analyse `point` (and `looser`, which must miss) for the verification.
+fn verify<E: Executor>(
+    ctx: &mut Ctx,
+    exec: &E,
+    point: &Point,
+    looser: Option<&BTreeMap<String, f64>>,
+    progress: &mut dyn Progress,
+) -> Result<Verification, Error> {
+    let as_list =
+        |m: &BTreeMap<String, f64>| m.iter().map(|(k, v)| (k.clone(), *v)).collect::<Vec<_>>();
+    let mut batch = vec![as_list(&point.params)];
+    if let Some(l) = looser {
+        batch.push(as_list(l));
+    }
+    let mut out = ctx.batch(exec, batch, progress)?;
+    let looser = if looser.is_some() { out.pop() } else { None };
+    let again = out.pop().expect("one result per point");
+    let passed = again.meets && looser.as_ref().is_none_or(|l| !l.meets);
+    Ok(Verification {
+        point: again,
+        looser,
+        passed,
+    })
+}
+
+/// The seed's procedure (METHOD §1.7): nested loops from the upper bounds, shrink
+/// factors < 1, stop at the first point meeting the target.
+fn seed_search<E: Executor>(
+    ctx: &mut Ctx,
+    exec: &E,
+    s: &SeedSearch,
+    progress: &mut dyn Progress,
+) -> Result<ModeOut, Error> {
+    let names: Vec<String> = s.params.iter().map(|p| p.name.clone()).collect();
+    let order = seed_order(&s.params);
+    let levels: Vec<GridParam> = s
+        .params
+        .iter()
+        .map(|p| GridParam {
+            name: p.name.clone(),
+            values: levels(p),
+        })
+        .collect();
+    let points_total = order.len();
+    let mut visited: Vec<Point> = Vec::new();
+    let mut found: Option<Point> = None;
+    for chunk in order.chunks(s.batch) {
+        let batch = chunk.iter().map(|v| named(&names, v)).collect();
+        for p in ctx.batch(exec, batch, progress)? {
+            let meets = p.meets;
+            visited.push(p.clone());
+            if meets {
+                found = Some(p);
+                break;
+            }
+        }
+        if found.is_some() {
+            break;
+        }
+    }
+    let details = |visited| {
+        Details::SeedSearch(SeedSearchOut {
+            levels: levels.clone(),
+            points_total,
+            visited,
+        })
+    };
+    let crit = crit_name(ctx.target);
+    match found {
+        Some(p) => {
+            let v = verify(ctx, exec, &p, None, progress)?;
+            let message = format!(
+                "{crit} = {} ≥ {} at {} (point {} of {} in the seed's order; verified by a fresh analysis: {}).",
+                fmt_value(p.value),
+                ctx.target.threshold,
+                fmt_params(&p.params),
+                visited.len(),
+                points_total,
+                if v.passed { "meets" } else { "FAILED" }
+            );
+            Ok((Status::Found, message, Some(p), Some(v), details(visited)))
+        }
+        None => {
+            let best = visited
+                .iter()
+                .filter(|p| p.value.is_some())
+                .max_by(|a, b| a.value.partial_cmp(&b.value).expect("finite criteria"));
+            let message = format!(
+                "No point of the {points_total} in the ranges reaches {crit} ≥ {}{}. Widen the ranges (lower the low bounds of {}) or lower the target.",
+                ctx.target.threshold,
+                best.map_or(String::new(), |b| format!(
+                    " (the best is {} at {})",
+                    fmt_value(b.value),
+                    fmt_params(&b.params)
+                )),
+                names.join(", ")
+            );
+            Ok((Status::NotFound, message, None, None, details(visited)))
+        }
+    }
+}
+
+/// Whether values along increasing x are monotonic (within rounding), and if not the
+/// index i where values[i−1], values[i], values[i+1] turn.
+fn monotonic_violation(values: &[f64]) -> Option<usize> {
+    let scale = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let tol = MONOTONE_TOL * scale;
+    let mut dir = 0i8; // +1 rising, −1 falling
+    for i in 1..values.len() {
+        let d = values[i] - values[i - 1];
+        let s = if d > tol {
+            1
+        } else if d < -tol {
+            -1
+        } else {
+            0
+        };
+        if s != 0 {
+            if dir != 0 && s != dir {
+                return Some(i - 1);
+            }
+            dir = s;
+        }
+    }
+    None
+}
+
+/// The boundary of one param by bisection on a log scale (METHOD §1.7).
+fn bisect<E: Executor>(
+    ctx: &mut Ctx,
+    exec: &E,
+    b: &Bisect,
+    progress: &mut dyn Progress,
+) -> Result<ModeOut, Error> {
+    let name = b.param.clone();
+    let at = |x: f64| vec![(name.clone(), x)];
+    let (l0, l1) = (b.low.ln(), b.high.ln());
+    let n = b.probes;
+    let xs: Vec<f64> = (0..n)
+        .map(|i| match i {
+            0 => b.low,
+            i if i == n - 1 => b.high,
+            i => (l0 + (l1 - l0) * i as f64 / (n - 1) as f64).exp(),
+        })
+        .collect();
+    let probes = ctx.batch(exec, xs.iter().map(|&x| at(x)).collect(), progress)?;
+    let mut evals: Vec<(f64, Point)> = xs.iter().copied().zip(probes).collect();
+    let crit = crit_name(ctx.target);
+    let thr = ctx.target.threshold;
+    let out = |evals: &[(f64, Point)], side, bracket, iterations| {
+        Details::Bisect(BisectOut {
+            param: name.clone(),
+            meets_side: side,
+            bracket,
+            iterations,
+            evaluations: evals.iter().map(|(_, p)| p.clone()).collect(),
+        })
+    };
+    let fmt_evals = |evals: &[(f64, Point)], idx: &[usize]| {
+        idx.iter()
+            .map(|&i| {
+                format!(
+                    "{} at {name} = {}",
+                    fmt_value(evals[i].1.value),
+                    fmt_num(evals[i].0)
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+
+    // Undefined criteria: no answer can be trusted.
+    if let Some((x, p)) = evals.iter().find(|(_, p)| p.value.is_none()) {
+        let message = format!(
+            "{crit} is undefined at {name} = {} ({}); no boundary can be bisected.",
+            fmt_num(*x),
+            p.note.clone().unwrap_or_default()
+        );
+        return Ok((
+            Status::NonMonotonic,
+            message,
+            None,
+            None,
+            out(&evals, None, None, 0),
+        ));
+    }
+    let meets: Vec<bool> = evals.iter().map(|(_, p)| p.meets).collect();
+    let transitions: Vec<usize> = (1..n).filter(|&i| meets[i] != meets[i - 1]).collect();
+    let values: Vec<f64> = evals.iter().map(|(_, p)| p.value.unwrap()).collect();
+    if transitions.len() > 1 || monotonic_violation(&values).is_some() {
+        let i = monotonic_violation(&values).unwrap_or(transitions[0]);
+        let idx: Vec<usize> = (i.saturating_sub(1)..(i + 2).min(n)).collect();
+        let message = format!(
+            "{crit} is not monotonic in {name} on [{}, {}] ({}){}: bisection could return a wrong answer, so none is given. Narrow the range to a monotonic part, or use a grid to see the shape.",
+            fmt_num(b.low),
+            fmt_num(b.high),
+            fmt_evals(&evals, &idx),
+            if transitions.len() > 1 {
+                format!(
+                    ", and the target is met on {} separate parts",
+                    transitions.len() / 2 + 1
+                )
+            } else {
+                String::new()
+            }
+        );
+        return Ok((
+            Status::NonMonotonic,
+            message,
+            None,
+            None,
+            out(&evals, None, None, 0),
+        ));
+    }
+    if transitions.is_empty() {
+        let best = values.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        return Ok(if meets[0] {
+            (
+                Status::WholeRangeMeets,
+                format!(
+                    "Every {name} in [{}, {}] meets {crit} ≥ {thr} ({}): the boundary lies outside the range; widen it.",
+                    fmt_num(b.low),
+                    fmt_num(b.high),
+                    fmt_evals(&evals, &[0, n - 1])
+                ),
+                None,
+                None,
+                out(&evals, None, None, 0),
+            )
+        } else {
+            (
+                Status::NotFound,
+                format!(
+                    "No {name} in [{}, {}] reaches {crit} ≥ {thr} (the best is {best:.4}): widen the range or lower the target.",
+                    fmt_num(b.low),
+                    fmt_num(b.high)
+                ),
+                None,
+                None,
+                out(&evals, None, None, 0),
+            )
+        });
+    }
+    let t = transitions[0];
+    let side = if meets[0] { Side::Low } else { Side::High };
+    // The bracket: `good` meets, `bad` misses.
+    let (mut good, mut bad) = if meets[0] {
+        (xs[t - 1], xs[t])
+    } else {
+        (xs[t], xs[t - 1])
+    };
+    let mut iterations = 0u32;
+    while good.max(bad) / good.min(bad) - 1.0 > b.rel_tol {
+        let mid = (good * bad).sqrt();
+        let p = ctx.batch(exec, vec![at(mid)], progress)?.remove(0);
+        iterations += 1;
+        let pos = evals.partition_point(|(x, _)| *x < mid);
+        let m = p.meets;
+        evals.insert(pos, (mid, p));
+        let values: Vec<f64> = evals
+            .iter()
+            .map(|(_, p)| p.value.unwrap_or(f64::NAN))
+            .collect();
+        if let Some(i) = monotonic_violation(&values) {
+            let idx: Vec<usize> = (i.saturating_sub(1)..(i + 2).min(evals.len())).collect();
+            let message = format!(
+                "{crit} turns out not monotonic in {name} near {} ({}): no answer is given. Narrow the range or use a grid.",
+                fmt_num(mid),
+                fmt_evals(&evals, &idx)
+            );
+            return Ok((
+                Status::NonMonotonic,
+                message,
+                None,
+                None,
+                out(&evals, Some(side), None, iterations),
+            ));
+        }
+        if m {
+            good = mid;
+        } else {
+            bad = mid;
+        }
+    }
+    let answer = evals
+        .iter()
+        .find(|(x, _)| *x == good)
+        .map(|(_, p)| p.clone())
+        .expect("the bracket's ends were analysed");
+    let looser_x = match side {
+        Side::Low => good * LOOSER_FACTOR,
+        Side::High => good / LOOSER_FACTOR,
+    };
+    let looser: BTreeMap<String, f64> = [(name.clone(), looser_x)].into_iter().collect();
+    let v = verify(ctx, exec, &answer, Some(&looser), progress)?;
+    let bracket = Some([good, bad]);
+    if !v.passed {
+        let message = format!(
+            "Bisection ended at {name} = {} but the verification failed ({} there, {} at {name} = {}): {crit} is not monotonic near the boundary; no answer is given.",
+            fmt_num(good),
+            fmt_value(v.point.value),
+            fmt_value(v.looser.as_ref().and_then(|l| l.value)),
+            fmt_num(looser_x)
+        );
+        return Ok((
+            Status::NonMonotonic,
+            message,
+            None,
+            Some(v),
+            out(&evals, Some(side), bracket, iterations),
+        ));
+    }
+    let message = format!(
+        "The loosest {name} meeting {crit} ≥ {thr} is {name} = {} ({}; the target is met for {name} {} it). Verified: {} there, {} at {name} = {} (1 % looser) misses.",
+        fmt_num(good),
+        fmt_value(answer.value),
+        match side {
+            Side::Low => "at or below",
+            Side::High => "at or above",
+        },
+        fmt_value(v.point.value),
+        fmt_value(v.looser.as_ref().and_then(|l| l.value)),
+        fmt_num(looser_x)
+    );
+    Ok((
+        Status::Found,
+        message,
+        Some(answer),
+        Some(v),
+        out(&evals, Some(side), bracket, iterations),
+    ))
+}
+
+/// Criteria tables over up to three params (the seed's Table 2).
+fn grid<E: Executor>(
+    ctx: &mut Ctx,
+    exec: &E,
+    g: &Grid,
+    progress: &mut dyn Progress,
+) -> Result<ModeOut, Error> {
+    let names: Vec<String> = g.params.iter().map(|p| p.name.clone()).collect();
+    let lists: Vec<Vec<f64>> = g.params.iter().map(|p| p.values.clone()).collect();
+    let index_lists: Vec<Vec<f64>> = lists
+        .iter()
+        .map(|l| (0..l.len()).map(|i| i as f64).collect())
+        .collect();
+    let indices: Vec<Vec<usize>> = cartesian(&index_lists)
+        .into_iter()
+        .map(|v| v.into_iter().map(|i| i as usize).collect())
+        .collect();
+    let points: Vec<Vec<(String, f64)>> =
+        cartesian(&lists).iter().map(|v| named(&names, v)).collect();
+    let mut cells = Vec::with_capacity(points.len());
+    let per_batch = exec.threads().max(1);
+    let mut idx_iter = indices.into_iter();
+    let mut rest = points;
+    while !rest.is_empty() {
+        let tail = rest.split_off(per_batch.min(rest.len()));
+        for p in ctx.batch(exec, rest, progress)? {
+            cells.push(GridCell {
+                index: idx_iter.next().expect("one index per cell"),
+                point: p,
+            });
+        }
+        rest = tail;
+    }
+    let qualifying = cells.iter().filter(|c| c.point.meets).count();
+    let crit = crit_name(ctx.target);
+    let thr = ctx.target.threshold;
+    let cheapest = g.cost_order.as_ref().and_then(|order| {
+        cells
+            .iter()
+            .filter(|c| c.point.meets)
+            .min_by(|a, b| {
+                for k in order {
+                    let (x, y) = (a.point.params[&k.name], b.point.params[&k.name]);
+                    let ord = match k.cheaper {
+                        Cheaper::Higher => y.partial_cmp(&x),
+                        Cheaper::Lower => x.partial_cmp(&y),
+                    }
+                    .expect("finite values");
+                    if ord.is_ne() {
+                        return ord;
+                    }
+                }
+                std::cmp::Ordering::Equal
+            })
+            .cloned()
+    });
+    let out = |cheapest: Option<Vec<usize>>, cells| {
+        Details::Grid(GridOut {
+            params: g.params.clone(),
+            cells,
+            cheapest,
+        })
+    };
+    match (&g.cost_order, cheapest) {
+        (Some(_), Some(c)) => {
+            let v = verify(ctx, exec, &c.point, None, progress)?;
+            let message = format!(
+                "{qualifying} of {} cells meet {crit} ≥ {thr}; the cheapest is {} with {} (verified by a fresh analysis: {}).",
+                cells.len(),
+                fmt_params(&c.point.params),
+                fmt_value(c.point.value),
+                if v.passed { "meets" } else { "FAILED" }
+            );
+            Ok((
+                Status::Found,
+                message,
+                Some(c.point.clone()),
+                Some(v),
+                out(Some(c.index), cells),
+            ))
+        }
+        _ if qualifying == 0 => {
+            let best = cells
+                .iter()
+                .filter_map(|c| c.point.value)
+                .fold(f64::NEG_INFINITY, f64::max);
+            Ok((
+                Status::NotFound,
+                format!(
+                    "No cell of {} meets {crit} ≥ {thr} (the best is {best:.4}): widen the ranges or lower the target.",
+                    cells.len()
+                ),
+                None,
+                None,
+                out(None, cells),
+            ))
+        }
+        _ => Ok((
+            Status::Table,
+            format!(
+                "{qualifying} of {} cells meet {crit} ≥ {thr} (marked); give `cost_order` to pick the cheapest.",
+                cells.len()
+            ),
+            None,
+            None,
+            out(None, cells),
+        )),
+    }
+}
+
+// ---------------------------------------------------------------- text output
+
+/// A plain-text rendering: the message, and for a grid its tables (rows = first param,
+/// columns = second, one table per value of the third), cells `F_YZ / F_ZX / F_YX`
+/// with `*` on those meeting the target and `[ ]` around the cheapest.
+pub fn render_text(r: &SynthesisResult) -> String {
+    let mut s = String::new();
+    let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+    match &r.details {
+        Details::Grid(g) => {
+            let rows = &g.params[0];
+            let cols = g.params.get(1);
+            let pages = g.params.get(2);
+            let n_cols = cols.map_or(1, |c| c.values.len());
+            let n_pages = pages.map_or(1, |p| p.values.len());
+            for k in 0..n_pages {
+                if let Some(p) = pages {
+                    s += &format!("{} = {}\n", p.name, fmt_num(p.values[k]));
+                }
+                let head = match cols {
+                    Some(c) => format!("{} \\ {}", rows.name, c.name),
+                    None => rows.name.clone(),
+                };
+                s += &format!("{head:>14}");
+                for j in 0..n_cols {
+                    let h = cols.map_or("F_YZ / F_ZX / F_YX".into(), |c| fmt_num(c.values[j]));
+                    s += &format!(" | {h:^24}");
+                }
+                s += "\n";
+                for (i, rv) in rows.values.iter().enumerate() {
+                    s += &format!("{:>14}", fmt_num(*rv));
+                    for j in 0..n_cols {
+                        let mut idx = vec![i];
+                        if cols.is_some() {
+                            idx.push(j);
+                        }
+                        if pages.is_some() {
+                            idx.push(k);
+                        }
+                        let cell = g.cells.iter().find(|c| c.index == idx);
+                        let txt = cell.map_or(String::new(), |c| {
+                            let p = &c.point;
+                            let body = format!("{} / {} / {}", f(p.yz), f(p.zx), f(p.yx));
+                            let mark = if p.meets { "*" } else { " " };
+                            if g.cheapest.as_ref() == Some(&idx) {
+                                format!("[{body}]{mark}")
+                            } else {
+                                format!(" {body} {mark}")
+                            }
+                        });
+                        s += &format!(" | {txt:^24}");
+                    }
+                    s += "\n";
+                }
+                s += "\n";
+            }
+        }
+        Details::SeedSearch(d) => {
+            for (i, p) in d.visited.iter().enumerate() {
+                s += &format!(
+                    "{:>4}  {}  →  {}{}\n",
+                    i + 1,
+                    fmt_params(&p.params),
+                    fmt_value(p.value),
+                    if p.meets { "  *" } else { "" }
+                );
+            }
+        }
+        Details::Bisect(d) => {
+            for p in &d.evaluations {
+                s += &format!(
+                    "  {}  →  {}{}\n",
+                    fmt_params(&p.params),
+                    fmt_value(p.value),
+                    if p.meets { "  *" } else { "" }
+                );
+            }
+        }
+    }
+    s += &r.message;
+    s += &format!(
+        "\n{} analyses of D = {} steps, {:.1} ms\n",
+        r.analyses, r.steps, r.timing.wall_ms
+    );
+    s
+}

@@ -1,0 +1,100 @@
+// Shared helpers of the browser tests: the real `kea serve` on a free port with a
+// temporary data dir, Debian's Chromium driven by playwright-core, and the CLI.
+//
+// Environment (set by `cargo xtask test`): KEA_BIN (the release `kea` binary),
+// KEA_ROOT (the repository), KEA_CHROMIUM (the browser).
+
+import { spawn, execFileSync } from 'node:child_process';
+import { mkdtempSync, mkdirSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import path from 'node:path';
+import { fileURLToPath } from 'node:url';
+import { chromium } from 'playwright-core';
+
+const here = path.dirname(fileURLToPath(import.meta.url));
+export const ROOT = process.env.KEA_ROOT ?? path.resolve(here, '..', '..');
+export const KEA_BIN = process.env.KEA_BIN ?? path.join(ROOT, 'target', 'release', 'kea');
+export const CHROMIUM = process.env.KEA_CHROMIUM ?? '/usr/bin/chromium';
+export const ARTIFACTS = path.join(here, 'artifacts');
+mkdirSync(ARTIFACTS, { recursive: true });
+
+/** Start `kea serve` on a free port; resolves to {url, stop()} once it listens. */
+export function startServer() {
+  const dataDir = mkdtempSync(path.join(tmpdir(), 'kea-e2e-'));
+  const child = spawn(
+    KEA_BIN,
+    ['serve', '--addr', '127.0.0.1:0', '--data-dir', dataDir, '--web-dir', path.join(ROOT, 'web')],
+    { stdio: ['ignore', 'pipe', 'pipe'], env: { ...process.env, RUST_LOG: process.env.RUST_LOG ?? 'warn' } },
+  );
+  let log = '';
+  child.stderr.on('data', (d) => (log += d));
+  return new Promise((resolve, reject) => {
+    const timer = setTimeout(() => reject(new Error(`kea serve did not start in 20 s:\n${log}`)), 20000);
+    let out = '';
+    child.stdout.on('data', (d) => {
+      out += d;
+      const m = out.match(/listening on (http:\/\/\S+)/);
+      if (m) {
+        clearTimeout(timer);
+        resolve({
+          url: m[1].replace(/\/$/, ''),
+          log: () => log,
+          stop: async () => {
+            const exited = new Promise((r) => child.once('exit', r));
+            child.kill('SIGTERM');
+            await Promise.race([exited, new Promise((r) => setTimeout(r, 5000))]);
+            if (child.exitCode === null) child.kill('SIGKILL');
+            rmSync(dataDir, { recursive: true, force: true });
+          },
+        });
+      }
+    });
+    child.once('exit', (code) => {
+      clearTimeout(timer);
+      reject(new Error(`kea serve exited with ${code}:\n${log}`));
+    });
+  });
+}
+
+/** Headless Chromium with a fresh profile. */
+export function launchBrowser() {
+  return chromium.launch({
+    executablePath: CHROMIUM,
+    args: [
+      '--headless',
+      '--no-sandbox',
+      '--disable-gpu',
+      '--no-first-run',
+      '--disable-background-networking',
+      '--disable-component-update',
+      '--disable-sync',
+      '--disable-quic',
+    ],
+  });
+}
+
+/** A page that records console errors and uncaught exceptions into `errors`. */
+export async function newPage(browser, errors) {
+  const context = await browser.newContext({ viewport: { width: 1440, height: 900 }, acceptDownloads: true });
+  const page = await context.newPage();
+  page.on('console', (m) => {
+    if (m.type() === 'error') errors.push(`console: ${m.text()}`);
+  });
+  page.on('pageerror', (e) => errors.push(`page error: ${e.message}`));
+  return page;
+}
+
+/** Run the `kea` CLI and return its stdout. */
+export function kea(...args) {
+  return execFileSync(KEA_BIN, args, { cwd: ROOT, encoding: 'utf8', maxBuffer: 256 * 1024 * 1024 });
+}
+
+export function screenshot(page, name) {
+  return page.screenshot({ path: path.join(ARTIFACTS, `${name}.png`), fullPage: true });
+}
+
+/** |a − b| / max(|a|, |b|), 0 when both are 0. */
+export function relDiff(a, b) {
+  const scale = Math.max(Math.abs(a), Math.abs(b));
+  return scale === 0 ? 0 : Math.abs(a - b) / scale;
+}

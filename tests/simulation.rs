@@ -1,0 +1,366 @@
+//! Monte Carlo (METHOD §1.8) against independent references: χ² bands around the
+//! Riccati variances, the bound's Minkowski inequality, bit-identical results across
+//! thread counts, and schedules against a hand computation.
+//!
+//! Statistical tests use a fixed seed and honest two-sided bands; where many checks
+//! are made, the level is split among them (Bonferroni), so the family-wise chance of
+//! a false alarm is at most 1 %.
+
+use kea_core::model::{Schedule, Steps, Value};
+use kea_core::simulation::{
+    Executor, ModelError, Sequential, SimulationRequest, SimulationResult, Truth, Verdict, simulate,
+};
+use kea_core::{Model, NoProgress, Overrides};
+use statrs::distribution::{ChiSquared, ContinuousCDF};
+
+/// Items split into `threads` contiguous slices, one thread each, results in order.
+struct Threads(usize);
+
+impl Executor for Threads {
+    fn map<T: Send, U: Send, F: Fn(T) -> U + Sync>(&self, items: Vec<T>, f: F) -> Vec<U> {
+        let per = items.len().div_ceil(self.0).max(1);
+        let mut parts: Vec<Vec<T>> = Vec::new();
+        let mut it = items.into_iter().peekable();
+        while it.peek().is_some() {
+            parts.push(it.by_ref().take(per).collect());
+        }
+        let f = &f;
+        std::thread::scope(|s| {
+            let handles: Vec<_> = parts
+                .into_iter()
+                .map(|p| s.spawn(move || p.into_iter().map(f).collect::<Vec<U>>()))
+                .collect();
+            handles
+                .into_iter()
+                .flat_map(|h| h.join().unwrap())
+                .collect()
+        })
+    }
+}
+
+/// The helicopter range channel (6 states, T = 0.01 s) over `steps` steps.
+fn helicopter(steps: u64) -> Model {
+    let mut m = kea_core::presets::get("helicopter-range").unwrap();
+    m.time.t_end = steps as f64 * 0.01;
+    m.time.steps = Steps::Fixed(steps);
+    m.options.trace_points = steps as usize; // one row per step
+    m
+}
+
+fn request(runs: u64, seed: u64, truth: Truth) -> SimulationRequest {
+    SimulationRequest {
+        runs,
+        seed,
+        truth,
+        model_error: ModelError::White,
+        trace_points: None,
+    }
+}
+
+fn sim(m: &Model, req: &SimulationRequest) -> SimulationResult {
+    simulate(m, &Overrides::new(), req, &Sequential, &mut NoProgress).unwrap()
+}
+
+/// Two-sided (1 − alpha) band of χ²_dof.
+fn chi2(dof: f64, alpha: f64) -> (f64, f64) {
+    let c = ChiSquared::new(dof).unwrap();
+    (c.inverse_cdf(alpha / 2.0), c.inverse_cdf(1.0 - alpha / 2.0))
+}
+
+const TESTED_STEPS: [usize; 5] = [1, 5, 20, 100, 300];
+
+#[test]
+fn matched_filter_sample_variances_lie_in_chi2_bands_around_riccati() {
+    let m = helicopter(300);
+    let runs = 2000;
+    let r = sim(&m, &request(runs, 7, Truth::Process));
+    assert_eq!(r.traces.bucket_steps, 1);
+    let analysis = kea_core::analyze(&m, &Overrides::new(), &mut NoProgress).unwrap();
+    let n = r.states.len();
+    // 5 steps × 6 states, plus 5 NEES checks.
+    let alpha = 0.01 / (TESTED_STEPS.len() * (n + 1)) as f64;
+    let (lo, hi) = chi2(runs as f64, alpha);
+    let rf = runs as f64;
+    for &k in &TESTED_STEPS {
+        let row = k - 1;
+        for (i, st) in r.traces.states.iter().enumerate() {
+            let pot = st.potential_sko[row];
+            // The simulation's Riccati agrees with the analysis engine's.
+            let pot_a = analysis.traces.states[i].potential_sko[row];
+            assert!(
+                (pot - pot_a).abs() <= 1e-9 * pot_a,
+                "{}: potential {pot} vs analysis {pot_a} at k={k}",
+                st.state
+            );
+            // R · s² / R_ii ~ χ²_R for a matched filter (Gaussian, zero-mean errors).
+            let stat = rf * st.filtered_sko[row].powi(2) / (pot * pot);
+            assert!(
+                stat > lo && stat < hi,
+                "{} at k={k}: R s²/R_ii = {stat:.1} outside [{lo:.1}, {hi:.1}]",
+                st.state
+            );
+            // The a-priori error Y − y has the open-loop covariance P^Y.
+            let open = st.open_loop_sko[row];
+            let stat = rf * st.a_priori_sko[row].powi(2) / (open * open);
+            assert!(
+                stat > lo && stat < hi,
+                "{} a-priori at k={k}: {stat:.1} outside [{lo:.1}, {hi:.1}]",
+                st.state
+            );
+        }
+        // Σ_runs NEES ~ χ²_{R·N}.
+        let (nlo, nhi) = chi2(rf * n as f64, alpha);
+        let nees = r.traces.nees[row].unwrap() * rf;
+        assert!(
+            nees > nlo && nees < nhi,
+            "NEES sum at k={k}: {nees:.0} outside [{nlo:.0}, {nhi:.0}]"
+        );
+    }
+    for v in &r.consistency.per_state {
+        assert_eq!(v.verdict, Verdict::Consistent, "{v:?}");
+    }
+    assert_eq!(r.consistency.nees.verdict, Verdict::Consistent);
+    assert_eq!(r.consistency.nis.verdict, Verdict::Consistent);
+    assert!(r.criteria.monte_carlo.is_some());
+}
+
+#[test]
+fn constant_model_error_makes_the_potential_accuracy_optimistic() {
+    // The Riccati assumes white F; a bias drawn once per run accumulates, so the real
+    // filtered errors of the jerk states exceed the potential ones by far.
+    let m = helicopter(300);
+    let mut req = request(500, 3, Truth::Process);
+    req.model_error = ModelError::Constant;
+    let r = sim(&m, &req);
+    assert_eq!(r.consistency.nees.verdict, Verdict::Optimistic);
+    for s in ["j_f", "j_b", "V_b"] {
+        let v = r
+            .consistency
+            .per_state
+            .iter()
+            .find(|v| v.state == s)
+            .unwrap();
+        assert_eq!(v.verdict, Verdict::Optimistic, "{v:?}");
+    }
+}
+
+#[test]
+fn bound_chi_is_above_the_sample_sko_with_truth_mean() {
+    // With truth = "mean" the filtered error is e_k = (I − pC) A e_{k−1} + p ΓΦ, so by
+    // Minkowski's inequality its SKO is at most χ_k of (3.18)–(3.19) at every step.
+    // Test s² ≤ χ² q/R with q the upper χ²_R quantile (Bonferroni over all checks).
+    let steps = 300;
+    let m = helicopter(steps);
+    let runs = 1000;
+    let r = sim(&m, &request(runs, 11, Truth::Mean));
+    let n = r.states.len();
+    let c = ChiSquared::new(runs as f64).unwrap();
+    let q = c.inverse_cdf(1.0 - 0.01 / (steps as usize * n) as f64) / runs as f64;
+    for st in &r.traces.states {
+        for k in 0..steps as usize {
+            let s2 = st.filtered_sko[k].powi(2);
+            assert!(
+                s2 <= st.chi[k].powi(2) * q,
+                "{} at k={}: sample SKO {} above the bound χ = {}",
+                st.state,
+                k + 1,
+                st.filtered_sko[k],
+                st.chi[k]
+            );
+        }
+    }
+    // The criteria sets: the seed claims the bound set is a guaranteed lower bound of
+    // the effect. For F_YX = η/χ that needs η to be tight, and it is not: |A| of an
+    // oscillating block makes η grow faster than the true a-priori SKO, so the bound
+    // set's YX is *above* the monte_carlo one here. Documented in docs/monte-carlo.md.
+    let bound = &r.criteria.bound.per_state;
+    let mc = &r.criteria.monte_carlo.as_ref().unwrap().per_state;
+    for (b, s) in bound.iter().zip(mc) {
+        eprintln!(
+            "{}: bound yx {:?} monte_carlo yx {:?}; yz {:?} / {:?}; zx {:?} / {:?}",
+            b.state, b.yx, s.yx, b.yz, s.yz, b.zx, s.zx
+        );
+    }
+}
+
+#[test]
+fn bound_chi_ignores_model_error_with_truth_process() {
+    // With truth = "process" the filtered error also carries −(I − pC) bΔt F, which
+    // (3.19) leaves out: χ is then not a bound. This documents where and why.
+    let steps = 300;
+    let m = helicopter(steps);
+    let runs = 1000;
+    let r = sim(&m, &request(runs, 13, Truth::Process));
+    let c = ChiSquared::new(runs as f64).unwrap();
+    let q_lo = c.inverse_cdf(0.001) / runs as f64;
+    let below: Vec<&str> = r
+        .traces
+        .states
+        .iter()
+        .filter(|st| {
+            (0..steps as usize).any(|k| st.filtered_sko[k].powi(2) * 1.0 > st.chi[k].powi(2) / q_lo)
+        })
+        .map(|st| st.state.as_str())
+        .collect();
+    // The jerk states are driven by F directly: their real SKO exceeds χ significantly.
+    assert!(
+        below.contains(&"j_f") && below.contains(&"j_b"),
+        "{below:?}"
+    );
+}
+
+#[test]
+fn bit_identical_across_1_2_and_4_threads() {
+    let m = helicopter(600); // 3 chunks of steps
+    let req = request(100, 42, Truth::Process); // 7 blocks of runs
+    let one = simulate(&m, &Overrides::new(), &req, &Threads(1), &mut NoProgress).unwrap();
+    let seq = sim(&m, &req);
+    assert_eq!(one, seq);
+    for t in [2, 4] {
+        let other = simulate(&m, &Overrides::new(), &req, &Threads(t), &mut NoProgress).unwrap();
+        assert_eq!(one, other, "{t} threads differ from 1");
+    }
+    // And a different seed gives different numbers.
+    let other = sim(&m, &request(100, 43, Truth::Process));
+    assert_ne!(one.final_.filtered_sko, other.final_.filtered_sko);
+}
+
+/// A random walk per state measured every `every`-th step (scalar, by hand).
+#[test]
+fn every_kth_step_schedule_matches_a_hand_computation() {
+    let (dt, phi, psi, eta0) = (0.1_f64, 2.0_f64, 0.5_f64, 1.0_f64);
+    let steps = 40u64;
+    let every = 4u64;
+    let text = format!(
+        r#"{{
+        "time": {{"t0": 0, "t_end": {t_end}, "steps": {steps}}},
+        "system": {{"states": ["x"], "a": [[0]], "b": [[1]], "y0": [1], "eta0": [{eta0}], "phi": [{phi}]}},
+        "measurement": {{"names": ["z"], "c": [[1]], "gamma": [[1]], "psi": [{psi}],
+                        "schedule": [{{"every": {every}}}]}},
+        "options": {{"trace_points": {steps}, "steady_state_shortcut": false}}
+    }}"#,
+        t_end = dt * steps as f64
+    );
+    let m = kea_core::model_from_json(&text).unwrap();
+    let runs = 4000;
+    let r = sim(&m, &request(runs, 5, Truth::Process));
+    let analysis = kea_core::analyze(&m, &Overrides::new(), &mut NoProgress).unwrap();
+    // Hand: r = R + (Δt φ)² (B = bΔt W (bΔt)ᵀ); at k ≡ 0 mod 4: R = r ψ²/(r + ψ²).
+    let mut big_r = eta0 * eta0;
+    let alpha = 0.01 / steps as f64;
+    let (lo, hi) = chi2(runs as f64, alpha);
+    for k in 1..=steps {
+        let pred = big_r + (dt * phi).powi(2);
+        big_r = if k % every == 0 {
+            pred * psi * psi / (pred + psi * psi)
+        } else {
+            pred
+        };
+        let row = (k - 1) as usize;
+        let st = &r.traces.states[0];
+        let pot = st.potential_sko[row];
+        assert!(
+            (pot * pot - big_r).abs() <= 1e-12 * big_r,
+            "k={k}: simulation R = {} vs hand {big_r}",
+            pot * pot
+        );
+        let pot_a = analysis.traces.states[0].potential_sko[row];
+        assert!(
+            (pot_a * pot_a - big_r).abs() <= 1e-12 * big_r,
+            "k={k}: analysis R = {} vs hand {big_r}",
+            pot_a * pot_a
+        );
+        // The simulated filter honours the schedule: its errors match R_k.
+        let stat = runs as f64 * st.filtered_sko[row].powi(2) / big_r;
+        assert!(stat > lo && stat < hi, "k={k}: {stat} not in [{lo}, {hi}]");
+        // The measured SKO is reported only where the measurement exists.
+        let meas = st.measured_sko.as_ref().unwrap()[row];
+        assert_eq!(meas.is_some(), k % every == 0, "k={k}");
+    }
+}
+
+/// Two states, two measurements, one of them unavailable on an interval: the Riccati
+/// against a textbook covariance update written with nalgebra (sub-matrix of C).
+#[test]
+fn interval_schedule_matches_an_independent_nalgebra_filter() {
+    use nalgebra::{DMatrix, Matrix2};
+    let steps = 60u64;
+    let dt = 0.05;
+    let mut m = kea_core::presets::get("cv-tracker").unwrap();
+    m.time.t_end = steps as f64 * dt;
+    m.time.steps = Steps::Fixed(steps);
+    m.options.trace_points = steps as usize;
+    m.options.steady_state_shortcut = false;
+    m.measurement.names = vec!["p".into(), "v".into()];
+    m.measurement.c = vec![
+        vec![Value::Number(1.0), Value::Number(0.0)],
+        vec![Value::Number(0.0), Value::Number(1.0)],
+    ];
+    m.measurement.gamma = Some(vec![
+        vec![Value::Number(1.0), Value::Number(0.0)],
+        vec![Value::Number(0.0), Value::Number(1.0)],
+    ]);
+    m.measurement.psi = Some(vec![Value::Number(0.5), Value::Number(0.3)]);
+    m.measurement.pairs = None;
+    // The velocity is not measured for t in [1, 2] (a "hover" gap).
+    m.measurement.schedule = Some(vec![
+        None,
+        Some(Schedule {
+            unavailable: Some(vec![[1.0, 2.0]]),
+            ..Default::default()
+        }),
+    ]);
+    let r = sim(&m, &request(50, 1, Truth::Process));
+    let a = Matrix2::new(1.0, dt, 0.0, 1.0);
+    let q = 1.0_f64; // phi
+    let bd = nalgebra::Vector2::new(0.0, dt);
+    let bmat = bd * bd.transpose() * (q * q);
+    let mut p = Matrix2::new(100.0, 0.0, 0.0, 4.0); // eta0 = [10, 2]
+    for k in 1..=steps {
+        let t = k as f64 * dt;
+        let pred = a * p * a.transpose() + bmat;
+        let vel = !(1.0..=2.0).contains(&t);
+        let (h, rv) = if vel {
+            (
+                DMatrix::identity(2, 2),
+                DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![0.25, 0.09])),
+            )
+        } else {
+            (
+                DMatrix::from_row_slice(1, 2, &[1.0, 0.0]),
+                DMatrix::from_element(1, 1, 0.25),
+            )
+        };
+        let pd = DMatrix::from_row_slice(2, 2, pred.transpose().as_slice());
+        let s = &h * &pd * h.transpose() + &rv;
+        let kgain = &pd * h.transpose() * s.try_inverse().unwrap();
+        let post = (DMatrix::identity(2, 2) - &kgain * &h) * &pd;
+        p = Matrix2::new(post[(0, 0)], post[(0, 1)], post[(1, 0)], post[(1, 1)]);
+        for i in 0..2 {
+            let pot = r.traces.states[i].potential_sko[(k - 1) as usize];
+            assert!(
+                (pot * pot - p[(i, i)]).abs() <= 1e-10 * p[(i, i)],
+                "k={k} state {i}: {} vs {}",
+                pot * pot,
+                p[(i, i)]
+            );
+        }
+    }
+}
+
+#[test]
+fn requests_are_validated_with_field_paths() {
+    let m = helicopter(100);
+    let bad = |req: SimulationRequest| {
+        simulate(&m, &Overrides::new(), &req, &Sequential, &mut NoProgress)
+            .unwrap_err()
+            .field_errors()
+    };
+    let e = bad(request(1, 0, Truth::Process));
+    assert_eq!(e[0].path, "runs");
+    let e = bad(request(200_000, 0, Truth::Process));
+    assert!(e[0].message.contains("limit"), "{e:?}");
+    let mut req = request(10, 0, Truth::Process);
+    req.trace_points = Some(0);
+    assert_eq!(bad(req)[0].path, "trace_points");
+}

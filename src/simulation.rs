@@ -39,21 +39,7 @@ const MIN_BLOCK_RUNS: usize = 16;
 /// Two-sided probability of the χ² acceptance bands.
 pub const BAND_PROBABILITY: f64 = 0.95;
 
-/// Runs independent items and returns their results in item order. A parallel
-/// implementation must give the same results as [`Sequential`] (the items do not
-/// share state), so the simulation is deterministic whatever the executor.
-pub trait Executor {
-    fn map<T: Send, U: Send, F: Fn(T) -> U + Sync>(&self, items: Vec<T>, f: F) -> Vec<U>;
-}
-
-/// One item after the other, on the caller's thread.
-pub struct Sequential;
-
-impl Executor for Sequential {
-    fn map<T: Send, U: Send, F: Fn(T) -> U + Sync>(&self, items: Vec<T>, f: F) -> Vec<U> {
-        items.into_iter().map(f).collect()
-    }
-}
+pub use crate::exec::{Executor, Sequential};
 
 /// What the filter is compared with (METHOD §1.8).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

@@ -597,7 +597,7 @@ pub fn planned_analyses(req: &SynthesisRequest) -> u64 {
                 .iter()
                 .map(|p| p.values.len() as u64)
                 .product::<u64>()
-                + 1
+                + u64::from(g.cost_order.is_some())
         }
         Mode::Bisect(b) => b.probes as u64 + bisect_iterations_max(b) as u64 + 2,
     }
@@ -1021,7 +1021,7 @@ fn bisect<E: Executor>(
     let transitions: Vec<usize> = (1..n).filter(|&i| meets[i] != meets[i - 1]).collect();
     let values: Vec<f64> = evals.iter().map(|(_, p)| p.value.unwrap()).collect();
     if transitions.len() > 1 || monotonic_violation(&values).is_some() {
-        let i = monotonic_violation(&values).unwrap_or(transitions[0]);
+        let i = monotonic_violation(&values).unwrap_or_else(|| transitions[0]);
         let idx: Vec<usize> = (i.saturating_sub(1)..(i + 2).min(n)).collect();
         let message = format!(
             "{crit} is not monotonic in {name} on [{}, {}] ({}){}: bisection could return a wrong answer, so none is given. Narrow the range to a monotonic part, or use a grid to see the shape.",

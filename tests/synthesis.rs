@@ -1,0 +1,537 @@
+//! Synthesis (METHOD §1.7) against independent references: individual analyses cell by
+//! cell, threshold checks of the answers, the seed's own Table 2 for the selection
+//! logic, and a closed-form scaling argument linking `psi` and `f` (see `psi_and_f`).
+
+use kea_core::exec::{Executor, Sequential};
+use kea_core::synthesis::{
+    self, Details, RangeParam, Side, Status, SynthesisRequest, SynthesisResult,
+};
+use kea_core::{Error, Model, NoProgress, Overrides, analyze, presets};
+use serde_json::{Value, json};
+use std::ops::ControlFlow;
+
+/// Steps for the tests: the criteria of the seed example change by < 1e-3 between
+/// D = 5000 and D = 10⁶, and the suite stays fast.
+const STEPS: u64 = 5000;
+
+fn seed_model() -> Model {
+    let mut m = presets::get("seed-example").expect("preset");
+    m.time.steps = kea_core::model::Steps::Fixed(STEPS);
+    m
+}
+
+/// The seed example with the a-priori error fixed (φ = phi0 = 2e-5, the preset's
+/// f·ψ), so that ψ alone is the sensor's accuracy.
+fn fixed_phi_model() -> Model {
+    let mut m = seed_model();
+    m.params.insert("phi0".into(), 2e-5);
+    m.system.phi = Some(vec!["phi0".into()]);
+    m
+}
+
+fn request(model: &Model, target: Value, mode: Value) -> SynthesisRequest {
+    synthesis::request_from_value(json!({
+        "model": serde_json::to_value(model).unwrap(),
+        "target": target,
+        "mode": mode,
+    }))
+    .expect("valid request")
+}
+
+fn run(req: &SynthesisRequest) -> SynthesisResult {
+    synthesis::synthesize(req, &Sequential, &mut NoProgress).expect("synthesis runs")
+}
+
+/// F_YX (bound, weighted) of an individual analysis.
+fn f_yx(model: &Model, set: &[(&str, f64)]) -> f64 {
+    let set: Overrides = set.iter().map(|(k, v)| (k.to_string(), *v)).collect();
+    analyze(model, &set, &mut NoProgress)
+        .expect("analysis")
+        .criteria
+        .bound
+        .weighted
+        .yx
+        .expect("defined")
+}
+
+/// A threaded executor (std threads, chunks in order) to show that answers do not
+/// depend on the executor or its thread count.
+struct Threads(usize);
+
+impl Executor for Threads {
+    fn map<T: Send, R: Send, F: Fn(T) -> R + Sync>(&self, items: Vec<T>, f: F) -> Vec<R> {
+        let n = items.len();
+        let per = n.div_ceil(self.0).max(1);
+        let mut chunks: Vec<Vec<T>> = Vec::new();
+        let mut it = items.into_iter();
+        loop {
+            let c: Vec<T> = it.by_ref().take(per).collect();
+            if c.is_empty() {
+                break;
+            }
+            chunks.push(c);
+        }
+        std::thread::scope(|s| {
+            let handles: Vec<_> = chunks
+                .into_iter()
+                .map(|c| s.spawn(|| c.into_iter().map(&f).collect::<Vec<R>>()))
+                .collect();
+            handles
+                .into_iter()
+                .flat_map(|h| h.join().unwrap())
+                .collect()
+        })
+    }
+    fn threads(&self) -> usize {
+        self.0
+    }
+}
+
+fn seed_grid_request(cost_order: Option<Value>) -> SynthesisRequest {
+    let mut grid = json!({"params": [
+        {"name": "f", "values": [2.0, 4.0, 8.0]},
+        {"name": "c", "values": [0.5, 0.25, 0.125]},
+    ]});
+    if let Some(c) = cost_order {
+        grid["cost_order"] = c;
+    }
+    request(
+        &seed_model(),
+        json!({"criterion": "yx", "set": "bound", "threshold": 14}),
+        json!({ "grid": grid }),
+    )
+}
+
+#[test]
+fn grid_equals_individual_analyses_cell_by_cell() {
+    let req = seed_grid_request(None);
+    let r = run(&req);
+    let Details::Grid(g) = &r.details else {
+        panic!("grid details")
+    };
+    assert_eq!(g.cells.len(), 9);
+    assert_eq!(r.analyses, 9);
+    assert_eq!(r.steps, STEPS);
+    let model = seed_model();
+    for cell in &g.cells {
+        let (i, j) = (cell.index[0], cell.index[1]);
+        let f = [2.0, 4.0, 8.0][i];
+        let c = [0.5, 0.25, 0.125][j];
+        let set: Overrides = [("f".to_string(), f), ("c".to_string(), c)].into();
+        let a = analyze(&model, &set, &mut NoProgress).unwrap();
+        let w = &a.criteria.bound.weighted;
+        assert_eq!(cell.point.params["f"], f);
+        assert_eq!(cell.point.params["c"], c);
+        assert_eq!(
+            (cell.point.yz, cell.point.zx, cell.point.yx),
+            (w.yz, w.zx, w.yx)
+        );
+        assert_eq!(cell.point.meets, w.yx.unwrap() >= 14.0, "cell f={f} c={c}");
+    }
+    // kea's criteria do not depend on c (c scales z_B and ζ alike, METHOD §1.9);
+    // only f = 8 reaches 14 (f = 4 gives ≈ 12.7).
+    let meets: Vec<bool> = g.cells.iter().map(|c| c.point.meets).collect();
+    assert_eq!(
+        meets,
+        [false, false, false, false, false, false, true, true, true]
+    );
+    assert_eq!(r.status, Status::Table);
+    assert!(r.answer.is_none());
+}
+
+#[test]
+fn grid_cheapest_cell_follows_cost_order_and_is_verified() {
+    // Cheaper: a larger c first, then a smaller f.
+    let req = seed_grid_request(Some(json!([
+        {"name": "c", "cheaper": "higher"},
+        {"name": "f", "cheaper": "lower"},
+    ])));
+    let r = run(&req);
+    assert_eq!(r.status, Status::Found, "{}", r.message);
+    let a = r.answer.as_ref().unwrap();
+    assert_eq!((a.params["f"], a.params["c"]), (8.0, 0.5));
+    let Details::Grid(g) = &r.details else {
+        panic!()
+    };
+    assert_eq!(g.cheapest, Some(vec![2, 0]));
+    let v = r.verification.as_ref().unwrap();
+    assert!(v.passed && v.point.meets);
+    assert_eq!(
+        v.point.yx,
+        Some(f_yx(&seed_model(), &[("f", 8.0), ("c", 0.5)]))
+    );
+    assert_eq!(r.analyses, 10);
+
+    // The other way round: a smaller c is cheaper → c = 0.125.
+    let req = seed_grid_request(Some(json!([{"name": "c", "cheaper": "lower"}])));
+    let a = run(&req).answer.unwrap();
+    assert_eq!(a.params["c"], 0.125);
+    assert_eq!(a.params["f"], 8.0);
+}
+
+#[test]
+fn results_do_not_depend_on_thread_count() {
+    let req = seed_grid_request(Some(json!([{"name": "f", "cheaper": "lower"}])));
+    let one = run(&req);
+    for t in [2, 3, 8] {
+        let many = synthesis::synthesize(&req, &Threads(t), &mut NoProgress).unwrap();
+        assert_eq!(many, one, "threads = {t}");
+    }
+    let search = request(
+        &fixed_phi_model(),
+        json!({"criterion": "yx", "threshold": 14}),
+        json!({"seed_search": {"params": [
+            {"name": "psi", "low": 2.5e-6, "high": 1e-5, "shrink": 0.5},
+            {"name": "c", "low": 0.125, "high": 0.5, "shrink": 0.5}
+        ], "batch": 3}}),
+    );
+    let one = run(&search);
+    let many = synthesis::synthesize(&search, &Threads(2), &mut NoProgress).unwrap();
+    assert_eq!(many, one);
+}
+
+#[test]
+fn three_param_grid_pages() {
+    let req = request(
+        &seed_model(),
+        json!({"criterion": "yx", "threshold": 10}),
+        json!({"grid": {"params": [
+            {"name": "f", "values": [4.0, 8.0]},
+            {"name": "c", "values": [0.5]},
+            {"name": "m_g", "values": [100.0, 50.0]}
+        ]}}),
+    );
+    let r = run(&req);
+    let Details::Grid(g) = &r.details else {
+        panic!()
+    };
+    let model = seed_model();
+    for cell in &g.cells {
+        let p = &cell.point.params;
+        let f = f_yx(&model, &[("f", p["f"]), ("c", p["c"]), ("m_g", p["m_g"])]);
+        assert_eq!(cell.point.yx, Some(f));
+    }
+    assert_eq!(
+        g.cells.iter().map(|c| c.index.clone()).collect::<Vec<_>>(),
+        vec![vec![0, 0, 0], vec![0, 0, 1], vec![1, 0, 0], vec![1, 0, 1]]
+    );
+    assert!(synthesis::render_text(&r).contains("m_g = 50"));
+}
+
+#[test]
+fn bisection_answer_meets_and_one_percent_looser_misses() {
+    let model = fixed_phi_model();
+    let req = request(
+        &model,
+        json!({"criterion": "yx", "set": "bound", "threshold": 14}),
+        json!({"bisect": {"param": "psi", "low": 1e-6, "high": 1e-5, "rel_tol": 1e-3}}),
+    );
+    let r = run(&req);
+    assert_eq!(r.status, Status::Found, "{}", r.message);
+    let psi = r.answer.as_ref().unwrap().params["psi"];
+    // Independent checks by individual analyses.
+    assert!(f_yx(&model, &[("psi", psi)]) >= 14.0);
+    assert!(f_yx(&model, &[("psi", psi * 1.01)]) < 14.0);
+    let v = r.verification.as_ref().unwrap();
+    assert!(v.passed);
+    assert_eq!(v.looser.as_ref().unwrap().params["psi"], psi * 1.01);
+    let Details::Bisect(b) = &r.details else {
+        panic!()
+    };
+    assert_eq!(b.meets_side, Some(Side::Low));
+    let [good, bad] = b.bracket.unwrap();
+    assert_eq!(good, psi);
+    assert!(bad > good && bad / good - 1.0 <= 1e-3);
+    assert!(f_yx(&model, &[("psi", bad)]) < 14.0);
+    assert_eq!(r.analyses, 9 + b.iterations as u64 + 2);
+}
+
+/// With η0 = 0 every SKO scales with ψ when φ = f·ψ, so the criteria depend on f only;
+/// with φ fixed at 2e-5, f = 2e-5/ψ. The two bisections must agree: ψ* = 2e-5 / f*.
+#[test]
+fn psi_and_f_bisections_agree() {
+    let by_f = run(&request(
+        &seed_model(),
+        json!({"criterion": "yx", "threshold": 14}),
+        json!({"bisect": {"param": "f", "low": 2.0, "high": 20.0, "rel_tol": 1e-4}}),
+    ));
+    let by_psi = run(&request(
+        &fixed_phi_model(),
+        json!({"criterion": "yx", "threshold": 14}),
+        json!({"bisect": {"param": "psi", "low": 1e-6, "high": 1e-5, "rel_tol": 1e-4}}),
+    ));
+    let f = by_f.answer.unwrap().params["f"];
+    let psi = by_psi.answer.unwrap().params["psi"];
+    let Details::Bisect(b) = &by_f.details else {
+        panic!()
+    };
+    assert_eq!(b.meets_side, Some(Side::High));
+    assert!((4.0..8.0).contains(&f), "f* = {f}");
+    assert!(
+        (psi * f / 2e-5 - 1.0).abs() < 3e-4,
+        "psi* = {psi}, f* = {f}"
+    );
+}
+
+/// The seed's selection logic on the seed's own published Table 2 (METHOD §1.9): the
+/// search descends the measured SKO ψ from its upper bound (φ fixed, so f = φ/ψ
+/// rises 2 → 4 → 8) and, inside, c (ζ ∝ c) from 0.5 down; it stops at the first cell
+/// with F_YX ≥ 14 — the seed's choice f* = 4, c* = 0.25, F_YX = 14.32.
+#[test]
+fn seed_selection_logic_reproduces_the_seeds_choice_on_table_2() {
+    let table2 = |f: f64, c: f64| -> f64 {
+        let fi = [2.0, 4.0, 8.0].iter().position(|&x| x == f).unwrap();
+        let ci = [0.5, 0.25, 0.125].iter().position(|&x| x == c).unwrap();
+        [
+            [7.32, 9.27, 4.15],
+            [11.66, 14.32, 18.52],
+            [23.16, 29.50, 28.99],
+        ][fi][ci]
+    };
+    let params = [
+        RangeParam {
+            name: "psi".into(),
+            low: 2.5e-6,
+            high: 1e-5,
+            shrink: 0.5,
+        },
+        RangeParam {
+            name: "c".into(),
+            low: 0.125,
+            high: 0.5,
+            shrink: 0.5,
+        },
+    ];
+    let order = synthesis::seed_order(&params);
+    assert_eq!(order.len(), 9);
+    assert_eq!(order[0], vec![1e-5, 0.5]);
+    assert_eq!(order[8], vec![2.5e-6, 0.125]);
+    let values: Vec<Option<f64>> = order
+        .iter()
+        .map(|p| Some(table2((2e-5 / p[0]).round(), p[1])))
+        .collect();
+    let i = synthesis::first_meeting(&values, 14.0).unwrap();
+    assert_eq!(order[i], vec![5e-6, 0.25]);
+    assert_eq!(values[i], Some(14.32));
+    assert_eq!(i, 4);
+}
+
+/// The same search on kea's own analyses: the answer is the first point of the seed's
+/// order whose individual analysis meets the target.
+#[test]
+fn seed_search_stops_at_the_first_point_meeting_the_target() {
+    let model = fixed_phi_model();
+    let req = request(
+        &model,
+        json!({"criterion": "yx", "threshold": 14}),
+        json!({"seed_search": {"params": [
+            {"name": "psi", "low": 2.5e-6, "high": 1e-5, "shrink": 0.5},
+            {"name": "c", "low": 0.125, "high": 0.5, "shrink": 0.5}
+        ], "batch": 1}}),
+    );
+    let r = run(&req);
+    let order = synthesis::seed_order(match &req.mode {
+        synthesis::Mode::SeedSearch(s) => &s.params,
+        _ => unreachable!(),
+    });
+    let values: Vec<Option<f64>> = order
+        .iter()
+        .map(|p| Some(f_yx(&model, &[("psi", p[0]), ("c", p[1])])))
+        .collect();
+    let i = synthesis::first_meeting(&values, 14.0).unwrap();
+    // kea: c does not matter, ψ = 2.5e-6 (f = 8) is the first level reaching 14.
+    assert_eq!(order[i], vec![2.5e-6, 0.5]);
+    assert_eq!(r.status, Status::Found, "{}", r.message);
+    let a = r.answer.as_ref().unwrap();
+    assert_eq!((a.params["psi"], a.params["c"]), (2.5e-6, 0.5));
+    assert_eq!(a.value, values[i]);
+    let Details::SeedSearch(d) = &r.details else {
+        panic!()
+    };
+    assert_eq!(d.visited.len(), i + 1);
+    assert!(d.visited[..i].iter().all(|p| !p.meets));
+    assert_eq!(r.analyses, i as u64 + 2); // batch 1: no overshoot, + verification
+    assert!(r.verification.unwrap().passed);
+}
+
+#[test]
+fn infeasible_targets_say_so_and_advise() {
+    let model = fixed_phi_model();
+    let r = run(&request(
+        &model,
+        json!({"criterion": "yx", "threshold": 1000}),
+        json!({"seed_search": {"params": [
+            {"name": "psi", "low": 2.5e-6, "high": 1e-5, "shrink": 0.5}
+        ]}}),
+    ));
+    assert_eq!(r.status, Status::NotFound);
+    assert!(r.answer.is_none());
+    assert!(r.message.contains("Widen the ranges"), "{}", r.message);
+    assert!(r.message.contains("lower the target"), "{}", r.message);
+    let Details::SeedSearch(d) = &r.details else {
+        panic!()
+    };
+    assert_eq!(d.visited.len(), 3);
+
+    let r = run(&request(
+        &model,
+        json!({"criterion": "yx", "threshold": 1000}),
+        json!({"bisect": {"param": "psi", "low": 1e-6, "high": 1e-5}}),
+    ));
+    assert_eq!(r.status, Status::NotFound);
+    assert!(r.message.contains("widen the range or lower the target"));
+
+    // A target met everywhere: the boundary is outside the range.
+    let r = run(&request(
+        &model,
+        json!({"criterion": "yx", "threshold": 1.5}),
+        json!({"bisect": {"param": "psi", "low": 1e-7, "high": 1e-6}}),
+    ));
+    assert_eq!(r.status, Status::WholeRangeMeets, "{}", r.message);
+    assert!(r.answer.is_none());
+}
+
+/// ψ_eff = ψ·(1 + (k−3)²) with f = 8: f_eff = 8/(1 + (k−3)²) peaks at k = 3, and the
+/// effect with it (F_YX rises with f on [2, 20]).
+fn humped_model() -> Model {
+    let mut m = seed_model();
+    m.params.insert("k".into(), 3.0);
+    m.params.insert("f".into(), 8.0);
+    m.measurement.psi = Some(vec!["psi*(1+(k-3)*(k-3))".into()]);
+    m
+}
+
+#[test]
+fn non_monotonic_criteria_give_no_answer() {
+    let model = humped_model();
+    let peak = f_yx(&model, &[("k", 3.0)]);
+    let edge = f_yx(&model, &[("k", 2.0)]).max(f_yx(&model, &[("k", 4.0)]));
+    assert!(peak > edge);
+    // Met only around k = 3: two boundaries.
+    let r = run(&request(
+        &model,
+        json!({"criterion": "yx", "threshold": (peak + edge) / 2.0}),
+        json!({"bisect": {"param": "k", "low": 2.0, "high": 4.0}}),
+    ));
+    assert_eq!(r.status, Status::NonMonotonic, "{}", r.message);
+    assert!(r.answer.is_none());
+    assert!(r.message.contains("not monotonic"));
+    // One boundary in [2.8, 4], but the effect rises then falls: still refused.
+    let r = run(&request(
+        &model,
+        json!({"criterion": "yx", "threshold": f_yx(&model, &[("k", 3.5)])}),
+        json!({"bisect": {"param": "k", "low": 2.8, "high": 4.0}}),
+    ));
+    assert_eq!(r.status, Status::NonMonotonic, "{}", r.message);
+    // Where the same model is monotonic (k ≥ 3), the boundary is found: k* ≈ 3.5.
+    let r = run(&request(
+        &model,
+        json!({"criterion": "yx", "threshold": f_yx(&model, &[("k", 3.5)])}),
+        json!({"bisect": {"param": "k", "low": 3.0, "high": 4.0}}),
+    ));
+    assert_eq!(r.status, Status::Found, "{}", r.message);
+    assert!((r.answer.unwrap().params["k"] / 3.5 - 1.0).abs() < 1e-3);
+}
+
+#[test]
+fn invalid_requests_name_the_field() {
+    let model = serde_json::to_value(seed_model()).unwrap();
+    let paths = |v: Value| -> Vec<String> {
+        let err = match synthesis::request_from_value(v) {
+            Err(e) => e,
+            Ok(req) => synthesis::validate(&req).expect_err("invalid"),
+        };
+        let Error::Invalid(list) = err else {
+            panic!("{err:?}")
+        };
+        list.into_iter().map(|e| e.path).collect()
+    };
+    let target = json!({"criterion": "yx", "threshold": 14});
+    assert_eq!(
+        paths(json!({"model": model, "target": target,
+            "mode": {"bisect": {"param": "psi", "low": 1e-3, "high": 1e-5}}})),
+        ["mode.bisect.high"]
+    );
+    assert_eq!(
+        paths(json!({"model": model, "target": target,
+            "mode": {"bisect": {"param": "nope", "low": 0, "high": 1e-5, "rel_tol": 0.05}}})),
+        [
+            "mode.bisect.param",
+            "mode.bisect.low",
+            "mode.bisect.rel_tol"
+        ]
+    );
+    assert_eq!(
+        paths(
+            json!({"model": model, "target": {"criterion": "yx", "threshold": -1, "state": "Q"},
+            "mode": {"seed_search": {"params": [{"name": "c", "low": 0.1, "high": 0.5, "shrink": 1.5}]}}})
+        ),
+        [
+            "target.threshold",
+            "target.state",
+            "mode.seed_search.params[0].shrink"
+        ]
+    );
+    assert_eq!(
+        paths(json!({"model": model, "target": target,
+            "mode": {"grid": {"params": [{"name": "c", "values": [1]}, {"name": "c", "values": []}],
+                "cost_order": [{"name": "f", "cheaper": "lower"}]}}})),
+        [
+            "mode.grid.params[1].name",
+            "mode.grid.params[1].values",
+            "mode.grid.cost_order[0].name"
+        ]
+    );
+    let p = paths(json!({"model": model, "target": target,
+        "mode": {"bisect": {"param": "psi", "lo": 1e-7, "high": 1e-5}}}));
+    assert_eq!(p.len(), 1);
+    assert!(p[0].starts_with("mode.bisect"), "{p:?}");
+    assert_eq!(
+        paths(
+            json!({"model": model, "target": {"criterion": "xy", "threshold": 1},
+            "mode": {"grid": {"params": [{"name": "c", "values": [1]}]}}})
+        ),
+        ["target.criterion"]
+    );
+    assert_eq!(
+        paths(json!({"model": model, "target": target, "set": {"zz": 1},
+            "mode": {"grid": {"params": [{"name": "c", "values": [1]}]}}})),
+        ["set.zz"]
+    );
+}
+
+#[test]
+fn cancellation_stops_the_synthesis() {
+    let req = seed_grid_request(None);
+    let mut calls = 0;
+    let mut stop_early = |_f: f64| {
+        calls += 1;
+        if calls > 3 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    };
+    let err = synthesis::synthesize(&req, &Sequential, &mut stop_early).unwrap_err();
+    assert_eq!(err, Error::Cancelled);
+    let err = synthesis::synthesize(&req, &Threads(2), &mut |_f: f64| ControlFlow::Break(()))
+        .unwrap_err();
+    assert_eq!(err, Error::Cancelled);
+}
+
+#[test]
+fn progress_rises_to_one() {
+    let req = seed_grid_request(None);
+    let mut seen: Vec<f64> = Vec::new();
+    let mut record = |f: f64| {
+        seen.push(f);
+        ControlFlow::Continue(())
+    };
+    run_with(&req, &mut record);
+    assert!(seen.windows(2).all(|w| w[1] >= w[0] - 1e-12), "{seen:?}");
+    assert_eq!(*seen.last().unwrap(), 1.0);
+}
+
+fn run_with(req: &SynthesisRequest, p: &mut dyn kea_core::Progress) -> SynthesisResult {
+    synthesis::synthesize(req, &Sequential, p).unwrap()
+}

@@ -1,0 +1,432 @@
+//! Every kind of bad model gets a precise error: the field path and what was expected.
+//! No panic and no NaN for any of them.
+
+use kea_core::{Error, NoProgress, Overrides, analyze, model_from_value};
+use serde_json::{Value, json};
+
+fn good() -> Value {
+    json!({
+        "params": {"m": 100.0, "s": 37.17, "psi": 1e-5},
+        "time": {"t0": 0.0, "t_end": 10.0, "steps": 1000},
+        "system": {
+            "states": ["x", "v"],
+            "a": [[0, 1], ["-s/m", 0]],
+            "u": [0, "0.3*sin(2*t)"],
+            "b": [[0], [1]],
+            "y0": [1, 0],
+            "eta0": [0.1, 0.1],
+            "phi": [0.5]
+        },
+        "measurement": {"names": ["zx"], "c": [[1, 0]], "gamma": [[1]], "psi": ["psi*1e4"]},
+        "criteria": {"confidence": 0.95}
+    })
+}
+
+/// Apply `edit` to the good model and expect an error at `path` containing `fragment`.
+fn expect(edit: impl FnOnce(&mut Value), set: &[(&str, f64)], path: &str, fragment: &str) {
+    let mut v = good();
+    edit(&mut v);
+    let set: Overrides = set.iter().map(|(k, x)| (k.to_string(), *x)).collect();
+    let err = match model_from_value(v) {
+        Err(e) => e,
+        Ok(m) => match analyze(&m, &set, &mut NoProgress) {
+            Err(e) => e,
+            Ok(r) => panic!(
+                "expected an error at {path}, got a result with F_YX = {:?}",
+                r.criteria.covariance.weighted.yx
+            ),
+        },
+    };
+    let errors = err.field_errors();
+    assert!(
+        errors
+            .iter()
+            .any(|e| e.path == path && e.message.contains(fragment)),
+        "expected an error at `{path}` containing \"{fragment}\", got {errors:#?}"
+    );
+}
+
+#[test]
+fn the_good_model_runs() {
+    let m = model_from_value(good()).unwrap();
+    let r = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap();
+    assert!(r.criteria.covariance.weighted.yx.unwrap().is_finite());
+}
+
+#[test]
+fn dimensions() {
+    expect(
+        |v| v["system"]["a"][1] = json!([0]),
+        &[],
+        "system.a[1]",
+        "row 1 of `a` has 1 entries, expected 2 (N = 2)",
+    );
+    expect(
+        |v| v["system"]["a"] = json!([[0, 1]]),
+        &[],
+        "system.a",
+        "has 1 rows, expected 2",
+    );
+    expect(
+        |v| v["system"]["u"] = json!([0]),
+        &[],
+        "system.u",
+        "expected 2",
+    );
+    expect(
+        |v| v["system"]["b"][1] = json!([1, 2]),
+        &[],
+        "system.b[1]",
+        "has 2 entries, expected 1",
+    );
+    expect(
+        |v| v["system"]["phi"] = json!([0.5, 0.5]),
+        &[],
+        "system.phi",
+        "expected 1",
+    );
+    expect(
+        |v| v["measurement"]["c"][0] = json!([1, 0, 0]),
+        &[],
+        "measurement.c[0]",
+        "expected 2",
+    );
+    expect(
+        |v| v["measurement"]["gamma"] = json!([[1], [1]]),
+        &[],
+        "measurement.gamma",
+        "expected 1",
+    );
+    expect(
+        |v| v["measurement"]["psi"] = json!([1, 2]),
+        &[],
+        "measurement.psi",
+        "expected 1",
+    );
+    expect(
+        |v| v["system"]["y0"] = json!([1]),
+        &[],
+        "system.y0",
+        "expected 2",
+    );
+    expect(
+        |v| v["measurement"]["names"] = json!(["a", "b", "c"]),
+        &[],
+        "measurement.names",
+        "3 measurements but only 2 states",
+    );
+}
+
+#[test]
+fn expressions() {
+    expect(
+        |v| v["system"]["a"][1][0] = json!("-s/mass"),
+        &[],
+        "system.a[1][0]",
+        "unknown parameter \"mass\"",
+    );
+    expect(
+        |v| v["system"]["a"][1][0] = json!("-s/mass"),
+        &[],
+        "system.a[1][0]",
+        "position 4",
+    );
+    expect(
+        |v| v["system"]["a"][0][1] = json!("(1+t"),
+        &[],
+        "system.a[0][1]",
+        "unbalanced '('",
+    );
+    expect(
+        |v| v["system"]["a"][0][1] = json!("1+*t"),
+        &[],
+        "system.a[0][1]",
+        "cannot parse",
+    );
+    expect(
+        |v| v["measurement"]["c"][0][0] = json!("1+t"),
+        &[],
+        "measurement.c[0][0]",
+        "must be constant",
+    );
+    expect(
+        |v| v["system"]["phi"][0] = json!("sin(t)"),
+        &[],
+        "system.phi[0]",
+        "must be constant",
+    );
+    expect(
+        |v| v["system"]["a"][0][1] = json!("1/0"),
+        &[],
+        "system.a[0][1]",
+        "finite",
+    );
+    expect(
+        |v| v["system"]["a"][0][1] = json!(""),
+        &[],
+        "system.a[0][1]",
+        "empty expression",
+    );
+    // finite at t0 but not later: reported at the step where it happens
+    expect(
+        |v| v["system"]["a"][0][1] = json!("1/(t-5)"),
+        &[],
+        "system.a[0][1]",
+        "not finite",
+    );
+}
+
+#[test]
+fn numbers_and_ranges() {
+    expect(
+        |v| v["system"]["eta0"][0] = json!(-1),
+        &[],
+        "system.eta0[0]",
+        "an SKO must be ≥ 0",
+    );
+    expect(
+        |v| v["system"]["phi"][0] = json!(-0.5),
+        &[],
+        "system.phi[0]",
+        "an SKO must be ≥ 0",
+    );
+    expect(
+        |v| v["measurement"]["psi"][0] = json!("-psi"),
+        &[],
+        "measurement.psi[0]",
+        "an SKO must be ≥ 0",
+    );
+    expect(
+        |v| v["time"]["t_end"] = json!(0.0),
+        &[],
+        "time.t_end",
+        "must be greater than t0",
+    );
+    expect(
+        |v| v["time"]["steps"] = json!(0),
+        &[],
+        "time.steps",
+        "at least 1",
+    );
+    expect(
+        |v| v["time"]["steps"] = json!(1_000_000_000_000u64),
+        &[],
+        "time.steps",
+        "more than the limit",
+    );
+    expect(
+        |v| v["time"]["steps"] = json!("many"),
+        &[],
+        "time.steps",
+        "expected a positive integer or \"auto\"",
+    );
+    expect(|v| v["time"]["steps"] = json!(-3), &[], "time.steps", "");
+    expect(
+        |v| v["criteria"]["confidence"] = json!(1.5),
+        &[],
+        "criteria.confidence",
+        "strictly between 0 and 1",
+    );
+    expect(
+        |v| v["options"] = json!({"trace_points": 1}),
+        &[],
+        "options.trace_points",
+        "expected 2 to",
+    );
+    expect(
+        |v| v["params"]["t"] = json!(1.0),
+        &[],
+        "params.t",
+        "time variable",
+    );
+    expect(
+        |v| v["params"]["sin"] = json!(1.0),
+        &[],
+        "params.sin",
+        "function name",
+    );
+}
+
+#[test]
+fn weights() {
+    expect(
+        |v| v["criteria"]["weights"] = json!({"yx": [0.5, 0.4]}),
+        &[],
+        "criteria.weights.yx",
+        "sum to 1",
+    );
+    expect(
+        |v| v["criteria"]["weights"] = json!({"yx": [1.0]}),
+        &[],
+        "criteria.weights.yx",
+        "one per state",
+    );
+    expect(
+        |v| v["criteria"]["weights"] = json!({"yz": [0.5, 0.5]}),
+        &[],
+        "criteria.weights.yz[1]",
+        "no paired measurement",
+    );
+    expect(
+        |v| v["criteria"]["weights"] = json!({"yx": [-0.5, 1.5]}),
+        &[],
+        "criteria.weights.yx[0]",
+        "≥ 0",
+    );
+}
+
+#[test]
+fn noise_covariances() {
+    expect(
+        |v| v["system"]["W"] = json!([[1.0]]),
+        &[],
+        "system.W",
+        "not both",
+    );
+    expect(
+        |v| {
+            v["system"].as_object_mut().unwrap().remove("phi");
+        },
+        &[],
+        "system.phi",
+        "missing",
+    );
+    expect(
+        |v| {
+            v["measurement"].as_object_mut().unwrap().remove("psi");
+            v["measurement"]["V"] = json!([[-1.0]]);
+        },
+        &[],
+        "measurement.V",
+        "positive semi-definite",
+    );
+    expect(
+        |v| {
+            v["system"]["b"] = json!([[1, 0], [0, 1]]);
+            v["system"].as_object_mut().unwrap().remove("phi");
+            v["system"]["W"] = json!([[1.0, 0.5], [0.4, 1.0]]);
+        },
+        &[],
+        "system.W[1][0]",
+        "symmetric",
+    );
+    expect(
+        |v| {
+            v["measurement"].as_object_mut().unwrap().remove("gamma");
+        },
+        &[],
+        "measurement.gamma",
+        "missing",
+    );
+}
+
+#[test]
+fn names_pairs_and_overrides() {
+    expect(
+        |v| v["system"]["states"] = json!(["x", "x"]),
+        &[],
+        "system.states[1]",
+        "duplicate",
+    );
+    expect(
+        |v| v["measurement"]["pairs"] = json!([{"state": "q", "measurement": "zx"}]),
+        &[],
+        "measurement.pairs[0].state",
+        "no state named \"q\"",
+    );
+    expect(
+        |_| {},
+        &[("mass", 1.0)],
+        "set.mass",
+        "no parameter \"mass\"",
+    );
+    expect(|_| {}, &[("m", f64::NAN)], "set.m", "finite");
+}
+
+#[test]
+fn malformed_json_is_located() {
+    expect(
+        |v| v["system"]["a"][0][0] = json!(true),
+        &[],
+        "system.a[0][0]",
+        "",
+    );
+    expect(
+        |v| v["system"]["extra"] = json!(1),
+        &[],
+        "system.extra",
+        "unknown field `extra`",
+    );
+    expect(
+        |v| v["kea_model"] = json!(7),
+        &[],
+        "kea_model",
+        "unsupported model format version 7",
+    );
+}
+
+#[test]
+fn singular_innovation_covariance_names_step_and_time() {
+    let mut v = good();
+    v["measurement"]["psi"] = json!([0.0]);
+    v["system"]["eta0"] = json!([0.0, 0.0]);
+    v["system"]["phi"] = json!([0.0]);
+    let m = model_from_value(v).unwrap();
+    let e = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap_err();
+    match &e {
+        Error::Numerical {
+            step,
+            t,
+            path,
+            message,
+        } => {
+            assert_eq!(*step, 1);
+            assert!((t - 0.01).abs() < 1e-12);
+            assert_eq!(path, "measurement");
+            assert!(message.contains("innovation covariance"), "{message}");
+        }
+        other => panic!("expected a numerical error, got {other:?}"),
+    }
+    assert!(e.to_string().contains("at step 1, t = 0.01"), "{e}");
+}
+
+#[test]
+fn results_never_contain_nan() {
+    // y ≡ 0: relative errors undefined -> null with a reason, not NaN
+    let mut v = good();
+    v["system"]["y0"] = json!([0, 0]);
+    v["system"]["u"] = json!([0, 0]);
+    let r = analyze(
+        &model_from_value(v).unwrap(),
+        &Overrides::new(),
+        &mut NoProgress,
+    )
+    .unwrap();
+    let text = serde_json::to_string(&r).unwrap();
+    assert!(
+        !text.contains("NaN") && !text.contains("inf"),
+        "{text:.300}"
+    );
+    let s = &r.criteria.bound.per_state[0];
+    assert!(s.yx.is_none());
+    assert!(s.undefined["yx"].contains("y_B = 0"), "{:?}", s.undefined);
+    assert!(r.criteria.bound.weighted.yx.is_none());
+}
+
+#[test]
+fn cancellation_stops_the_run() {
+    let mut v = good();
+    v["time"]["steps"] = json!(1_000_000);
+    let m = model_from_value(v).unwrap();
+    let mut calls = 0;
+    let mut cancel_second = |_f: f64| {
+        calls += 1;
+        if calls >= 2 {
+            std::ops::ControlFlow::Break(())
+        } else {
+            std::ops::ControlFlow::Continue(())
+        }
+    };
+    let e = analyze(&m, &Overrides::new(), &mut cancel_second).unwrap_err();
+    assert_eq!(e, Error::Cancelled);
+}

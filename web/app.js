@@ -53,7 +53,13 @@ const editor = new ModelEditor($('editor'), () => {
   }
   saveToUrl();
   scheduleCheck();
+  markStale();
 });
+
+/** The shown results belong to an earlier version of the model. */
+function markStale() {
+  if (!$('results').hidden) $('results').classList.add('stale');
+}
 
 function modelJson() {
   return JSON.stringify(editor.model);
@@ -76,6 +82,7 @@ function loadModel(model, presetName = null) {
   state.preset = presetName;
   $('preset').value = presetName ?? '';
   editor.load(model);
+  markStale();
   saveToUrl();
   return check();
 }
@@ -130,10 +137,15 @@ async function run() {
   $('run').disabled = true;
   $('cancel').disabled = false;
   $('progress').value = 0;
-  setStatus(where === 'browser' ? 'Running in this browser…' : 'Running on the server…');
+  const label = where === 'browser' ? 'Running in this browser…' : 'Running on the server…';
+  setStatus(label);
   const started = performance.now();
+  const onProgress = (p) => {
+    $('progress').value = p;
+    if (state.running === runner) setStatus(`${label} ${Math.floor(p * 100)} %`);
+  };
   try {
-    const { result, job } = await runner.run(modelJson(), (p) => ($('progress').value = p));
+    const { result, job } = await runner.run(modelJson(), onProgress);
     $('progress').value = 1;
     const elapsed = performance.now() - started;
     state.result = result;
@@ -163,6 +175,7 @@ function cancel() {
 
 function showResult(r, where, elapsed) {
   $('results').hidden = false;
+  $('results').classList.remove('stale');
   const parts = [
     `D = ${r.steps.toLocaleString('en')} steps, Δt = ${fmt(r.dt)}`,
     `t ∈ [${fmt(r.t0)}, ${fmt(r.t_end)}]`,
@@ -215,6 +228,7 @@ async function main() {
   $('export-model').addEventListener('click', () =>
     download(`${fileStem()}.json`, 'application/json', JSON.stringify(editor.model, null, 2) + '\n'),
   );
+  $('import-button').addEventListener('click', () => $('import-model').click());
   $('import-model').addEventListener('change', async (e) => {
     const file = e.target.files[0];
     if (!file) return;

@@ -141,6 +141,38 @@ test('an invalid expression is reported at its cell, and the mark goes when fixe
   assert.equal(await page.getAttribute(input, 'aria-invalid'), null);
 });
 
+test('a model survives JSON export, import and a shared link', async () => {
+  await page.selectOption('#preset', 'cv-tracker');
+  await page.waitForFunction(() => location.hash === '#preset=cv-tracker');
+  const [exported] = await Promise.all([page.waitForEvent('download'), page.click('#export-model')]);
+  const model = JSON.parse(readFileSync(await exported.path(), 'utf8'));
+  assert.deepEqual(model, JSON.parse(kea('preset', 'cv-tracker')));
+
+  model.name = 'imported tracker';
+  model.params.r = 0.125;
+  await page.setInputFiles('#import-model', {
+    name: 'tracker.json',
+    mimeType: 'application/json',
+    buffer: Buffer.from(JSON.stringify(model)),
+  });
+  await page.waitForFunction(() => document.querySelector('input[data-path="params.r"]')?.value === '0.125');
+  assert.equal(await page.inputValue('input[data-path=name]'), 'imported tracker');
+  assert.equal(await page.inputValue('#preset'), '');
+
+  // The address now carries the model: a second tab opened on it shows the same.
+  await page.waitForFunction(() => location.hash.startsWith('#model='));
+  const link = page.url();
+  const errors = [];
+  const other = await newPage(browser, errors);
+  await other.goto(link);
+  await other.waitForSelector('body[data-ready=true]', { timeout: 30000 });
+  assert.equal(await other.inputValue('input[data-path="params.r"]'), '0.125');
+  assert.equal(await other.inputValue('input[data-path=name]'), 'imported tracker');
+  assert.equal(await other.inputValue('input[data-path="system.a[0][1]"]'), '1');
+  await other.context().close();
+  assert.deepEqual(errors, []);
+});
+
 /** Make the loaded model long: D = 10⁸ steps and no steady-state shortcut. */
 async function makeLong() {
   await page.selectOption('#preset', 'seed-example');

@@ -313,14 +313,35 @@ fn ensure_chromium() -> Result<PathBuf> {
     }
 }
 
+/// The oldest Node.js the e2e tests' `playwright-core` supports.
+const NODE_MAJOR: u32 = 20;
+
 fn ensure_node() -> Result<()> {
-    if output(Command::new("node").arg("--version")).is_some()
-        && output(Command::new("npm").arg("--version")).is_some()
-    {
-        return Ok(());
+    let npm = output(Command::new("npm").arg("--version")).is_some();
+    let node = output(Command::new("node").arg("--version"));
+    if node.is_none() || !npm {
+        eprintln!("xtask: node/npm missing; installing them with apt-get");
+        apt_install(&["nodejs", "npm"])?;
     }
-    eprintln!("xtask: node/npm missing; installing them with apt-get");
-    apt_install(&["nodejs", "npm"])
+    let version = output(Command::new("node").arg("--version")).unwrap_or_default();
+    match node_major(&version) {
+        Some(major) if major >= NODE_MAJOR => Ok(()),
+        _ => Err(format!(
+            "the browser tests need Node.js {NODE_MAJOR} or newer, found `{}`",
+            version.trim()
+        )),
+    }
+}
+
+/// The major version of `node --version` output (`v20.20.2` → 20).
+fn node_major(version: &str) -> Option<u32> {
+    version
+        .trim()
+        .strip_prefix('v')?
+        .split('.')
+        .next()?
+        .parse()
+        .ok()
 }
 
 fn apt_install(packages: &[&str]) -> Result<()> {
@@ -360,6 +381,13 @@ mod tests {
         );
         assert_eq!(exact_pin(manifest, "js-sys"), None, "not an exact pin");
         assert_eq!(exact_pin(manifest, "serde"), None);
+    }
+
+    #[test]
+    fn reads_the_node_major_version() {
+        assert_eq!(node_major("v20.20.2\n"), Some(20));
+        assert_eq!(node_major("v18.19.0"), Some(18));
+        assert_eq!(node_major("20.1"), None);
     }
 
     #[test]

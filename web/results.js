@@ -40,6 +40,15 @@ export function fmt(x) {
   return x.toExponential(4);
 }
 
+/** An axis tick: short, exponent form outside [1e-3, 1e5). */
+function tick(x) {
+  if (x === null || x === undefined) return '';
+  if (x === 0) return '0';
+  const a = Math.abs(x);
+  if (a >= 1e-3 && a < 1e5) return String(Number(x.toPrecision(4)));
+  return x.toExponential(2).replace(/\.?0+e/, 'e');
+}
+
 /** One criterion cell: the full-precision value in data-value, highlighted when > 1. */
 function criterionCell(set, criterion, row, stateName, value, why) {
   const td = el('td', {
@@ -70,7 +79,9 @@ export function criteriaTable(result) {
   const body = el('tbody');
   const sets = result.criteria;
   sets.bound.per_state.forEach((ps, i) => {
-    const tr = el('tr', {}, el('th', { scope: 'row', text: ps.state + (ps.measurement ? ` ↔ ${ps.measurement}` : '') }));
+    const label = el('th', { scope: 'row', text: ps.state });
+    if (ps.measurement) label.append(el('span', { class: 'pair', text: ` ↔ ${ps.measurement}` }));
+    const tr = el('tr', {}, label);
     for (const [key] of CRITERIA) {
       for (const [set] of SETS) {
         const s = sets[set].per_state[i];
@@ -162,8 +173,8 @@ export class TraceChart {
         height: 320,
         scales: { x: { time: false }, y: log ? { distr: 3 } : {} },
         axes: [
-          { label: 't', values: (_, ticks) => ticks.map(fmt) },
-          { label: 'SKO', size: 70, values: (_, ticks) => ticks.map(fmt) },
+          { label: 't', values: (_, ticks) => ticks.map(tick) },
+          { label: 'SKO', size: 70, values: (_, ticks) => ticks.map(tick) },
         ],
         series,
         legend: { live: true },

@@ -12,6 +12,14 @@ const PRESETS: &[(&str, &str)] = &[
         include_str!("../presets/helicopter-range.json"),
     ),
     ("cv-tracker", include_str!("../presets/cv-tracker.json")),
+    (
+        "helicopter-hover",
+        include_str!("../presets/helicopter-hover.json"),
+    ),
+    (
+        "helicopter-angle",
+        include_str!("../presets/helicopter-angle.json"),
+    ),
 ];
 
 #[derive(Clone, Debug, PartialEq, Serialize)]

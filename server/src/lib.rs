@@ -6,6 +6,7 @@
 //! the output. Anything about filtering belongs in `kea_core`.
 
 pub mod cli;
+pub mod parallel;
 pub mod serve;
 
 use clap::{CommandFactory, Parser, Subcommand};
@@ -43,6 +44,10 @@ commands! {
     Presets(cli::presets::ListArgs),
     /// Print a preset model's JSON (a starting point for your own model).
     Preset(cli::presets::ShowArgs),
+    /// Monte Carlo: real (simulated) against potential (Riccati) accuracy.
+    Simulate(cli::simulate::Args),
+    /// Synthesis: the error levels that reach a desired filtering effect.
+    Synthesize(cli::synthesize::Args),
     /// Run the HTTP service (API, jobs, web UI).
     Serve(serve::Args),
 }

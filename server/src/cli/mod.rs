@@ -3,6 +3,8 @@
 
 pub mod analyze;
 pub mod presets;
+pub mod simulate;
+pub mod synthesize;
 
 use std::process::ExitCode;
 

@@ -7,6 +7,8 @@
 //! in [`registry`].
 
 pub mod analysis;
+pub mod simulation;
+pub mod synthesis;
 
 use kea_core::{Error, Progress};
 use serde_json::Value;
@@ -58,6 +60,8 @@ pub fn registry() -> Registry {
     Registry {
         kinds: Arc::new(vec![
             Box::new(analysis::Analysis),
+            Box::new(simulation::Simulation),
+            Box::new(synthesis::Synthesis),
             // New kinds: one line each, e.g. Box::new(synthesis::Synthesis),
         ]),
     }

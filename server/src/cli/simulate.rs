@@ -1,0 +1,273 @@
+//! `kea simulate MODEL.json --runs R [--seed S] [--truth process|mean]
+//! [--model-error white|constant] [--threads T] [--json | --csv FILE]`: the Monte Carlo
+//! of METHOD §1.8 — real (simulated) against potential (Riccati) accuracy.
+
+use crate::Run;
+use kea_core::simulation::{
+    Executor, ModelError, SimulationRequest, SimulationResult, Truth, Verdict,
+};
+use kea_core::{NoProgress, Overrides};
+use std::fmt::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+/// Items split into contiguous slices, one scoped thread each, results in item order.
+/// The core's simulation gives bit-identical results whatever `threads` is.
+#[derive(Clone, Copy, Debug)]
+pub struct ScopedThreads(pub usize);
+
+impl ScopedThreads {
+    /// One thread per available core.
+    pub fn available() -> Self {
+        ScopedThreads(std::thread::available_parallelism().map_or(1, |n| n.get()))
+    }
+}
+
+impl Executor for ScopedThreads {
+    fn map<T: Send, R: Send, F: Fn(T) -> R + Sync>(&self, items: Vec<T>, f: F) -> Vec<R> {
+        let threads = self.0.max(1);
+        if threads == 1 || items.len() < 2 {
+            return items.into_iter().map(f).collect();
+        }
+        let per = items.len().div_ceil(threads);
+        let mut parts: Vec<Vec<T>> = Vec::with_capacity(threads);
+        let mut it = items.into_iter().peekable();
+        while it.peek().is_some() {
+            parts.push(it.by_ref().take(per).collect());
+        }
+        let f = &f;
+        std::thread::scope(|s| {
+            let handles: Vec<_> = parts
+                .into_iter()
+                .map(|p| s.spawn(move || p.into_iter().map(f).collect::<Vec<R>>()))
+                .collect();
+            handles
+                .into_iter()
+                .flat_map(|h| h.join().expect("a simulation thread panicked"))
+                .collect()
+        })
+    }
+
+    fn threads(&self) -> usize {
+        self.0.max(1)
+    }
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum TruthArg {
+    Process,
+    Mean,
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum ModelErrorArg {
+    White,
+    Constant,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The model file (JSON), or `preset:NAME` for a preset (see `kea presets`).
+    pub model: String,
+    /// Number of runs R.
+    #[arg(long, default_value_t = 1000)]
+    pub runs: u64,
+    /// Seed of the random streams (same seed, same numbers, whatever --threads).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// What the filter is compared with: the noisy process Y, or the mean y (seed 000).
+    #[arg(long, value_enum, default_value = "process")]
+    pub truth: TruthArg,
+    /// Model error drawn at every step (white) or once per run (a constant bias).
+    #[arg(long, value_enum, default_value = "white")]
+    pub model_error: ModelErrorArg,
+    /// Rows of the traces (bucket averages).
+    #[arg(long)]
+    pub trace_points: Option<usize>,
+    /// Threads (default: every core). Results do not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Override a model parameter, e.g. `--set q=0.5` (repeatable).
+    #[arg(long = "set", value_name = "NAME=VALUE", value_parser = super::parse_override)]
+    pub set: Vec<(String, f64)>,
+    /// Print the whole result as JSON.
+    #[arg(long)]
+    pub json: bool,
+    /// Also write the traces (potential against real SKOs) as CSV to this file.
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+}
+
+impl Run for Args {
+    fn run(self) -> ExitCode {
+        let model = if let Some(name) = self.model.strip_prefix("preset:") {
+            match kea_core::presets::get(name) {
+                Some(m) => m,
+                None => {
+                    eprintln!(
+                        "model: no preset \"{name}\" (presets: {})",
+                        kea_core::presets::names().join(", ")
+                    );
+                    return ExitCode::from(super::EXIT_INVALID);
+                }
+            }
+        } else {
+            let text = match std::fs::read_to_string(&self.model) {
+                Ok(t) => t,
+                Err(e) => {
+                    eprintln!("cannot read {}: {e}", self.model);
+                    return ExitCode::from(super::EXIT_FAILURE);
+                }
+            };
+            match kea_core::model_from_json(&text) {
+                Ok(m) => m,
+                Err(e) => return super::report_error(&e),
+            }
+        };
+        let req = SimulationRequest {
+            runs: self.runs,
+            seed: self.seed,
+            truth: match self.truth {
+                TruthArg::Process => Truth::Process,
+                TruthArg::Mean => Truth::Mean,
+            },
+            model_error: match self.model_error {
+                ModelErrorArg::White => ModelError::White,
+                ModelErrorArg::Constant => ModelError::Constant,
+            },
+            trace_points: self.trace_points,
+        };
+        let exec = match self.threads {
+            Some(t) => ScopedThreads(t.max(1)),
+            None => ScopedThreads::available(),
+        };
+        let set: Overrides = self.set.into_iter().collect();
+        let start = Instant::now();
+        let mut result =
+            match kea_core::simulation::simulate(&model, &set, &req, &exec, &mut NoProgress) {
+                Ok(r) => r,
+                Err(e) => return super::report_error(&e),
+            };
+        result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        if let Some(path) = &self.csv
+            && let Err(e) = std::fs::write(path, kea_core::simulation::traces_csv(&result))
+        {
+            eprintln!("cannot write {}: {e}", path.display());
+            return ExitCode::from(super::EXIT_FAILURE);
+        }
+        if self.json {
+            match serde_json::to_string_pretty(&result) {
+                Ok(s) => println!("{s}"),
+                Err(e) => {
+                    eprintln!("cannot serialise the result: {e}");
+                    return ExitCode::from(super::EXIT_FAILURE);
+                }
+            }
+        } else {
+            print!("{}", table(&result, exec.threads()));
+        }
+        ExitCode::SUCCESS
+    }
+}
+
+fn opt(v: Option<f64>) -> String {
+    v.map_or("—".to_string(), |x| format!("{x:.4}"))
+}
+
+fn verdict(v: Verdict) -> &'static str {
+    match v {
+        Verdict::Consistent => "consistent",
+        Verdict::Optimistic => "optimistic (real worse than potential)",
+        Verdict::Pessimistic => "pessimistic (real better than potential)",
+        Verdict::Undefined => "undefined",
+    }
+}
+
+/// The plain-text report: final SKOs, verdicts, and the three criteria sets.
+pub fn table(r: &SimulationResult, threads: usize) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Monte Carlo: {} runs × {} steps, seed {}, truth = {:?}, model error = {:?} ({:.0} ms, {threads} threads)",
+        r.request.runs,
+        r.steps,
+        r.request.seed,
+        r.request.truth,
+        r.request.model_error,
+        r.timing.wall_ms
+    );
+    let _ = writeln!(
+        s,
+        "\nAt t = {}: SKO of the errors (sample) against the potential sqrt(R_ii) and the bound χ",
+        r.t_end
+    );
+    let _ = writeln!(
+        s,
+        "{:<12} {:>12} {:>12} {:>12} {:>12} {:>12}   verdict (mean s²/R_ii, band)",
+        "state", "a-priori", "measured", "filtered", "potential", "bound χ"
+    );
+    for (i, st) in r.states.iter().enumerate() {
+        let f = &r.final_;
+        let v = &r.consistency.per_state[i];
+        let _ = writeln!(
+            s,
+            "{:<12} {:>12.5e} {:>12} {:>12.5e} {:>12.5e} {:>12.5e}   {} ({} in [{:.3}, {:.3}])",
+            st,
+            f.a_priori_sko[i],
+            f.measured_sko[i].map_or("—".into(), |x| format!("{x:.5e}")),
+            f.filtered_sko[i],
+            f.potential_sko[i],
+            f.chi[i],
+            verdict(v.verdict),
+            opt(v.variance_ratio),
+            v.band[0],
+            v.band[1]
+        );
+    }
+    let c = &r.consistency;
+    for (name, st) in [("NEES", &c.nees), ("NIS", &c.nis)] {
+        let _ = writeln!(
+            s,
+            "{name}: average {} (dof {:.2}), {:.0} % band [{:.3}, {:.3}], {} of steps in band: {}",
+            opt(st.time_average),
+            st.dof,
+            c.band_probability * 100.0,
+            st.band[0],
+            st.band[1],
+            st.fraction_in_band
+                .map_or("—".into(), |f| format!("{:.1} %", f * 100.0)),
+            verdict(st.verdict)
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nCriteria (weighted F): bound / covariance / monte_carlo"
+    );
+    let sets = [
+        Some(&r.criteria.bound),
+        Some(&r.criteria.covariance),
+        r.criteria.monte_carlo.as_ref(),
+    ];
+    for (name, get) in [("F_YZ", 0usize), ("F_ZX", 1), ("F_YX", 2)] {
+        let vals: Vec<String> = sets
+            .iter()
+            .map(|set| {
+                opt(set.and_then(|c| match get {
+                    0 => c.weighted.yz,
+                    1 => c.weighted.zx,
+                    _ => c.weighted.yx,
+                }))
+            })
+            .collect();
+        let _ = writeln!(
+            s,
+            "{name:<6} {:>12} {:>12} {:>12}",
+            vals[0], vals[1], vals[2]
+        );
+    }
+    for w in &r.warnings {
+        let _ = writeln!(s, "warning: {w}");
+    }
+    s
+}

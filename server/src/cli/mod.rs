@@ -3,6 +3,7 @@
 
 pub mod analyze;
 pub mod presets;
+pub mod synthesize;
 pub mod simulate;
 pub mod synthesize;
 

@@ -1,0 +1,135 @@
+//! `kea synthesize REQUEST.json [--model FILE | --preset NAME] [--set name=value]…
+//! [--threads N] [--json]`: the error levels that reach a desired filtering effect
+//! (METHOD §1.7), on every core.
+
+use crate::Run;
+use crate::parallel::Rayon;
+use kea_core::NoProgress;
+use kea_core::synthesis::{self, Status};
+use serde_json::Value;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The synthesis request (JSON: `target`, `mode`, and `model` unless given below);
+    /// see docs/synthesis.md.
+    pub request: PathBuf,
+    /// Take the model from this file (replaces the request's `model`).
+    #[arg(long, conflicts_with = "preset")]
+    pub model: Option<PathBuf>,
+    /// Take the model from a preset (see `kea presets`).
+    #[arg(long)]
+    pub preset: Option<String>,
+    /// Override a model parameter at every point, e.g. `--set c=0.25` (repeatable).
+    #[arg(long = "set", value_name = "NAME=VALUE", value_parser = super::parse_override)]
+    pub set: Vec<(String, f64)>,
+    /// Threads for the analyses (default: every core). Answers do not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Print the whole result as JSON instead of the table and message.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn read(path: &PathBuf) -> Result<String, ExitCode> {
+    std::fs::read_to_string(path).map_err(|e| {
+        eprintln!("cannot read {}: {e}", path.display());
+        ExitCode::from(super::EXIT_FAILURE)
+    })
+}
+
+impl Run for Args {
+    fn run(self) -> ExitCode {
+        let text = match read(&self.request) {
+            Ok(t) => t,
+            Err(c) => return c,
+        };
+        let mut value: Value = match serde_json::from_str(&text) {
+            Ok(v) => v,
+            Err(e) => {
+                return super::report_error(&kea_core::Error::invalid(
+                    "",
+                    format!("not valid JSON: {e}"),
+                ));
+            }
+        };
+        let Value::Object(obj) = &mut value else {
+            return super::report_error(&kea_core::Error::invalid("", "expected a JSON object"));
+        };
+        let model_text = match (&self.model, &self.preset) {
+            (Some(path), _) => match read(path) {
+                Ok(t) => Some(t),
+                Err(c) => return c,
+            },
+            (None, Some(name)) => match kea_core::presets::get_json(name) {
+                Some(t) => Some(t.to_string()),
+                None => {
+                    eprintln!(
+                        "no preset `{name}` (presets: {})",
+                        kea_core::presets::names().join(", ")
+                    );
+                    return ExitCode::from(super::EXIT_INVALID);
+                }
+            },
+            (None, None) => None,
+        };
+        if let Some(t) = model_text {
+            match serde_json::from_str::<Value>(&t) {
+                Ok(m) => {
+                    obj.insert("model".into(), m);
+                }
+                Err(e) => {
+                    return super::report_error(&kea_core::Error::invalid(
+                        "model",
+                        format!("not valid JSON: {e}"),
+                    ));
+                }
+            }
+        }
+        if !self.set.is_empty() {
+            let set = obj
+                .entry("set")
+                .or_insert_with(|| Value::Object(Default::default()));
+            if let Value::Object(set) = set {
+                for (k, v) in &self.set {
+                    set.insert(k.clone(), (*v).into());
+                }
+            }
+        }
+        let request = match synthesis::request_from_value(value) {
+            Ok(r) => r,
+            Err(e) => return super::report_error(&e),
+        };
+        let exec = match Rayon::new(self.threads) {
+            Ok(x) => x,
+            Err(e) => {
+                eprintln!("{e}");
+                return ExitCode::from(super::EXIT_FAILURE);
+            }
+        };
+        let start = Instant::now();
+        let mut result = match synthesis::synthesize(&request, &exec, &mut NoProgress) {
+            Ok(r) => r,
+            Err(e) => return super::report_error(&e),
+        };
+        result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        if self.json {
+            match serde_json::to_string_pretty(&result) {
+                Ok(s) => println!("{s}"),
+                Err(e) => {
+                    eprintln!("cannot serialise the result: {e}");
+                    return ExitCode::from(super::EXIT_FAILURE);
+                }
+            }
+        } else {
+            print!("{}", synthesis::render_text(&result));
+        }
+        match result.status {
+            Status::Found | Status::Table => ExitCode::SUCCESS,
+            // A valid run without an answer (not found, non-monotonic, whole range).
+            _ => ExitCode::from(super::EXIT_FAILURE),
+        }
+    }
+}

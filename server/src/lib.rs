@@ -7,7 +7,6 @@
 
 pub mod cli;
 pub mod parallel;
-pub mod parallel;
 pub mod serve;
 
 use clap::{CommandFactory, Parser, Subcommand};
@@ -47,8 +46,6 @@ commands! {
     Preset(cli::presets::ShowArgs),
     /// Monte Carlo: real (simulated) against potential (Riccati) accuracy.
     Simulate(cli::simulate::Args),
-    /// Synthesis: the error levels that reach a desired filtering effect.
-    Synthesize(cli::synthesize::Args),
     /// Synthesis: the error levels that reach a desired filtering effect.
     Synthesize(cli::synthesize::Args),
     /// Run the HTTP service (API, jobs, web UI).

@@ -3,7 +3,6 @@
 
 pub mod analyze;
 pub mod presets;
-pub mod synthesize;
 pub mod simulate;
 pub mod synthesize;
 

@@ -7,7 +7,6 @@
 //! in [`registry`].
 
 pub mod analysis;
-pub mod synthesis;
 pub mod simulation;
 pub mod synthesis;
 
@@ -62,7 +61,6 @@ pub fn registry() -> Registry {
         kinds: Arc::new(vec![
             Box::new(analysis::Analysis),
             Box::new(simulation::Simulation),
-            Box::new(synthesis::Synthesis),
             Box::new(synthesis::Synthesis),
             // New kinds: one line each, e.g. Box::new(synthesis::Synthesis),
         ]),

@@ -209,7 +209,7 @@ fn cancel_running_and_queued_jobs() {
         assert_eq!(r.status, 202, "{}", r.text);
         r.json()["id"].as_str().unwrap().to_string()
     };
-    let running = submit(long_model(200_000_000));
+    let running = submit(long_model(50_000_000));
     let queued = submit(preset("cv-tracker"));
     s.wait_job(&running, LONG, |j| {
         j["status"] == "running" && j["progress"].as_f64().unwrap() > 0.0
@@ -375,7 +375,7 @@ fn limits_sync_work_and_absurd_work() {
     let dir = tmp();
     let s = Server::start(
         dir.path(),
-        &["--sync-work-limit", "1e5", "--max-work", "1e9"],
+        &["--sync-work-limit", "1e5", "--max-work", "1e8"],
     );
     let r = s.post("/v1/analyze", &json!({"model": long_model(100_000)}));
     assert_eq!(r.status, 422, "{}", r.text);
@@ -384,7 +384,7 @@ fn limits_sync_work_and_absurd_work() {
     assert!(r.text.contains("POST /v1/jobs"), "{}", r.text);
     let r = s.post(
         "/v1/jobs",
-        &json!({"kind": "analysis", "model": long_model(1_000_000_000)}),
+        &json!({"kind": "analysis", "model": long_model(50_000_000)}),
     );
     assert_eq!(r.status, 422, "{}", r.text);
     assert_eq!(r.json()["type"], "urn:kea:problem:too-much-work");

@@ -204,7 +204,10 @@ fn readme_examples_validate_against_the_spec() {
         .expect("README has a ## Server section");
     let section = section.split("\n## ").next().unwrap();
     let mut checked = 0;
-    for line in section.lines().filter(|l| l.contains("curl ")) {
+    for line in section
+        .lines()
+        .filter(|l| l.trim_start().starts_with("curl "))
+    {
         let url_at = line.find("http://").expect("curl line has a URL");
         let url: String = line[url_at..]
             .chars()

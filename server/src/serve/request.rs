@@ -39,18 +39,7 @@ impl FromRequest<AppState> for JsonBody {
             )));
         }
         let limit = state.config.limits.max_body_bytes;
-        let bytes = axum::body::to_bytes(req.into_body(), limit)
-            .await
-            .map_err(|_| {
-                Problem::new(
-                    StatusCode::PAYLOAD_TOO_LARGE,
-                    kind::TOO_LARGE,
-                    "the request body is too large",
-                )
-                .detail(format!(
-                    "the limit is {limit} bytes (server option --max-body-bytes)"
-                ))
-            })?;
+        let bytes = read_limited(req, limit).await?;
         serde_json::from_slice(&bytes).map(JsonBody).map_err(|e| {
             Problem::new(
                 StatusCode::BAD_REQUEST,
@@ -61,6 +50,45 @@ impl FromRequest<AppState> for JsonBody {
             .error("", format!("not valid JSON: {e}"))
         })
     }
+}
+
+/// How much of an over-large body is still read (and dropped) before answering 413,
+/// so the connection closes cleanly and the client sees the answer, not a reset.
+const DRAIN_BEYOND_LIMIT: usize = 16 * 1024 * 1024;
+
+/// Read the body up to `limit` bytes; over it, 413 (after draining a bounded amount).
+async fn read_limited(req: Request, limit: usize) -> Result<Vec<u8>, Problem> {
+    use futures_util::StreamExt;
+    let mut stream = req.into_body().into_data_stream();
+    let mut buf = Vec::new();
+    let mut total = 0usize;
+    while let Some(chunk) = stream.next().await {
+        let chunk = chunk.map_err(|e| {
+            Problem::new(
+                StatusCode::BAD_REQUEST,
+                kind::MALFORMED,
+                "cannot read the body",
+            )
+            .detail(e.to_string())
+        })?;
+        total += chunk.len();
+        if total <= limit {
+            buf.extend_from_slice(&chunk);
+        } else if total > limit + DRAIN_BEYOND_LIMIT {
+            break;
+        }
+    }
+    if total > limit {
+        return Err(Problem::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            kind::TOO_LARGE,
+            "the request body is too large",
+        )
+        .detail(format!(
+            "the limit is {limit} bytes (server option --max-body-bytes)"
+        )));
+    }
+    Ok(buf)
 }
 
 /// The body as a JSON object, or a 422 at the root.

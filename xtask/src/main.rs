@@ -4,6 +4,7 @@
 //!   `kea serve` with the web UI — the README's one run command.
 //! - `cargo xtask test`: every test — Rust (release, so the builds are shared with
 //!   `serve`), then the browser end-to-end tests against the real server.
+//! - `cargo xtask e2e`: only the browser end-to-end tests.
 //! - `cargo xtask wasm`: only build the wasm module into `web/pkg`.
 //! - `cargo xtask bench-web`: the wasm-in-browser vs native benchmark.
 //!
@@ -25,6 +26,7 @@ const USAGE: &str = "usage: cargo xtask <command>
 commands:
   serve [-- <kea serve args>]   build the wasm module, then run `kea serve` (web UI at /)
   test                          run every test: Rust (release) and the browser e2e tests
+  e2e                           only the browser e2e tests (tests/e2e, Chromium + kea serve)
   wasm                          build the wasm module into web/pkg
   bench-web                     benchmark the analysis in the browser (wasm) against native
 ";
@@ -46,6 +48,7 @@ fn main() -> ExitCode {
     let outcome = match cmd {
         "serve" => serve(&rest),
         "test" => test(),
+        "e2e" => build_wasm().and_then(|()| e2e_tests()),
         "wasm" => build_wasm(),
         "bench-web" => bench_web(),
         "-h" | "--help" | "help" => {
@@ -244,9 +247,29 @@ fn serve(args: &[String]) -> Result<()> {
     run(&mut cmd)
 }
 
+/// Every test. A failing stage does not stop the next (CI shows every failure);
+/// the command fails if any stage failed.
 fn test() -> Result<()> {
     build_wasm()?;
-    run(cargo().args(["test", "--workspace", "--release"]))?;
+    let mut failed = Vec::new();
+    if let Err(e) = run(cargo().args(["test", "--workspace", "--release"])) {
+        eprintln!("xtask: {e}; going on with the browser tests");
+        failed.push("Rust tests");
+    }
+    if let Err(e) = e2e_tests() {
+        eprintln!("xtask: {e}");
+        failed.push("browser e2e tests");
+    }
+    if failed.is_empty() {
+        eprintln!("xtask: all tests passed");
+        Ok(())
+    } else {
+        Err(format!("failed: {}", failed.join(", ")))
+    }
+}
+
+/// The browser end-to-end tests only (builds what they need).
+fn e2e_tests() -> Result<()> {
     run(cargo().args(["build", "--release", "-p", "kea-server", "--bin", "kea"]))?;
     e2e(&["--test"], &e2e_test_files()?)
 }

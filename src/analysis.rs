@@ -7,7 +7,7 @@
 
 use crate::decimate::Decimator;
 use crate::error::Error;
-use crate::linalg::{cov_rel_diff, mul, mul_abt_sym, mul_vec};
+use crate::linalg::{cov_rel_diff, mul, mul_abt_sym, mul_vec, predict_cov, sparse_mul_vec};
 use crate::result::*;
 use crate::riccati::JosephStep;
 use crate::steps::select_steps;
@@ -162,8 +162,12 @@ impl<'m, const N: usize> Engine<'m, N> {
             .collect();
 
         // --- per-step inputs (recomputed only if time-varying)
-        let mut big_a = vec![0.0; n * n]; // A = I + aΔt (1.11)
-        let mut abs_a = vec![0.0; n * n];
+        // A = I + aΔt (1.11), dense, only for the stationary solution of invariant models
+        let mut big_a = if m.a.is_constant() {
+            vec![0.0; n * n]
+        } else {
+            Vec::new()
+        };
         let mut bd = vec![0.0; n * nl]; // b Δt
         let mut bw = vec![0.0; n * nl]; // (b Δt) W
         let mut big_b = vec![0.0; n * n]; // B = bΔt W (bΔt)ᵀ (1.15)
@@ -175,12 +179,37 @@ impl<'m, const N: usize> Engine<'m, N> {
         let mut meas_sko = vec![0.0; nm]; // sqrt(diag Rv)
         let mut u_dt = vec![0.0; n];
 
-        let update_a = |a_fn: &crate::expr::TimeMatrix, big_a: &mut [f64], abs_a: &mut [f64]| {
-            for i in 0..n {
-                for j in 0..n {
-                    let v = a_fn.values[i * n + j] * dt + if i == j { 1.0 } else { 0.0 };
-                    big_a[i * n + j] = v;
-                    abs_a[i * n + j] = v.abs();
+        // The structure of a: entries that vary or are non-zero; A = I + E, E = aΔt.
+        let a_pattern: Vec<(usize, usize)> = (0..n)
+            .flat_map(|i| (0..n).map(move |j| (i, j)))
+            .filter(|&(i, j)| m.a.values[i * n + j] != 0.0 || m.a.varies(i * n + j))
+            .collect();
+        // |A| keeps the diagonal even where a_ii = 0 (A_ii = 1).
+        let abs_pattern: Vec<(usize, usize)> = (0..n)
+            .flat_map(|i| (0..n).map(move |j| (i, j)))
+            .filter(|&(i, j)| i == j || m.a.values[i * n + j] != 0.0 || m.a.varies(i * n + j))
+            .collect();
+        let mut e_nz: Vec<(usize, usize, f64)> =
+            a_pattern.iter().map(|&(i, j)| (i, j, 0.0)).collect();
+        let mut abs_nz: Vec<(usize, usize, f64)> =
+            abs_pattern.iter().map(|&(i, j)| (i, j, 0.0)).collect();
+        let update_a = |a_fn: &crate::expr::TimeMatrix,
+                        big_a: &mut [f64],
+                        e_nz: &mut [(usize, usize, f64)],
+                        abs_nz: &mut [(usize, usize, f64)]| {
+            for e in e_nz.iter_mut() {
+                e.2 = a_fn.values[e.0 * n + e.1] * dt;
+            }
+            for e in abs_nz.iter_mut() {
+                let v = a_fn.values[e.0 * n + e.1] * dt + if e.0 == e.1 { 1.0 } else { 0.0 };
+                e.2 = v.abs();
+            }
+            if !big_a.is_empty() {
+                for i in 0..n {
+                    for j in 0..n {
+                        big_a[i * n + j] =
+                            a_fn.values[i * n + j] * dt + if i == j { 1.0 } else { 0.0 };
+                    }
                 }
             }
         };
@@ -228,7 +257,7 @@ impl<'m, const N: usize> Engine<'m, N> {
         // Constant inputs once.
         a_fn.update(t0).map_err(|p| time_err(p, 0, t0))?;
         b_fn.update(t0).map_err(|p| time_err(p, 0, t0))?;
-        update_a(&a_fn, &mut big_a, &mut abs_a);
+        update_a(&a_fn, &mut big_a, &mut e_nz, &mut abs_nz);
         update_b(&b_fn, &mut bd, &mut bw, &mut big_b, &mut b_phi);
         let t1 = t0 + dt;
         update_noise(&mut noise_fn, t1).map_err(|p| time_err(&p, 1, t1))?;
@@ -278,6 +307,7 @@ impl<'m, const N: usize> Engine<'m, N> {
         let mut chi = vec![0.0; n]; // χ(t0) = 0 (3.18)
         let mut xi = vec![0.0; n];
         let mut tmp_nn = vec![0.0; n * n];
+        let mut tmp_p = vec![0.0; n * n];
         let mut joseph = JosephStep::new(n, nm);
         let mut schedule = m.schedule.clone();
         let mut avail = vec![true; nm];
@@ -308,7 +338,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             // (1.11)–(1.15) inputs at t_{k−1}; Γ at t_k.
             if !a_const && k > 1 {
                 a_fn.update(t_prev).map_err(|p| time_err(p, k, t_prev))?;
-                update_a(&a_fn, &mut big_a, &mut abs_a);
+                update_a(&a_fn, &mut big_a, &mut e_nz, &mut abs_nz);
             }
             if !b_const && k > 1 {
                 b_fn.update(t_prev).map_err(|p| time_err(p, k, t_prev))?;
@@ -334,13 +364,13 @@ impl<'m, const N: usize> Engine<'m, N> {
 
             // ẏ(t_{k−1}) = a y + u (1.4); y_k = A y_{k−1} + uΔt (3.3)
             mul_vec(&mut ydot, &a_fn.values, &y, n, n);
-            mul_vec(&mut y_next, &big_a, &y, n, n);
+            sparse_mul_vec(&mut y_next, &e_nz, &y, n);
             for i in 0..n {
                 let d = (ydot[i] + u_fn.values[i]).abs();
                 if d > ydot_max[i] {
                     ydot_max[i] = d;
                 }
-                y[i] = y_next[i] + u_dt[i];
+                y[i] += y_next[i] + u_dt[i];
                 let ya = y[i].abs();
                 if ya > y_max[i] {
                     y_max[i] = ya;
@@ -364,7 +394,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                         .map_err(|p| time_err(&p, k, t_k))?,
                 };
                 let ok = if all {
-                    joseph.step(&mut big_r, &big_a, &big_b, &c_nz, &rv, nm)
+                    joseph.step(n, &mut big_r, &e_nz, &big_b, &c_nz, &rv, nm)
                 } else {
                     // Compact C and Rv to the available rows.
                     let mut idx = Vec::with_capacity(nm);
@@ -385,7 +415,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                             rv_k[a * nk + b] = rv[ja * nm + jb];
                         }
                     }
-                    let ok = joseph.step(&mut big_r, &big_a, &big_b, &c_nz_k, &rv_k, nk);
+                    let ok = joseph.step(n, &mut big_r, &e_nz, &big_b, &c_nz_k, &rv_k, nk);
                     gain_k[..n * nk].copy_from_slice(&joseph.gain[..n * nk]);
                     joseph.gain[..n * nm].fill(0.0);
                     for i in 0..n {
@@ -435,8 +465,8 @@ impl<'m, const N: usize> Engine<'m, N> {
 
             // Open-loop covariance P^Y = A P Aᵀ + B (§1.5, exact second moments)
             if open_diverged.is_none() {
-                mul(&mut tmp_nn, &big_a, &p_y, n, n, n);
-                mul_abt_sym(&mut p_y, &tmp_nn, &big_a, Some(&big_b), n, n);
+                tmp_p.copy_from_slice(&p_y);
+                predict_cov(&mut p_y, &tmp_p, &e_nz, &big_b, &mut tmp_nn, n);
                 if !(0..n).all(|i| p_y[i * n + i].is_finite()) {
                     open_diverged = Some((k, t_k));
                 }
@@ -444,11 +474,11 @@ impl<'m, const N: usize> Engine<'m, N> {
 
             // Bound propagation (3.16)–(3.19)
             if bound_diverged.is_none() {
-                mul_vec(&mut tmp_n, &abs_a, &eta, n, n);
+                sparse_mul_vec(&mut tmp_n, &abs_nz, &eta, n);
                 for i in 0..n {
                     eta[i] = tmp_n[i] + b_phi[i];
                 }
-                mul_vec(&mut xi, &abs_a, &chi, n, n);
+                sparse_mul_vec(&mut xi, &abs_nz, &chi, n);
                 mul_vec(&mut chi, &abs_h, &xi, n, n);
                 for i in 0..n {
                     let mut s = 0.0;

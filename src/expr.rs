@@ -336,6 +336,11 @@ impl TimeMatrix {
         self.varying.is_empty()
     }
 
+    /// Whether entry `i` (flat, row-major) depends on t.
+    pub fn varies(&self, i: usize) -> bool {
+        self.varying.iter().any(|(k, _, _)| *k == i)
+    }
+
     pub fn varying_count(&self) -> usize {
         self.varying.len()
     }

@@ -5,14 +5,15 @@
 /// c (r×p) = a (r×k) · b (k×p).
 #[inline(always)]
 pub fn mul(c: &mut [f64], a: &[f64], b: &[f64], r: usize, k: usize, p: usize) {
-    for (ci, ai) in c[..r * p]
-        .chunks_exact_mut(p)
-        .zip(a[..r * k].chunks_exact(k))
-    {
+    for i in 0..r {
+        let ci = &mut c[i * p..i * p + p];
         ci.fill(0.0);
-        for (&aik, bk) in ai.iter().zip(b[..k * p].chunks_exact(p)) {
-            for (cij, &bkj) in ci.iter_mut().zip(bk) {
-                *cij += aik * bkj;
+        let ai = &a[i * k..i * k + k];
+        for l in 0..k {
+            let ail = ai[l];
+            let bl = &b[l * p..l * p + p];
+            for j in 0..p {
+                ci[j] += ail * bl[j];
             }
         }
     }
@@ -27,8 +28,8 @@ pub fn mul_abt_sym(c: &mut [f64], a: &[f64], b: &[f64], add: Option<&[f64]>, r: 
         for j in i..r {
             let bj = &b[j * k..j * k + k];
             let mut s = 0.0;
-            for (x, y) in ai.iter().zip(bj) {
-                s += x * y;
+            for l in 0..k {
+                s += ai[l] * bj[l];
             }
             if let Some(add) = add {
                 s += add[i * r + j];
@@ -36,6 +37,56 @@ pub fn mul_abt_sym(c: &mut [f64], a: &[f64], b: &[f64], add: Option<&[f64]>, r: 
             c[i * r + j] = s;
             c[j * r + i] = s;
         }
+    }
+}
+
+/// out = A R Aᵀ + B for A = I + E with E sparse, given as (row, col, value): the
+/// prediction (2.1) in O(nnz(E)·N) instead of O(N³). `t` is an N×N work buffer.
+/// The result is symmetrised so it stays exactly symmetric.
+#[inline(always)]
+pub fn predict_cov(
+    out: &mut [f64],
+    r: &[f64],
+    e_nz: &[(usize, usize, f64)],
+    b: &[f64],
+    t: &mut [f64],
+    n: usize,
+) {
+    // T = A R = R + E R
+    t[..n * n].copy_from_slice(&r[..n * n]);
+    for &(i, k, v) in e_nz {
+        let (ti, rk) = (i * n, k * n);
+        for j in 0..n {
+            t[ti + j] += v * r[rk + j];
+        }
+    }
+    // out = T Aᵀ + B = T + T Eᵀ + B: column j of out gets v · column k of T
+    for (o, (x, y)) in out[..n * n]
+        .iter_mut()
+        .zip(t[..n * n].iter().zip(&b[..n * n]))
+    {
+        *o = x + y;
+    }
+    for &(j, k, v) in e_nz {
+        for i in 0..n {
+            out[i * n + j] += v * t[i * n + k];
+        }
+    }
+    for i in 0..n {
+        for j in i + 1..n {
+            let m = 0.5 * (out[i * n + j] + out[j * n + i]);
+            out[i * n + j] = m;
+            out[j * n + i] = m;
+        }
+    }
+}
+
+/// y = M x for a sparse M given as (row, col, value).
+#[inline(always)]
+pub fn sparse_mul_vec(y: &mut [f64], m_nz: &[(usize, usize, f64)], x: &[f64], n: usize) {
+    y[..n].fill(0.0);
+    for &(i, j, v) in m_nz {
+        y[i] += v * x[j];
     }
 }
 
@@ -102,12 +153,14 @@ pub fn cholesky_solve(l: &[f64], x: &mut [f64], m: usize, p: usize) {
 /// y (r) = a (r×k) · x (k).
 #[inline(always)]
 pub fn mul_vec(y: &mut [f64], a: &[f64], x: &[f64], r: usize, k: usize) {
-    for (yi, ai) in y[..r].iter_mut().zip(a[..r * k].chunks_exact(k)) {
+    let x = &x[..k];
+    for i in 0..r {
+        let ai = &a[i * k..i * k + k];
         let mut s = 0.0;
-        for (p, q) in ai.iter().zip(&x[..k]) {
-            s += p * q;
+        for l in 0..k {
+            s += ai[l] * x[l];
         }
-        *yi = s;
+        y[i] = s;
     }
 }
 

@@ -65,7 +65,7 @@ pub fn dare_doubling(
     None
 }
 
-use crate::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym};
+use crate::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym, predict_cov};
 
 /// Work buffers and outputs of one step of the filter's covariance recursion
 /// (2.1)–(2.7) in Joseph form. Allocated once; `step` allocates nothing.
@@ -103,7 +103,8 @@ impl JosephStep {
         }
     }
 
-    /// One step: from R_{k−1} (`big_r`, overwritten with R_k), A_{k−1}, B_{k−1}, the
+    /// One step: from R_{k−1} (`big_r`, overwritten with R_k), A_{k−1} = I + E given
+    /// as the non-zeros of E = a(t_{k−1})Δt (row, col, value), B_{k−1}, the
     /// measurements' non-zeros of C as (row, col, value) with rows 0..nm, and Rv_k
     /// (nm×nm). Returns false if q_k is not positive definite.
     ///
@@ -113,19 +114,21 @@ impl JosephStep {
     ///     R = h r hᵀ + p Rv pᵀ,  h = I − pC    (2.7), Joseph form
     /// computed as M = h r = r − p S (S = C r), h r hᵀ = M − M Cᵀ pᵀ,
     /// R = M + (p Rv − M Cᵀ) pᵀ, upper triangle mirrored so R stays symmetric.
+    /// `n` is the state dimension (pass a compile-time constant where possible: the
+    /// caller's const-generic N lets the compiler unroll every loop here).
     #[inline(always)]
     pub fn step(
         &mut self,
+        n: usize,
         big_r: &mut [f64],
-        big_a: &[f64],
+        e_nz: &[(usize, usize, f64)],
         big_b: &[f64],
         c_nz: &[(usize, usize, f64)],
         rv: &[f64],
         nm: usize,
     ) -> bool {
-        let n = self.n;
-        mul(&mut self.tmp, big_a, big_r, n, n, n);
-        mul_abt_sym(&mut self.r_pred, &self.tmp, big_a, Some(big_b), n, n);
+        debug_assert_eq!(n, self.n);
+        predict_cov(&mut self.r_pred, big_r, e_nz, big_b, &mut self.tmp, n);
         if nm == 0 {
             big_r[..n * n].copy_from_slice(&self.r_pred[..n * n]);
             for i in 0..n {

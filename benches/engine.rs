@@ -1,0 +1,105 @@
+//! The engine's performance workloads (BENCHMARKS.md): the seed's Table 1 (D = 10⁶,
+//! P states, n = P measurements, time-varying a(t)), N = 30, the steady-state
+//! shortcut, and the cost of expression evaluation.
+//!
+//!     cargo bench -p kea-core --bench engine            # everything (~2 min)
+//!     cargo bench -p kea-core --bench engine -- table1  # a filter on the names
+//!
+//! Each workload is timed `runs` times after one warm-up; the median is printed,
+//! with the per-step figure. One core: the engine is single-threaded.
+
+use kea_core::{Model, NoProgress, analyze, model_from_value};
+use serde_json::json;
+use std::time::Instant;
+
+/// A P-state chain: a_ii = −0.5 − 0.1 i (+ 0.2 sin(t) when time-varying), a_i,i+1 = 1,
+/// b = I, every state measured (C = I), Γ = I.
+fn chain(p: usize, steps: u64, varying: usize, shortcut: bool) -> Model {
+    let a: Vec<Vec<serde_json::Value>> = (0..p)
+        .map(|i| {
+            (0..p)
+                .map(|j| {
+                    if i == j {
+                        let base = -0.5 - 0.1 * i as f64;
+                        if i < varying {
+                            json!(format!("{base} + 0.2*sin(t + {i})"))
+                        } else {
+                            json!(base)
+                        }
+                    } else if j == i + 1 {
+                        json!(1.0)
+                    } else {
+                        json!(0.0)
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let eye = |k: usize| -> Vec<Vec<f64>> {
+        (0..k).map(|i| (0..k).map(|j| if i == j { 1.0 } else { 0.0 }).collect()).collect()
+    };
+    model_from_value(json!({
+        "time": {"t0": 0.0, "t_end": 10.0, "steps": steps},
+        "system": {
+            "states": (0..p).map(|i| format!("x{i}")).collect::<Vec<_>>(),
+            "a": a, "b": eye(p), "phi": vec![0.3; p],
+            "y0": vec![1.0; p], "eta0": vec![0.1; p]
+        },
+        "measurement": {
+            "names": (0..p).map(|i| format!("z{i}")).collect::<Vec<_>>(),
+            "c": eye(p), "gamma": eye(p), "psi": vec![1e-3; p]
+        },
+        "options": {"steady_state_shortcut": shortcut}
+    }))
+    .expect("bench model is valid")
+}
+
+fn time(name: &str, model: &Model, runs: usize) -> f64 {
+    let steps = match model.time.steps {
+        kea_core::model::Steps::Fixed(d) => d,
+        _ => unreachable!(),
+    };
+    let once = || {
+        let t = Instant::now();
+        let r = analyze(model, &Default::default(), &mut NoProgress).expect("bench runs");
+        std::hint::black_box(&r);
+        t.elapsed().as_secs_f64()
+    };
+    once();
+    let mut v: Vec<f64> = (0..runs).map(|_| once()).collect();
+    v.sort_by(f64::total_cmp);
+    let med = v[v.len() / 2];
+    println!(
+        "{name:<40} median {:>9.3} s  ({:>7.1} ns/step; min {:.3} max {:.3}, {} runs)",
+        med,
+        med / steps as f64 * 1e9,
+        v[0],
+        v[v.len() - 1],
+        runs
+    );
+    med
+}
+
+fn main() {
+    let filter: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with("--")).collect();
+    let want = |name: &str| filter.is_empty() || filter.iter().any(|f| name.contains(f.as_str()));
+    let d = 1_000_000;
+    for p in [4, 6, 8, 9, 10] {
+        let name = format!("table1 P={p} time-varying a(t)");
+        if want(&name) {
+            time(&name, &chain(p, d, p, true), 5);
+        }
+    }
+    if want("n30 time-varying a(t)") {
+        time("n30 time-varying a(t)", &chain(30, d, 30, true), 1);
+    }
+    if want("shortcut P=10 time-invariant") {
+        time("shortcut P=10 time-invariant, shortcut on", &chain(10, d, 0, true), 5);
+        time("shortcut P=10 time-invariant, shortcut off", &chain(10, d, 0, false), 5);
+    }
+    if want("expressions") {
+        let with = time("expressions P=10, 10 time-varying entries", &chain(10, d, 10, false), 5);
+        let without = time("expressions P=10, constant a", &chain(10, d, 0, false), 5);
+        println!("expression share: {:.1} % of the time-varying run", (with - without) / with * 100.0);
+    }
+}

@@ -7,7 +7,7 @@
 //!
 //! Run: `cargo bench -p kea-server --bench load` (release build). Options by
 //! environment: KEA_BENCH_SECONDS (default 10), KEA_BENCH_CONNECTIONS (64),
-//! KEA_BENCH_JOBS (100).
+//! KEA_BENCH_JOBS (100), KEA_BENCH_TRACE_POINTS (the preset's 1000).
 
 use serde_json::{Value, json};
 use std::io::{BufRead, BufReader};
@@ -43,8 +43,12 @@ fn main() {
         .unwrap()
         .unwrap();
     let base = line.strip_prefix("kea: listening on ").unwrap().to_string();
-    let model: Value =
+    let mut model: Value =
         serde_json::from_str(kea_core::presets::get_json("cv-tracker").unwrap()).unwrap();
+    // Fewer trace points = a smaller response (the preset's 1000 make ~350 kB of JSON).
+    if let Ok(tp) = std::env::var("KEA_BENCH_TRACE_POINTS") {
+        model["options"]["trace_points"] = tp.parse::<u64>().expect("a count").into();
+    }
     assert_eq!(model["time"]["steps"], 1000);
     println!(
         "server {base}, {} cores",
@@ -79,7 +83,8 @@ fn main() {
         .expect("run wrk (apt-get install -y wrk)");
     let report = String::from_utf8_lossy(&out.stdout);
     println!(
-        "== POST /v1/analyze (N = 2, D = 1000), wrk -t2 -c{connections} -d{seconds}s\n{report}"
+        "== POST /v1/analyze (N = 2, D = 1000, trace_points = {}), wrk -t2 -c{connections} -d{seconds}s\n{report}",
+        model["options"]["trace_points"]
     );
     assert!(!report.contains("Non-2xx"), "some requests failed");
 

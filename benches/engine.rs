@@ -15,6 +15,11 @@ use std::time::Instant;
 /// A P-state chain: a_ii = −0.5 − 0.1 i (+ 0.2 sin(t) when time-varying), a_i,i+1 = 1,
 /// b = I, every state measured (C = I), Γ = I.
 fn chain(p: usize, steps: u64, varying: usize, shortcut: bool) -> Model {
+    chain_measured(p, p, steps, varying, shortcut)
+}
+
+/// The chain with only the first `nm` states measured.
+fn chain_measured(p: usize, nm: usize, steps: u64, varying: usize, shortcut: bool) -> Model {
     let a: Vec<Vec<serde_json::Value>> = (0..p)
         .map(|i| {
             (0..p)
@@ -36,7 +41,9 @@ fn chain(p: usize, steps: u64, varying: usize, shortcut: bool) -> Model {
         })
         .collect();
     let eye = |k: usize| -> Vec<Vec<f64>> {
-        (0..k).map(|i| (0..k).map(|j| if i == j { 1.0 } else { 0.0 }).collect()).collect()
+        (0..k)
+            .map(|i| (0..k).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
+            .collect()
     };
     model_from_value(json!({
         "time": {"t0": 0.0, "t_end": 10.0, "steps": steps},
@@ -46,8 +53,8 @@ fn chain(p: usize, steps: u64, varying: usize, shortcut: bool) -> Model {
             "y0": vec![1.0; p], "eta0": vec![0.1; p]
         },
         "measurement": {
-            "names": (0..p).map(|i| format!("z{i}")).collect::<Vec<_>>(),
-            "c": eye(p), "gamma": eye(p), "psi": vec![1e-3; p]
+            "names": (0..nm).map(|i| format!("z{i}")).collect::<Vec<_>>(),
+            "c": eye(p)[..nm].to_vec(), "gamma": eye(nm), "psi": vec![1e-3; nm]
         },
         "options": {"steady_state_shortcut": shortcut}
     }))
@@ -81,7 +88,10 @@ fn time(name: &str, model: &Model, runs: usize) -> f64 {
 }
 
 fn main() {
-    let filter: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with("--")).collect();
+    let filter: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
     let want = |name: &str| filter.is_empty() || filter.iter().any(|f| name.contains(f.as_str()));
     let d = 1_000_000;
     for p in [4, 6, 8, 9, 10] {
@@ -90,16 +100,39 @@ fn main() {
             time(&name, &chain(p, d, p, true), 5);
         }
     }
+    if want("peer N=10 n=5") {
+        // The Python peer's model (benches/python_peer.py): time-invariant, no shortcut.
+        time(
+            "peer N=10 n=5 time-invariant, shortcut off",
+            &chain_measured(10, 5, 200_000, 0, false),
+            5,
+        );
+    }
     if want("n30 time-varying a(t)") {
         time("n30 time-varying a(t)", &chain(30, d, 30, true), 1);
     }
     if want("shortcut P=10 time-invariant") {
-        time("shortcut P=10 time-invariant, shortcut on", &chain(10, d, 0, true), 5);
-        time("shortcut P=10 time-invariant, shortcut off", &chain(10, d, 0, false), 5);
+        time(
+            "shortcut P=10 time-invariant, shortcut on",
+            &chain(10, d, 0, true),
+            5,
+        );
+        time(
+            "shortcut P=10 time-invariant, shortcut off",
+            &chain(10, d, 0, false),
+            5,
+        );
     }
     if want("expressions") {
-        let with = time("expressions P=10, 10 time-varying entries", &chain(10, d, 10, false), 5);
+        let with = time(
+            "expressions P=10, 10 time-varying entries",
+            &chain(10, d, 10, false),
+            5,
+        );
         let without = time("expressions P=10, constant a", &chain(10, d, 0, false), 5);
-        println!("expression share: {:.1} % of the time-varying run", (with - without) / with * 100.0);
+        println!(
+            "expression share: {:.1} % of the time-varying run",
+            (with - without) / with * 100.0
+        );
     }
 }

@@ -36,18 +36,25 @@ pub struct Decimator {
     pub t: Vec<f64>,
     /// One column per series; `None` where a series had no defined value.
     pub columns: Vec<Vec<Option<f64>>>,
+    /// `max_rows == 0`: record nothing (results without traces).
+    enabled: bool,
 }
 
 impl Decimator {
     /// Choose the bucket size so that at most `max_rows` rows are produced.
     pub fn new(steps: u64, series: usize, max_rows: usize) -> Self {
+        let enabled = max_rows > 0;
         let max_rows = max_rows.max(2) as u64;
         let bucket = if steps <= max_rows {
             1
         } else {
             steps.div_ceil(max_rows / 2)
         };
-        let rows = (steps.div_ceil(bucket) * if bucket == 1 { 1 } else { 2 }) as usize;
+        let rows = if enabled {
+            (steps.div_ceil(bucket) * if bucket == 1 { 1 } else { 2 }) as usize
+        } else {
+            0
+        };
         Decimator {
             bucket,
             steps,
@@ -58,6 +65,7 @@ impl Decimator {
             last_t: 0.0,
             t: Vec::with_capacity(rows),
             columns: (0..series).map(|_| Vec::with_capacity(rows)).collect(),
+            enabled,
         }
     }
 
@@ -68,6 +76,9 @@ impl Decimator {
     /// Start a step at time t (steps must come in order).
     #[inline]
     pub fn begin(&mut self, t: f64) {
+        if !self.enabled {
+            return;
+        }
         if self.in_bucket == 0 {
             self.first_t = t;
         }
@@ -77,6 +88,9 @@ impl Decimator {
     /// Record series `s` at step `k` (call between `begin` and `end`).
     #[inline]
     pub fn put(&mut self, s: usize, k: u64, v: f64) {
+        if !self.enabled {
+            return;
+        }
         let e = &mut self.cur[s];
         e.any = true;
         if v < e.min {
@@ -92,6 +106,9 @@ impl Decimator {
     /// Finish a step; `k` is its index (1-based) and the last is `steps`.
     #[inline]
     pub fn end(&mut self, k: u64) {
+        if !self.enabled {
+            return;
+        }
         self.in_bucket += 1;
         if self.in_bucket == self.bucket || k == self.steps {
             self.flush();
@@ -166,6 +183,12 @@ mod tests {
         let col: Vec<f64> = d.columns[0].iter().map(|x| x.unwrap()).collect();
         assert_eq!(col, vec![1.0, 9.0, 8.0, 0.0]);
         assert_eq!(d.t, vec![1.0, 4.0, 5.0, 8.0]);
+    }
+
+    #[test]
+    fn zero_rows_records_nothing() {
+        let d = run(&[1.0, 2.0, 3.0], 0);
+        assert!(d.t.is_empty() && d.columns[0].is_empty());
     }
 
     #[test]

@@ -190,8 +190,23 @@ fn unary_minus_binds_loosely(text: &str) -> String {
     out
 }
 
+/// exmex's messages can carry Debug dumps of its internals: keep the readable part.
 fn describe(msg: &str) -> String {
-    msg.trim().to_string()
+    let msg = msg.trim();
+    if msg.starts_with("we have") && msg.contains("ops and") {
+        return "an operator or an operand is missing (e.g. \"2 3\" or \"2*\")".to_string();
+    }
+    let cut = [", Operator {", " Operator {", "{"]
+        .iter()
+        .filter_map(|p| msg.find(p))
+        .min()
+        .unwrap_or(msg.len());
+    let short = msg[..cut].trim_end_matches([',', ' ']);
+    if short.is_empty() {
+        "not a valid expression".to_string()
+    } else {
+        short.to_string()
+    }
 }
 
 /// Scan identifiers ourselves so that an unknown name is reported with its position
@@ -434,6 +449,9 @@ mod tests {
         assert!(e.message.contains("unbalanced"), "{}", e.message);
         let e = compile_entry(&"s**/m".into(), &params(), "p", true, 0.0).unwrap_err();
         assert!(e.message.contains("cannot parse"), "{}", e.message);
+        assert!(!e.message.contains('{'), "no Debug dumps: {}", e.message);
+        let e = compile_entry(&"2 3".into(), &params(), "p", true, 0.0).unwrap_err();
+        assert!(e.message.contains("missing"), "{}", e.message);
     }
 
     #[test]

@@ -231,7 +231,7 @@ pub struct Weights {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Options {
-    /// Rows kept in the decimated traces (each bucket keeps its extremes).
+    /// Rows kept in the decimated traces (each bucket keeps its extremes); 0: no traces.
     #[serde(default = "default_trace_points")]
     pub trace_points: usize,
     /// For time-invariant models: stop the Riccati recursion once it is stationary.

@@ -486,10 +486,13 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
 
     // --- options
     let op = &model.options;
-    if op.trace_points < 2 || op.trace_points > MAX_TRACE_POINTS {
+    if op.trace_points == 1 || op.trace_points > MAX_TRACE_POINTS {
         errs.at(
             "options.trace_points",
-            format!("expected 2 to {MAX_TRACE_POINTS}, got {}", op.trace_points),
+            format!(
+                "expected 0 (no traces) or 2 to {MAX_TRACE_POINTS}, got {}",
+                op.trace_points
+            ),
         );
     }
 

@@ -231,7 +231,7 @@ fn numbers_and_ranges() {
         |v| v["options"] = json!({"trace_points": 1}),
         &[],
         "options.trace_points",
-        "expected 2 to",
+        "or 2 to",
     );
     expect(
         |v| v["params"]["t"] = json!(1.0),

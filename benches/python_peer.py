@@ -31,7 +31,7 @@ for j in range(n):
 R = (1e-3) ** 2 * np.eye(n)
 
 kf = KalmanFilter(k_endog=n, k_states=N, k_posdef=N)
-kf.bind(np.zeros((n, steps)))
+kf.bind(np.zeros((steps, n)))
 kf.design = H
 kf.obs_cov = R
 kf.transition = A

@@ -453,7 +453,10 @@ impl<'m, const N: usize> Engine<'m, N> {
                 }
                 // Steady state: r_k within STEADY_TOL of r∞ (then R, p are stationary too).
                 if let Some(r_inf) = &r_inf {
-                    if steady_at.is_none() && cov_rel_diff(&joseph.r_pred, r_inf, n) <= STEADY_TOL {
+                    if steady_at.is_none()
+                        && diag_close(&joseph.r_pred, r_inf, n, STEADY_TOL)
+                        && cov_rel_diff(&joseph.r_pred, r_inf, n) <= STEADY_TOL
+                    {
                         steady_at = Some(k);
                         steady_cov = Some((big_r.clone(), joseph.gain[..n * nm].to_vec()));
                         if m.steady_state_shortcut {
@@ -655,6 +658,12 @@ impl<'m, const N: usize> Engine<'m, N> {
             warnings,
         })
     }
+}
+
+/// The cheap first test of the steady state: every diagonal entry within `tol`.
+#[inline(always)]
+fn diag_close(a: &[f64], b: &[f64], n: usize, tol: f64) -> bool {
+    (0..n).all(|i| (a[i * n + i] - b[i * n + i]).abs() <= tol * b[i * n + i].abs())
 }
 
 fn update_noise(noise: &mut MeasurementNoise, t: f64) -> Result<(), String> {

@@ -40,8 +40,9 @@ pub fn mul_abt_sym(c: &mut [f64], a: &[f64], b: &[f64], add: Option<&[f64]>, r: 
     }
 }
 
-/// out = A R Aᵀ + B for A = I + E with E sparse, given as (row, col, value): the
-/// prediction (2.1) in O(nnz(E)·N) instead of O(N³). `t` is an N×N work buffer.
+/// out = A R Aᵀ + B for A = I + E with E sparse, given as (row, col, value), and R
+/// symmetric: the prediction (2.1) in O(nnz(E)·N) instead of O(N³). With T = A R,
+/// A R Aᵀ = A Tᵀ, so both products are row operations. `t` is an N×N work buffer.
 /// The result is symmetrised so it stays exactly symmetric.
 #[inline(always)]
 pub fn predict_cov(
@@ -52,24 +53,34 @@ pub fn predict_cov(
     t: &mut [f64],
     n: usize,
 ) {
+    let (r, b, t) = (&r[..n * n], &b[..n * n], &mut t[..n * n]);
     // T = A R = R + E R
-    t[..n * n].copy_from_slice(&r[..n * n]);
+    t.copy_from_slice(r);
     for &(i, k, v) in e_nz {
-        let (ti, rk) = (i * n, k * n);
+        let src = &r[k * n..k * n + n];
+        let dst = &mut t[i * n..i * n + n];
         for j in 0..n {
-            t[ti + j] += v * r[rk + j];
+            dst[j] += v * src[j];
         }
     }
-    // out = T Aᵀ + B = T + T Eᵀ + B: column j of out gets v · column k of T
-    for (o, (x, y)) in out[..n * n]
-        .iter_mut()
-        .zip(t[..n * n].iter().zip(&b[..n * n]))
-    {
-        *o = x + y;
+    // out = Tᵀ, then out = A Tᵀ = Tᵀ + E Tᵀ (rows of Tᵀ are read from `out` before any
+    // row of `out` is changed: use B's slot afterwards) — so build Tᵀ in `out` first.
+    let out = &mut out[..n * n];
+    for i in 0..n {
+        for j in 0..n {
+            out[i * n + j] = t[j * n + i];
+        }
     }
-    for &(j, k, v) in e_nz {
-        for i in 0..n {
-            out[i * n + j] += v * t[i * n + k];
+    // t := Tᵀ (copy), out := Tᵀ + B, then out += E Tᵀ row by row.
+    t.copy_from_slice(out);
+    for (o, x) in out.iter_mut().zip(b) {
+        *o += x;
+    }
+    for &(i, k, v) in e_nz {
+        let src = &t[k * n..k * n + n];
+        let dst = &mut out[i * n..i * n + n];
+        for j in 0..n {
+            dst[j] += v * src[j];
         }
     }
     for i in 0..n {

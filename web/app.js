@@ -5,6 +5,7 @@
 import { ModelEditor } from './editor.js';
 import { BrowserRunner, ServerRunner, WasmWorker } from './runner.js';
 import { TraceChart, criteriaTable, finalTable, fmt } from './results.js';
+import { mountTabs } from './tabs.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -59,6 +60,7 @@ const editor = new ModelEditor($('editor'), () => {
 /** The shown results belong to an earlier version of the model. */
 function markStale() {
   if (!$('results').hidden) $('results').classList.add('stale');
+  document.dispatchEvent(new Event('kea:model-changed')); // the Synthesis and Monte Carlo tabs
 }
 
 function modelJson() {
@@ -262,6 +264,7 @@ async function main() {
   $('trace-state').addEventListener('change', () => chart.draw());
   $('trace-log').addEventListener('change', () => chart.draw());
   document.addEventListener('keydown', (e) => {
+    if (($('results-pane').dataset.tab ?? 'analysis') !== 'analysis') return; // tabs.js handles the others
     if ((e.ctrlKey || e.metaKey) && e.key === 'Enter') run();
     if (e.key === 'Escape' && state.running) cancel();
   });
@@ -271,6 +274,13 @@ async function main() {
     server.disabled = true;
     server.parentElement.title = 'No kea server answers here (open the page through `kea serve`).';
   }
+  mountTabs({
+    model: () => editor.model,
+    showModelErrors: (errors) => editor.showErrors(errors),
+    download,
+    fileStem,
+    server: !document.querySelector('input[name=mode][value=server]').disabled,
+  });
   await loadFromUrl();
   document.body.dataset.ready = 'true';
 }

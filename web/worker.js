@@ -1,6 +1,7 @@
 // The wasm build of kea-core, in a Web Worker so the page never freezes.
 //
 // Messages in:  {id, op: 'presets' | 'preset' | 'check' | 'analyze' | 'traces_csv', ...args}
+//               or {id, op: 'synthesize' | 'simulate', request} | {id, op: 'simulation_csv', result}
 // Messages out: {id, progress} while analysing (at most every 50 ms), then
 //               {id, ok: <value>} or {id, error: {kind, title, errors:[{path, message}]}}.
 // Cancelling a run: the page terminates this worker and starts a new one (instant).
@@ -50,6 +51,24 @@ self.onmessage = async (event) => {
         value = JSON.parse(text);
         break;
       }
+      case 'synthesize':
+      case 'simulate': {
+        // Synthesis and Monte Carlo (web/synthesis.js, web/simulation.js): one request JSON.
+        let last = 0;
+        const text = kea[op](event.data.request, (fraction) => {
+          const now = performance.now();
+          if (now - last > 50) {
+            last = now;
+            self.postMessage({ id, progress: fraction });
+          }
+          return true;
+        });
+        value = JSON.parse(text);
+        break;
+      }
+      case 'simulation_csv':
+        value = kea.simulation_csv(event.data.result);
+        break;
       case 'traces_csv':
         value = kea.traces_csv(event.data.result);
         break;

@@ -85,6 +85,108 @@ pub fn analyze(
     serde_json::to_string(&result).map_err(|e| JsValue::from_str(&e.to_string()))
 }
 
+/// A progress callback as the core's `Progress`: `progress(fraction)` returning
+/// `false` (or throwing) cancels.
+fn js_progress(progress: &js_sys::Function) -> impl FnMut(f64) -> ControlFlow<()> + '_ {
+    move |fraction: f64| match progress.call1(&JsValue::NULL, &JsValue::from_f64(fraction)) {
+        Ok(v) if v == JsValue::FALSE => ControlFlow::Break(()),
+        Err(_) => ControlFlow::Break(()),
+        Ok(_) => ControlFlow::Continue(()),
+    }
+}
+
+/// Run a synthesis request (`{model, set?, target, mode}`, docs/synthesis.md) with the
+/// core's `Sequential` executor. Errors carry the request's paths (`model.system.a[0][0]`,
+/// `mode.bisect.high`, `target.state`). Returns the result JSON, `timing.wall_ms` measured here.
+#[wasm_bindgen]
+pub fn synthesize(request_json: &str, progress: &js_sys::Function) -> Result<String, JsValue> {
+    let start = js_sys::Date::now();
+    let request = kea_core::synthesis::request_from_json(request_json).map_err(|e| to_js(&e))?;
+    let mut report = js_progress(progress);
+    let mut result =
+        kea_core::synthesis::synthesize(&request, &kea_core::exec::Sequential, &mut report)
+            .map_err(|e| to_js(&e))?;
+    result.timing.wall_ms = js_sys::Date::now() - start;
+    serde_json::to_string(&result).map_err(|e| JsValue::from_str(&e.to_string()))
+}
+
+/// A Monte Carlo request as the server's job kind `simulation` takes it: the model, its
+/// overrides, and the core's `SimulationRequest` members beside them.
+#[derive(serde::Deserialize)]
+struct SimulateIn {
+    model: serde_json::Value,
+    #[serde(default)]
+    set: Overrides,
+    #[serde(flatten)]
+    request: serde_json::Map<String, serde_json::Value>,
+}
+
+/// Run a Monte Carlo simulation (`{model, set?, runs, seed?, truth?, model_error?,
+/// trace_points?}`, docs/monte-carlo.md) with the core's `Sequential` executor; the
+/// result is bit-identical to the server's for the same seed. Model errors are at
+/// `model.…`, the simulation's at `runs`, `seed`, …, as on the server.
+#[wasm_bindgen]
+pub fn simulate(request_json: &str, progress: &js_sys::Function) -> Result<String, JsValue> {
+    let start = js_sys::Date::now();
+    let input: SimulateIn = serde_json::from_str(request_json).map_err(|e| {
+        to_js(&Error::invalid(
+            "",
+            format!("not a simulation request: {e}"),
+        ))
+    })?;
+    let model =
+        kea_core::model_from_value(input.model).map_err(|e| to_js(&e.with_prefix("model")))?;
+    let request: kea_core::simulation::SimulationRequest =
+        serde_json::from_value(serde_json::Value::Object(input.request))
+            .map_err(|e| to_js(&Error::invalid("", e.to_string())))?;
+    // Locate the errors as the server does: the model's under `model.`, then the run's own.
+    let compiled =
+        kea_core::validate::compile(&model, &input.set).map_err(|e| to_js(&model_located(e)))?;
+    kea_core::simulation::check_request(&request, &compiled).map_err(|e| to_js(&e))?;
+    let mut report = js_progress(progress);
+    let mut result = kea_core::simulation::simulate(
+        &model,
+        &input.set,
+        &request,
+        &kea_core::exec::Sequential,
+        &mut report,
+    )
+    .map_err(|e| to_js(&model_located(e)))?;
+    result.timing.wall_ms = js_sys::Date::now() - start;
+    serde_json::to_string(&result).map_err(|e| JsValue::from_str(&e.to_string()))
+}
+
+/// Prefix a model's error paths with `model.` (those under `set` stay).
+fn model_located(e: Error) -> Error {
+    match e {
+        Error::Invalid(v) => Error::Invalid(
+            v.into_iter()
+                .flat_map(|f| {
+                    if f.path == "set" || f.path.starts_with("set.") {
+                        vec![f]
+                    } else {
+                        Error::Invalid(vec![f]).with_prefix("model").field_errors()
+                    }
+                })
+                .collect(),
+        ),
+        other => other.with_prefix("model"),
+    }
+}
+
+/// The traces of a Monte Carlo result (as returned by [`simulate`]) as CSV, same as the CLI's.
+#[wasm_bindgen]
+pub fn simulation_csv(result_json: &str) -> Result<String, JsValue> {
+    let result: kea_core::simulation::SimulationResult = serde_json::from_str(result_json)
+        .map_err(|e| {
+            to_js(&Error::invalid(
+                "",
+                format!("not a kea simulation result: {e}"),
+            ))
+        })?;
+    Ok(kea_core::simulation::traces_csv(&result))
+}
+
 /// The traces of a result (as returned by [`analyze`]) as CSV, same as the CLI's.
 #[wasm_bindgen]
 pub fn traces_csv(result_json: &str) -> Result<String, JsValue> {

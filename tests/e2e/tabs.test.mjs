@@ -1,0 +1,298 @@
+// The Synthesis and Monte Carlo tabs in a real browser against the real server: a
+// small grid and a bisection, and a small Monte Carlo, each run in the browser (wasm
+// worker, the core's Sequential executor) and as a server job; the two must agree with
+// each other and with the CLI (synthesis to 1e-9 relative; Monte Carlo bit-identical
+// for the same seed, whatever the thread count).
+
+import { after, before, test } from 'node:test';
+import assert from 'node:assert/strict';
+import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import path from 'node:path';
+import { kea, launchBrowser, newPage, relDiff, screenshot, startServer } from './lib.mjs';
+
+const STEPS = 2000; // small D: the grid's 7 analyses and 200 runs take well under a second
+
+let server;
+let browser;
+let page;
+let tmp;
+const consoleErrors = [];
+
+before(async () => {
+  tmp = mkdtempSync(path.join(tmpdir(), 'kea-e2e-tabs-'));
+  server = await startServer();
+  browser = await launchBrowser();
+  page = await newPage(browser, consoleErrors);
+  await page.goto(`${server.url}/`);
+  await page.waitForSelector('body[data-ready=true]', { timeout: 30000 });
+});
+
+after(async () => {
+  await browser?.close();
+  await server?.stop();
+  if (tmp) rmSync(tmp, { recursive: true, force: true });
+});
+
+function assertClose(actual, expected, what) {
+  if (expected === null) {
+    assert.equal(actual, null, what);
+    return;
+  }
+  assert.ok(Number.isFinite(actual), `${what}: ${actual} is not a number`);
+  assert.ok(relDiff(actual, expected) <= 1e-9, `${what}: ${actual} vs ${expected} (relative ${relDiff(actual, expected)})`);
+}
+
+/** The seed example with D = STEPS, as loaded in the editor; also written for the CLI. */
+async function smallSeedExample() {
+  await page.selectOption('#preset', 'seed-example');
+  await page.waitForFunction(() => location.hash === '#preset=seed-example');
+  await page.fill('input[data-path="time.steps"]', String(STEPS));
+  const model = JSON.parse(kea('preset', 'seed-example'));
+  model.time.steps = STEPS;
+  const file = path.join(tmp, 'seed-small.json');
+  writeFileSync(file, JSON.stringify(model));
+  return file;
+}
+
+/** Run a tab's request in `where` and wait for its result; returns the downloaded result JSON. */
+async function runView(prefix, where) {
+  await page.evaluate((p) => delete document.getElementById(`${p}-result`).dataset.where, prefix);
+  await page.check(`input[name=${prefix}-where][value=${where}]`);
+  await page.click(`#${prefix}-run`);
+  await page.waitForFunction(
+    ([p, w]) => document.getElementById(`${p}-result`).dataset.where === w && !document.getElementById(`${p}-run`).disabled,
+    [prefix, where],
+    { timeout: 60000 },
+  );
+  assert.match(await page.textContent(`#${prefix}-status`), where === 'browser' ? /browser, wasm/ : /server job/);
+  const [download] = await Promise.all([page.waitForEvent('download'), page.click(`#${prefix}-download`)]);
+  return JSON.parse(readFileSync(await download.path(), 'utf8'));
+}
+
+/** The grid's cells as shown: {index: {yz, zx, yx, meets, cheapest}}. */
+function gridCells() {
+  return page.$$eval('#syn-grid td[data-index]', (cells) =>
+    Object.fromEntries(
+      cells.map((c) => [
+        c.dataset.index,
+        {
+          yz: c.dataset.yz === '' ? null : Number(c.dataset.yz),
+          zx: c.dataset.zx === '' ? null : Number(c.dataset.zx),
+          yx: c.dataset.yx === '' ? null : Number(c.dataset.yx),
+          meets: c.dataset.meets === 'true',
+          cheapest: c.classList.contains('cheapest'),
+        },
+      ]),
+    ),
+  );
+}
+
+test('the tabs switch with the mouse and the arrow keys', async () => {
+  await page.click('#tab-synthesis');
+  assert.equal(await page.getAttribute('#tab-synthesis', 'aria-selected'), 'true');
+  assert.equal(await page.isVisible('#synthesis-panel'), true);
+  assert.equal(await page.isVisible('#run'), false, "the analysis's Run button is hidden");
+  await page.focus('#tab-synthesis');
+  await page.keyboard.press('ArrowRight');
+  assert.equal(await page.getAttribute('#tab-simulation', 'aria-selected'), 'true');
+  assert.equal(await page.evaluate(() => document.activeElement.id), 'tab-simulation');
+  assert.equal(await page.isVisible('#simulation-panel'), true);
+  assert.equal(await page.isVisible('#synthesis-panel'), false);
+  await page.keyboard.press('Home');
+  assert.equal(await page.getAttribute('#tab-analysis', 'aria-selected'), 'true');
+  assert.equal(await page.isVisible('#run'), true);
+});
+
+test('a synthesis grid gives the same table in the browser, on the server and in the CLI', async () => {
+  const modelFile = await smallSeedExample();
+  await page.click('#tab-synthesis');
+  // The params that the error levels use come first: f and psi for the seed example.
+  assert.deepEqual(
+    await page.$$eval(['#syn-grid-param-0', '#syn-grid-param-1'].join(','), (s) => s.map((x) => x.value)),
+    ['psi', 'f'],
+  );
+  await page.selectOption('#syn-mode', 'grid');
+  await page.selectOption('#syn-criterion', 'yx');
+  await page.selectOption('#syn-set', 'bound');
+  await page.selectOption('#syn-state', '');
+  await page.fill('#syn-threshold', '10');
+  await page.selectOption('#syn-grid-param-0', 'f');
+  await page.fill('#syn-grid-values-0', '2, 4, 8');
+  await page.selectOption('#syn-grid-cheaper-0', 'lower');
+  await page.selectOption('#syn-grid-param-1', 'c');
+  await page.fill('#syn-grid-values-1', '0.5, 0.25');
+  await page.selectOption('#syn-grid-cheaper-1', '');
+  await page.selectOption('#syn-grid-param-2', '');
+
+  const fromBrowser = await runView('syn', 'browser');
+  const inBrowser = await gridCells();
+  await screenshot(page, '10-synthesis-grid-browser');
+  const fromServer = await runView('syn', 'server');
+  const onServer = await gridCells();
+  await screenshot(page, '11-synthesis-grid-server');
+
+  const request = {
+    target: { criterion: 'yx', set: 'bound', threshold: 10 },
+    mode: { grid: { params: [{ name: 'f', values: [2, 4, 8] }, { name: 'c', values: [0.5, 0.25] }], cost_order: [{ name: 'f', cheaper: 'lower' }] } },
+  };
+  const requestFile = path.join(tmp, 'grid.json');
+  writeFileSync(requestFile, JSON.stringify(request));
+  const cli = JSON.parse(kea('synthesize', requestFile, '--model', modelFile, '--json'));
+  assert.equal(cli.status, 'found');
+  assert.equal(cli.details.grid.cells.length, 6);
+
+  for (const r of [fromBrowser, fromServer]) {
+    assert.equal(r.status, 'found');
+    assert.equal(r.analyses, 7, 'six cells and the re-analysed answer');
+    assert.equal(r.steps, STEPS);
+    assert.equal(r.message, cli.message);
+  }
+  for (const cell of cli.details.grid.cells) {
+    const key = cell.index.join(',');
+    for (const [name, shown] of [['browser', inBrowser[key]], ['server', onServer[key]]]) {
+      assert.ok(shown, `${name} shows cell ${key}`);
+      for (const c of ['yz', 'zx', 'yx']) assertClose(shown[c], cell.point[c], `${name} cell ${key} ${c}`);
+      assert.equal(shown.meets, cell.point.meets, `${name} cell ${key} meets`);
+      assert.equal(shown.meets, cell.point.yx >= 10, `cell ${key}: meets iff F_YX ≥ 10`);
+    }
+    for (const c of ['yz', 'zx', 'yx']) assertClose(inBrowser[key][c], onServer[key][c], `browser vs server cell ${key} ${c}`);
+  }
+  assert.equal(Object.keys(inBrowser).length, 6);
+  // kea's criteria do not depend on c (docs/synthesis.md): the two columns are equal;
+  // F_YX grows with f = φ/ψ, and f = 4 is the cheapest (lowest f) cell that meets 10.
+  for (const i of [0, 1, 2]) assertClose(inBrowser[`${i},1`].yx, inBrowser[`${i},0`].yx, `row ${i}: F_YX does not depend on c`);
+  assert.ok(inBrowser['0,0'].yx < 10 && inBrowser['1,0'].yx >= 10 && inBrowser['2,0'].yx > inBrowser['1,0'].yx);
+  assert.deepEqual(
+    Object.entries(inBrowser).filter(([, v]) => v.cheapest).map(([k]) => k),
+    ['1,0'],
+  );
+  assert.deepEqual(cli.details.grid.cheapest, [1, 0]);
+  assert.match(await page.textContent('#syn-cheapest'), /c = 0\.5, f = 4/);
+  assert.match(await page.textContent('#syn-message'), /4 of 6 cells meet F_YX \(bound\) ≥ 10/);
+  assert.equal(await page.getAttribute('#syn-analyses', 'data-value'), '7');
+  // The answer is re-analysed: the verification row repeats it.
+  const verified = await page.$eval('#syn-points tr[data-point=verified] td[data-criterion=yx]', (td) => Number(td.dataset.value));
+  assertClose(verified, cli.answer.yx, 'verified F_YX');
+});
+
+test('a bisection gives the same answer and verification in the browser and on the server', async () => {
+  await page.selectOption('#syn-mode', 'bisect');
+  await page.selectOption('#syn-bisect-param', 'f');
+  await page.fill('#syn-bisect-low', '1');
+  await page.fill('#syn-bisect-high', '10');
+  await page.fill('#syn-threshold', '10');
+  const inBrowser = await runView('syn', 'browser');
+  await screenshot(page, '12-synthesis-bisect-browser');
+  const onServer = await runView('syn', 'server');
+  for (const r of [inBrowser, onServer]) {
+    assert.equal(r.status, 'found');
+    assert.equal(r.details.bisect.meets_side, 'high', 'a larger f = φ/ψ (a better sensor) meets');
+    assert.ok(r.answer.yx >= 10 && r.verification.passed);
+    assert.ok(r.verification.looser.yx < 10, 'the 1 % looser point misses');
+    assertClose(r.verification.looser.params.f * 1.01, r.answer.params.f, 'the looser point is 1 % toward the missing side');
+  }
+  assert.equal(inBrowser.analyses, onServer.analyses);
+  assertClose(inBrowser.answer.params.f, onServer.answer.params.f, 'f*');
+  for (const c of ['yz', 'zx', 'yx']) {
+    assertClose(inBrowser.answer[c], onServer.answer[c], `answer ${c}`);
+    assertClose(inBrowser.verification.looser[c], onServer.verification.looser[c], `looser ${c}`);
+  }
+  // Shown: answer, re-analysed point and the looser one that misses.
+  const rows = await page.$$eval('#syn-points tbody tr', (trs) => trs.map((tr) => [tr.dataset.point, tr.lastElementChild.textContent]));
+  assert.deepEqual(rows, [
+    ['answer', 'yes ✓'],
+    ['verified', 'yes ✓'],
+    ['looser', 'no'],
+  ]);
+  const shownF = await page.$eval('#syn-points tr[data-point=answer] td[data-param=f]', (td) => Number(td.dataset.value));
+  assertClose(shownF, onServer.answer.params.f, 'shown f*');
+});
+
+/** Every value of the Monte Carlo criteria table: {`set.criterion.row`: value|null}. */
+function mcCriteria() {
+  return page.$$eval('#mc-criteria td[data-set]', (cells) =>
+    Object.fromEntries(cells.map((c) => [`${c.dataset.set}.${c.dataset.criterion}.${c.dataset.row}`, c.dataset.value === '' ? null : Number(c.dataset.value)])),
+  );
+}
+
+test('a Monte Carlo run is bit-identical in the browser, on the server and in the CLI', async () => {
+  const modelFile = await smallSeedExample();
+  await page.click('#tab-simulation');
+  await page.fill('#mc-runs', '200');
+  await page.fill('#mc-seed', '7');
+  await page.selectOption('#mc-truth', 'process');
+  await page.selectOption('#mc-model-error', 'white');
+  await page.fill('#mc-trace-points', '50');
+
+  const inBrowser = await runView('mc', 'browser');
+  const shownBrowser = await mcCriteria();
+  await screenshot(page, '13-monte-carlo-browser');
+  const onServer = await runView('mc', 'server');
+  const shownServer = await mcCriteria();
+  const cli = JSON.parse(kea('simulate', modelFile, '--runs', '200', '--seed', '7', '--trace-points', '50', '--json'));
+
+  const strip = (r) => ({ ...r, timing: null });
+  assert.deepStrictEqual(strip(inBrowser), strip(onServer), 'browser and server: bit-identical');
+  assert.deepStrictEqual(strip(inBrowser), strip(cli), 'browser and CLI: bit-identical');
+  assert.equal(inBrowser.steps, STEPS);
+  assert.equal(inBrowser.traces.t.length, 50);
+  assert.deepEqual(shownBrowser, shownServer);
+
+  // The table shows the three sets of the result.
+  for (const set of ['bound', 'covariance', 'monte_carlo']) {
+    for (const c of ['yz', 'zx', 'yx']) {
+      assert.equal(shownBrowser[`${set}.${c}.weighted`], inBrowser.criteria[set].weighted[c], `${set} ${c}`);
+      assert.equal(shownBrowser[`${set}.${c}.0`], inBrowser.criteria[set].per_state[0][c], `${set} ${c} Y`);
+    }
+  }
+  // Real against potential: with truth = process the covariance set is exact, and 200
+  // runs estimate it within sampling error.
+  const mc = inBrowser.criteria.monte_carlo.weighted;
+  const cov = inBrowser.criteria.covariance.weighted;
+  for (const c of ['yz', 'zx', 'yx']) assert.ok(relDiff(mc[c], cov[c]) < 0.1, `F_${c}: Monte Carlo ${mc[c]} vs covariance ${cov[c]}`);
+  // Consistency: NEES, NIS and the state, with their bands and verdicts as computed.
+  const c = inBrowser.consistency;
+  const verdicts = await page.$$eval('#mc-consistency tbody tr', (trs) => trs.map((tr) => [tr.dataset.stat, tr.querySelector('[data-verdict]').dataset.verdict, Number(tr.querySelector('td[data-value]').dataset.value)]));
+  assert.deepEqual(verdicts, [
+    ['nees', c.nees.verdict, c.nees.time_average],
+    ['nis', c.nis.verdict, c.nis.time_average],
+    ['state-0', c.per_state[0].verdict, c.per_state[0].variance_ratio],
+  ]);
+  assert.equal(c.nees.verdict, 'consistent');
+  assert.ok(c.nees.band[0] < c.nees.time_average && c.nees.time_average < c.nees.band[1]);
+  // The plot: potential √R_ii, the sample SKO of the filtered error, and χ.
+  const legend = await page.$$eval('#mc-chart .u-legend .u-series th', (ths) => ths.map((t) => t.textContent));
+  for (const name of ['potential SKO √R_ii', 'sample SKO', 'bound χ']) {
+    assert.ok(legend.some((l) => l.includes(name)), `legend ${legend} lacks ${name}`);
+  }
+  await page.check('#mc-log');
+  await page.waitForSelector('#mc-chart .u-legend');
+  await screenshot(page, '14-monte-carlo-server-log');
+});
+
+test('an invalid request is marked at its control; a model error at its cell', async () => {
+  await page.fill('#mc-runs', '1');
+  await page.check('input[name=mc-where][value=browser]');
+  await page.click('#mc-run');
+  await page.waitForFunction(() => document.querySelector('#mc-status').classList.contains('error'), null, { timeout: 30000 });
+  assert.match(await page.textContent('#mc-status'), /runs: at least 2 runs/);
+  assert.equal(await page.getAttribute('#mc-runs', 'aria-invalid'), 'true');
+  await page.fill('#mc-runs', '200');
+
+  await page.click('#tab-synthesis');
+  await page.fill('input[data-path="system.a[0][0]"]', 's/m +* 1');
+  await page.check('input[name=syn-where][value=server]');
+  await page.click('#syn-run');
+  await page.waitForFunction(() => document.querySelector('#syn-status').classList.contains('error'), null, { timeout: 30000 });
+  assert.match(await page.textContent('#syn-status'), /marked model fields/);
+  await page.waitForSelector('td[data-path="system.a[0][0]"] .cell-error');
+  await screenshot(page, '15-synthesis-invalid-model');
+  assert.ok(await page.$eval('#syn-result', (e) => e.classList.contains('stale')), 'the shown result is marked stale');
+  await page.selectOption('#preset', 'seed-example');
+  await page.waitForSelector('td[data-path="system.a[0][0]"] .cell-error', { state: 'detached', timeout: 10000 });
+});
+
+test('the page logged no console errors', () => {
+  assert.deepEqual(consoleErrors, []);
+});

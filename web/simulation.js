@@ -1,0 +1,271 @@
+// The Monte Carlo tab (docs/monte-carlo.md): R simulated runs of the current model,
+// in this browser (wasm, the core's Sequential executor: bit-identical to the server
+// for the same seed) or as a server job of kind `simulation`; the potential SKO √R_ii
+// against the sample SKO of the filtered error (and the bound χ) per state, the
+// consistency verdicts (NEES, NIS, per state), and the criteria sets side by side.
+
+import uPlot from './vendor/uplot/uPlot.esm.js';
+import { RunBar, checkModel, el, field, fmt, input, markControls, num, routeErrors, runError, select } from './views.js';
+
+const SETS = ['bound', 'covariance', 'monte_carlo'];
+const CRITERIA = [
+  ['yz', 'F_YZ'],
+  ['zx', 'F_ZX'],
+  ['yx', 'F_YX'],
+];
+const SERIES = [
+  ['potential_sko', 'potential SKO √R_ii', '#9467bd', []],
+  ['filtered_sko', 'real: sample SKO of X − truth', '#d62728', []],
+  ['chi', 'bound χ', '#2ca02c', [6, 4]],
+];
+
+function tick(x) {
+  if (x === null || x === undefined) return '';
+  if (x === 0) return '0';
+  const a = Math.abs(x);
+  if (a >= 1e-3 && a < 1e5) return String(Number(x.toPrecision(4)));
+  return x.toExponential(2).replace(/\.?0+e/, 'e');
+}
+
+export class SimulationView {
+  /** `ctx`: {model(), showModelErrors(errors), download(name, type, text), fileStem()}. */
+  constructor(root, ctx) {
+    this.root = root;
+    this.ctx = ctx;
+    this.result = null;
+    this.plot = null;
+    this.build();
+  }
+
+  build() {
+    this.runs = input('mc-runs', '200', { inputmode: 'numeric', 'data-request-path': 'runs' });
+    this.seed = input('mc-seed', '1', { inputmode: 'numeric', 'data-request-path': 'seed' });
+    this.truth = select('mc-truth', [['process', 'process: Y (Kalman reading)'], ['mean', 'mean: y (the seed’s reading)']], 'process');
+    this.truth.dataset.requestPath = 'truth';
+    this.modelError = select('mc-model-error', [['white', 'white (drawn every step)'], ['constant', 'constant (once per run)']], 'white');
+    this.modelError.dataset.requestPath = 'model_error';
+    this.tracePoints = input('mc-trace-points', '', { inputmode: 'numeric', placeholder: 'model’s', 'data-request-path': 'trace_points' });
+    this.form = el(
+      'form',
+      { class: 'view-form', novalidate: true, onsubmit: (e) => e.preventDefault() },
+      el(
+        'fieldset',
+        { class: 'section' },
+        el('legend', { text: 'Monte Carlo: real against potential accuracy' }),
+        el(
+          'div',
+          { class: 'row' },
+          field('Runs R', this.runs),
+          field('Seed', this.seed),
+          field('Truth', this.truth),
+          field('Model error F', this.modelError),
+          field('Trace points', this.tracePoints),
+        ),
+        el('p', { class: 'help', text: 'Each run draws its own ChaCha8 stream of the seed: the same seed gives bit-identical results in the browser and on the server. Cost ∝ R × D × N².' }),
+      ),
+    );
+    this.bar = new RunBar({ prefix: 'mc', label: 'Run Monte Carlo', op: 'simulate', kind: 'simulation', onRun: (where, exec) => this.run(where, exec) });
+    this.out = el('div', { id: 'mc-result', class: 'view-result', hidden: true });
+    this.stateSelect = el('select', { id: 'mc-state' });
+    this.log = el('input', { type: 'checkbox', id: 'mc-log' });
+    this.chart = el('div', { id: 'mc-chart', class: 'mc-chart' });
+    this.stateSelect.addEventListener('change', () => this.draw());
+    this.log.addEventListener('change', () => this.draw());
+    new ResizeObserver(() => this.plot?.setSize({ width: this.width(), height: 320 })).observe(this.chart);
+    this.root.append(this.form, this.bar.root, this.out);
+  }
+
+  request() {
+    const errors = [];
+    const integer = (control, path, optional = false) => {
+      if (optional && control.value.trim() === '') return undefined;
+      const x = num(control.value);
+      if (!Number.isInteger(x) || x < 0) errors.push({ path, message: `“${control.value}” is not a whole number ≥ 0` });
+      return x;
+    };
+    const request = {
+      model: this.ctx.model(),
+      runs: integer(this.runs, 'runs'),
+      seed: integer(this.seed, 'seed'),
+      truth: this.truth.value,
+      model_error: this.modelError.value,
+    };
+    const tp = integer(this.tracePoints, 'trace_points', true);
+    if (tp !== undefined) request.trace_points = tp;
+    if (errors.length) throw { kind: 'invalid', title: 'Invalid Monte Carlo request', errors };
+    return request;
+  }
+
+  async run(where, exec) {
+    try {
+      const request = this.request();
+      markControls(this.form, []);
+      const invalid = await checkModel(request.model);
+      if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
+      const { result, job } = await exec(request);
+      this.ctx.showModelErrors([]);
+      this.show(result, where);
+      return job;
+    } catch (e) {
+      const own = routeErrors(e?.errors, this.ctx.showModelErrors);
+      markControls(this.form, own);
+      throw runError(e, own, (e?.errors?.length ?? 0) - own.length);
+    }
+  }
+
+  markStale() {
+    if (!this.out.hidden) this.out.classList.add('stale');
+  }
+
+  show(r, where) {
+    this.result = r;
+    this.out.hidden = false;
+    this.out.classList.remove('stale');
+    this.out.dataset.where = where;
+    const q = r.request;
+    const summary = el('p', {
+      id: 'mc-summary',
+      text: [
+        `R = ${q.runs.toLocaleString('en')} runs, seed ${q.seed}, truth ${q.truth}, model error ${q.model_error}`,
+        `D = ${r.steps.toLocaleString('en')} steps, Δt = ${fmt(r.dt)}, t ∈ [${fmt(r.t0)}, ${fmt(r.t_end)}]`,
+        `${fmt(r.timing.wall_ms)} ms on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`,
+      ].join(' · '),
+    });
+    const warnings = el('ul', { class: 'mc-warnings' }, ...r.warnings.map((w) => el('li', { text: w })));
+    const previous = this.stateSelect.value;
+    this.stateSelect.replaceChildren(...r.states.map((s, i) => el('option', { value: String(i), text: s })));
+    if (previous && Number(previous) < r.states.length) this.stateSelect.value = previous;
+    const parts = [
+      summary,
+      el('p', { class: 'stale-note', text: 'The model has changed since this run: run again to update.' }),
+      r.warnings.length ? warnings : null,
+      el('h3', { text: 'Potential against real' }),
+      el('div', { class: 'chart-controls' }, el('label', { for: 'mc-state', text: 'State' }), this.stateSelect, el('label', {}, this.log, ' log scale')),
+      this.chart,
+      el('h3', { text: 'Consistency' }),
+      this.consistencyTable(r.consistency),
+      el('h3', { text: 'Criteria: bound, covariance, Monte Carlo' }),
+      this.criteriaTable(r),
+      el(
+        'div',
+        { class: 'downloads' },
+        el('button', { type: 'button', id: 'mc-download', text: 'Download result JSON', onclick: () => this.ctx.download(`${this.ctx.fileStem()}-monte-carlo.json`, 'application/json', JSON.stringify(this.result, null, 2) + '\n') }),
+      ),
+    ];
+    this.out.replaceChildren(...parts.filter(Boolean));
+    this.draw();
+  }
+
+  consistencyTable(c) {
+    const pct = (x) => (x === null || x === undefined ? '—' : `${fmt(100 * x)} %`);
+    const band = (b) => `[${fmt(b[0])}, ${fmt(b[1])}]`;
+    const verdict = (v) => el('td', { class: `verdict ${v}`, 'data-verdict': v, text: v });
+    const table = el('table', { class: 'criteria mc-consistency', id: 'mc-consistency' });
+    table.append(el('caption', { text: `Time averages against the ${fmt(100 * c.band_probability)} % χ² band of one step for R runs (optimistic: real errors larger than the potential ones)` }));
+    table.append(
+      el('thead', {}, el('tr', {}, ...['statistic', 'time average', 'band', 'steps in band', 'verdict'].map((t) => el('th', { scope: 'col', text: t })))),
+    );
+    const body = el('tbody');
+    for (const [key, label] of [['nees', 'NEES'], ['nis', 'NIS']]) {
+      const s = c[key];
+      body.append(
+        el(
+          'tr',
+          { 'data-stat': key },
+          el('th', { scope: 'row', text: `${label} (dof ${fmt(s.dof)})` }),
+          el('td', { class: 'num', 'data-value': s.time_average ?? '', text: fmt(s.time_average) }),
+          el('td', { class: 'num', text: band(s.band) }),
+          el('td', { class: 'num', text: pct(s.fraction_in_band) }),
+          verdict(s.verdict),
+        ),
+      );
+    }
+    c.per_state.forEach((s, i) => {
+      const bias = s.normalised_bias === null || s.normalised_bias === undefined ? '' : `; mean error / SKO ${fmt(s.normalised_bias)}`;
+      body.append(
+        el(
+          'tr',
+          { 'data-stat': `state-${i}`, class: i === 0 ? 'sep' : null },
+          el('th', { scope: 'row', text: `${s.state}: s² / R_ii`, title: `sample variance of the filtered error over the potential one${bias}` }),
+          el('td', { class: 'num', 'data-value': s.variance_ratio ?? '', text: fmt(s.variance_ratio) }),
+          el('td', { class: 'num', text: band(s.band) }),
+          el('td', { class: 'num', text: pct(s.fraction_in_band) }),
+          verdict(s.verdict),
+        ),
+      );
+    });
+    table.append(body);
+    return table;
+  }
+
+  criteriaTable(r) {
+    const table = el('table', { class: 'criteria', id: 'mc-criteria' });
+    table.append(el('caption', { text: 'Criteria (> 1 = an effect, highlighted) from the bound, the covariance (cov.) and the sample SKOs of the runs (MC)' }));
+    const head1 = el('tr', {}, el('th', { rowspan: 2, scope: 'col', text: 'state' }));
+    const head2 = el('tr');
+    for (const [, label] of CRITERIA) {
+      head1.append(el('th', { colspan: 3, scope: 'colgroup', text: label }));
+      for (const set of SETS) head2.append(el('th', { scope: 'col', title: set, text: { bound: 'bound', covariance: 'cov.', monte_carlo: 'MC' }[set] }));
+    }
+    table.append(el('thead', {}, head1, head2));
+    const body = el('tbody');
+    const cell = (set, key, row, value) =>
+      el('td', {
+        class: `num${value !== null && value > 1 ? ' effect' : ''}${set === 'monte_carlo' ? ' mc' : ''}`,
+        'data-set': set,
+        'data-criterion': key,
+        'data-row': row,
+        'data-value': value === null || value === undefined ? '' : String(value),
+        title: value === null || value === undefined ? 'undefined' : String(value),
+        text: fmt(value),
+      });
+    r.criteria.bound.per_state.forEach((ps, i) => {
+      const tr = el('tr', {}, el('th', { scope: 'row', text: ps.state }));
+      for (const [key] of CRITERIA) for (const set of SETS) tr.append(cell(set, key, String(i), r.criteria[set]?.per_state[i]?.[key] ?? null));
+      body.append(tr);
+    });
+    const tr = el('tr', { class: 'weighted' }, el('th', { scope: 'row', text: 'weighted' }));
+    for (const [key] of CRITERIA) for (const set of SETS) tr.append(cell(set, key, 'weighted', r.criteria[set]?.weighted?.[key] ?? null));
+    body.append(tr);
+    table.append(body);
+    return el('div', { class: 'scroll' }, table);
+  }
+
+  width() {
+    return Math.max(320, (this.chart.clientWidth || this.root.clientWidth) - 8);
+  }
+
+  draw() {
+    const r = this.result;
+    if (!r) return;
+    const i = Number(this.stateSelect.value) || 0;
+    const log = this.log.checked;
+    const trace = r.traces.states[i];
+    const clean = (v) => (v === null || v === undefined || (log && !(v > 0)) ? null : v);
+    const data = [r.traces.t];
+    const series = [{ label: 't' }];
+    for (const [key, label, stroke, dash] of SERIES) {
+      if (!trace[key]) continue;
+      data.push(trace[key].map(clean));
+      series.push({ label, stroke, width: key === 'filtered_sko' ? 1.2 : 2, dash, value: (_, v) => (v === null ? '—' : fmt(v)) });
+    }
+    this.plot?.destroy();
+    this.chart.replaceChildren();
+    this.plot = new uPlot(
+      {
+        title: `${trace.state}: potential SKO √R_ii against the real one (R = ${r.request.runs} runs)`,
+        width: this.width(),
+        height: 320,
+        scales: { x: { time: false }, y: log ? { distr: 3 } : {} },
+        axes: [
+          { label: 't', values: (_, ticks) => ticks.map(tick) },
+          { label: 'SKO', size: 70, values: (_, ticks) => ticks.map(tick) },
+        ],
+        series,
+        legend: { live: true },
+      },
+      data,
+      this.chart,
+    );
+  }
+}

@@ -1,0 +1,488 @@
+// The Synthesis tab (docs/synthesis.md): for the current model, a target (criterion,
+// set, weighted or one state, threshold) and a mode (bisect, grid, seed_search), run in
+// this browser (wasm, the core's Sequential executor) or as a server job of kind
+// `synthesis`; the result as grid tables or as the answer with its verification.
+
+import { RunBar, checkModel, el, field, fmt, input, markControls, num, routeErrors, runError, select } from './views.js';
+
+const CRITERIA = [
+  ['yz', 'F_YZ (measured vs a-priori)'],
+  ['zx', 'F_ZX (filtered vs measured)'],
+  ['yx', 'F_YX (filtered vs a-priori)'],
+];
+const LABEL = { yz: 'F_YZ', zx: 'F_ZX', yx: 'F_YX' };
+const MODES = [
+  ['grid', 'grid — criteria tables over up to 3 params'],
+  ['bisect', 'bisect — the loosest value of one param'],
+  ['seed_search', 'seed_search — the seed’s search from the upper bounds'],
+];
+const ROWS = 3; // grid params and seed-search params
+
+/** Numbers for an input: short and exact enough (`1e-05`, `0.25`). */
+function show(x) {
+  return Number.isFinite(x) ? String(Number(x.toPrecision(6))) : '';
+}
+
+function paramValue(model, name) {
+  const v = Number(model.params?.[name]);
+  return Number.isFinite(v) && v > 0 ? v : 1;
+}
+
+export class SynthesisView {
+  /** `ctx`: {model() → the editor's model object, showModelErrors(errors), download(name, type, text), fileStem()}. */
+  constructor(root, ctx) {
+    this.root = root;
+    this.ctx = ctx;
+    this.result = null;
+    this.build();
+  }
+
+  // ------------------------------------------------------------ form
+
+  build() {
+    const id = (s) => `syn-${s}`;
+    this.criterion = select(id('criterion'), CRITERIA, 'yx');
+    this.criterion.dataset.requestPath = 'target.criterion';
+    this.set = select(id('set'), [['bound', 'bound (the seed’s modulus)'], ['covariance', 'covariance']], 'bound');
+    this.set.dataset.requestPath = 'target.set';
+    this.state = select(id('state'), [['', 'weighted (all states)']], '');
+    this.state.dataset.requestPath = 'target.state';
+    this.threshold = input(id('threshold'), '14', { inputmode: 'decimal', 'data-request-path': 'target.threshold' });
+    const target = el(
+      'fieldset',
+      { class: 'section' },
+      el('legend', { text: 'Target: criterion ≥ threshold' }),
+      el(
+        'div',
+        { class: 'row' },
+        field('Criterion', this.criterion),
+        field('Set', this.set),
+        field('Of', this.state),
+        field('Threshold F*', this.threshold),
+      ),
+    );
+
+    this.mode = select(id('mode'), MODES, 'grid');
+    this.mode.dataset.requestPath = 'mode';
+    this.mode.addEventListener('change', () => this.showMode());
+
+    // bisect
+    this.bisect = {
+      param: select(id('bisect-param'), []),
+      low: input(id('bisect-low'), '', { inputmode: 'decimal', 'data-request-path': 'mode.bisect.low' }),
+      high: input(id('bisect-high'), '', { inputmode: 'decimal', 'data-request-path': 'mode.bisect.high' }),
+      rel_tol: input(id('bisect-rel-tol'), '0.001', { inputmode: 'decimal', 'data-request-path': 'mode.bisect.rel_tol' }),
+      probes: input(id('bisect-probes'), '9', { inputmode: 'numeric', 'data-request-path': 'mode.bisect.probes' }),
+    };
+    this.bisect.param.dataset.requestPath = 'mode.bisect.param';
+    this.bisect.param.addEventListener('change', () => this.defaultsBisect());
+    const bisectPanel = el(
+      'div',
+      { class: 'mode-panel', 'data-mode': 'bisect' },
+      el(
+        'div',
+        { class: 'row' },
+        field('Param', this.bisect.param),
+        field('Low', this.bisect.low),
+        field('High', this.bisect.high),
+        field('Rel. tolerance', this.bisect.rel_tol),
+        field('Probes', this.bisect.probes),
+      ),
+      el('p', { class: 'help', text: 'Log-scale bisection over [low, high] (0 < low < high); refuses non-monotonic criteria. The answer is re-analysed, and a point 1 % looser must miss.' }),
+    );
+
+    // grid
+    this.grid = [];
+    const gridBody = el('tbody');
+    for (let i = 0; i < ROWS; i++) {
+      const row = {
+        param: select(id(`grid-param-${i}`), []),
+        values: input(id(`grid-values-${i}`), '', { 'data-request-path': `mode.grid.params[${i}].values`, class: 'values' }),
+        cheaper: select(id(`grid-cheaper-${i}`), [['', 'no cost order'], ['higher', 'higher is cheaper'], ['lower', 'lower is cheaper']], ''),
+      };
+      row.param.dataset.requestPath = `mode.grid.params[${i}].name`;
+      row.cheaper.dataset.requestPath = `mode.grid.cost_order[${i}]`;
+      row.param.addEventListener('change', () => this.defaultsGrid(i));
+      const label = ['rows', 'columns', 'pages'][i];
+      row.param.setAttribute('aria-label', `Grid ${label}: param`);
+      row.values.setAttribute('aria-label', `Grid ${label}: values, comma-separated`);
+      row.cheaper.setAttribute('aria-label', `Grid ${label}: cost order`);
+      gridBody.append(el('tr', {}, el('th', { scope: 'row', text: label }), el('td', {}, row.param), el('td', {}, row.values), el('td', {}, row.cheaper)));
+      this.grid.push(row);
+    }
+    const gridPanel = el(
+      'div',
+      { class: 'mode-panel', 'data-mode': 'grid' },
+      el(
+        'table',
+        { class: 'grid syn-rows' },
+        el('caption', { text: 'Grid params (up to 3)' }),
+        el('thead', {}, el('tr', {}, el('th'), el('th', { scope: 'col', text: 'param' }), el('th', { scope: 'col', text: 'values (comma-separated)' }), el('th', { scope: 'col', text: 'cost' }))),
+        gridBody,
+      ),
+      el('p', { class: 'help', text: 'Rows × columns × pages, every cell re-analysed. With a cost order (top row most important) the cheapest cell meeting the target is the answer.' }),
+    );
+
+    // seed_search
+    this.seed = [];
+    const seedBody = el('tbody');
+    for (let i = 0; i < ROWS; i++) {
+      const base = `mode.seed_search.params[${i}]`;
+      const row = {
+        param: select(id(`seed-param-${i}`), []),
+        high: input(id(`seed-high-${i}`), '', { inputmode: 'decimal', 'data-request-path': `${base}.high` }),
+        low: input(id(`seed-low-${i}`), '', { inputmode: 'decimal', 'data-request-path': `${base}.low` }),
+        shrink: input(id(`seed-shrink-${i}`), '0.5', { inputmode: 'decimal', 'data-request-path': `${base}.shrink` }),
+      };
+      row.param.dataset.requestPath = `${base}.name`;
+      row.param.addEventListener('change', () => this.defaultsSeed(i));
+      for (const [k, text] of [['param', 'param'], ['high', 'high'], ['low', 'low'], ['shrink', 'shrink factor']]) {
+        row[k].setAttribute('aria-label', `Search param ${i + 1}: ${text}`);
+      }
+      seedBody.append(el('tr', {}, el('th', { scope: 'row', text: String(i + 1) }), ...['param', 'high', 'low', 'shrink'].map((k) => el('td', {}, row[k]))));
+      this.seed.push(row);
+    }
+    this.batch = input(id('seed-batch'), '4', { inputmode: 'numeric', 'data-request-path': 'mode.seed_search.batch' });
+    const seedPanel = el(
+      'div',
+      { class: 'mode-panel', 'data-mode': 'seed_search' },
+      el(
+        'table',
+        { class: 'grid syn-rows' },
+        el('caption', { text: 'Search params (the first outermost)' }),
+        el('thead', {}, el('tr', {}, el('th'), ...['param', 'high', 'low', 'shrink'].map((t) => el('th', { scope: 'col', text: t })))),
+        seedBody,
+      ),
+      el('div', { class: 'row' }, field('Batch', this.batch, 'points analysed at once; fixed, so the answer is reproducible')),
+      el('p', { class: 'help', text: 'From high down, multiplied by shrink (0 < shrink < 1) while ≥ low; stops at the first point meeting the target.' }),
+    );
+
+    const modeSet = el(
+      'fieldset',
+      { class: 'section' },
+      el('legend', { text: 'Mode' }),
+      el('div', { class: 'row' }, field('Mode', this.mode)),
+      gridPanel,
+      bisectPanel,
+      seedPanel,
+    );
+
+    this.bar = new RunBar({
+      prefix: 'syn',
+      label: 'Run synthesis',
+      op: 'synthesize',
+      kind: 'synthesis',
+      onRun: (where, exec) => this.run(where, exec),
+    });
+    this.form = el('form', { class: 'view-form', novalidate: true, onsubmit: (e) => e.preventDefault() }, target, modeSet);
+    this.out = el('div', { id: 'syn-result', class: 'view-result', hidden: true });
+    this.root.append(this.form, this.bar.root, this.out);
+    this.refreshChoices();
+    this.showMode();
+  }
+
+  showMode() {
+    for (const p of this.form.querySelectorAll('.mode-panel')) p.hidden = p.dataset.mode !== this.mode.value;
+  }
+
+  /**
+   * The model's params and states changed: update the choices. A new model (another
+   * object: a preset, an import) also resets the params and their ranges.
+   */
+  refreshChoices() {
+    const model = this.ctx.model();
+    if (!model) return;
+    const fresh = model !== this.model;
+    this.model = model;
+    const params = Object.keys(model.params ?? {});
+    const preferred = errorParams(model);
+    const states = model.system?.states ?? [];
+    const fill = (sel, options, pick) => {
+      const before = sel.value;
+      sel.replaceChildren(...options.map(([v, t]) => el('option', { value: v, text: t })));
+      const values = options.map(([v]) => v);
+      sel.value = fresh ? pick ?? values[0] ?? '' : values.includes(before) ? before : values[0] ?? '';
+      return fresh || before !== sel.value;
+    };
+    fill(this.state, [['', 'weighted (all states)'], ...states.map((s) => [s, `state ${s}`])], '');
+    const ps = params.map((p) => [p, p]);
+    if (fill(this.bisect.param, ps, preferred[0])) this.defaultsBisect();
+    this.grid.forEach((row, i) => {
+      if (fill(row.param, i === 0 ? ps : [['', '(none)'], ...ps], i < 2 ? preferred[i] ?? '' : '')) this.defaultsGrid(i);
+    });
+    this.seed.forEach((row, i) => {
+      if (fill(row.param, i === 0 ? ps : [['', '(none)'], ...ps], i === 0 ? preferred[0] : '')) this.defaultsSeed(i);
+    });
+  }
+
+  defaultsBisect() {
+    const v = paramValue(this.ctx.model(), this.bisect.param.value);
+    this.bisect.low.value = show(v / 10);
+    this.bisect.high.value = show(v * 10);
+  }
+
+  defaultsGrid(i) {
+    const row = this.grid[i];
+    if (!row.param.value) {
+      row.values.value = '';
+      return;
+    }
+    const v = paramValue(this.ctx.model(), row.param.value);
+    row.values.value = [v / 2, v, v * 2].map(show).join(', ');
+  }
+
+  defaultsSeed(i) {
+    const row = this.seed[i];
+    if (!row.param.value) {
+      row.high.value = row.low.value = '';
+      return;
+    }
+    const v = paramValue(this.ctx.model(), row.param.value);
+    row.high.value = show(v);
+    row.low.value = show(v / 8);
+  }
+
+  // ------------------------------------------------------------ request
+
+  /** The request for the current model and form; throws {errors} for unreadable inputs. */
+  request() {
+    const errors = [];
+    const number = (control, path) => {
+      const x = num(control.value);
+      if (!Number.isFinite(x)) errors.push({ path, message: `“${control.value}” is not a number` });
+      return x;
+    };
+    const target = {
+      criterion: this.criterion.value,
+      set: this.set.value,
+      threshold: number(this.threshold, 'target.threshold'),
+    };
+    if (this.state.value) target.state = this.state.value;
+    let mode;
+    if (this.mode.value === 'bisect') {
+      const b = this.bisect;
+      mode = {
+        bisect: {
+          param: b.param.value,
+          low: number(b.low, 'mode.bisect.low'),
+          high: number(b.high, 'mode.bisect.high'),
+          rel_tol: number(b.rel_tol, 'mode.bisect.rel_tol'),
+          probes: number(b.probes, 'mode.bisect.probes'),
+        },
+      };
+    } else if (this.mode.value === 'grid') {
+      const params = [];
+      const cost = [];
+      this.grid.forEach((row) => {
+        const k = params.length;
+        // Paths as the request will have them (rows left empty are skipped).
+        row.param.dataset.requestPath = `mode.grid.params[${k}].name`;
+        row.values.dataset.requestPath = `mode.grid.params[${k}].values`;
+        if (!row.param.value) return;
+        const values = row.values.value
+          .split(/[,;\s]+/)
+          .filter((s) => s !== '')
+          .map((s) => {
+            const x = num(s);
+            if (!Number.isFinite(x)) errors.push({ path: `mode.grid.params[${k}].values`, message: `“${s}” is not a number` });
+            return x;
+          });
+        params.push({ name: row.param.value, values });
+        if (row.cheaper.value) cost.push({ name: row.param.value, cheaper: row.cheaper.value });
+      });
+      mode = { grid: { params } };
+      if (cost.length) mode.grid.cost_order = cost;
+    } else {
+      const params = [];
+      for (const row of this.seed) {
+        const base = `mode.seed_search.params[${params.length}]`;
+        for (const k of ['low', 'high', 'shrink']) row[k].dataset.requestPath = `${base}.${k}`;
+        row.param.dataset.requestPath = `${base}.name`;
+        if (!row.param.value) continue;
+        params.push({
+          name: row.param.value,
+          low: number(row.low, `${base}.low`),
+          high: number(row.high, `${base}.high`),
+          shrink: number(row.shrink, `${base}.shrink`),
+        });
+      }
+      mode = { seed_search: { params, batch: number(this.batch, 'mode.seed_search.batch') } };
+    }
+    if (errors.length) throw { kind: 'invalid', title: 'Invalid synthesis request', errors };
+    return { model: this.ctx.model(), target, mode };
+  }
+
+  async run(where, exec) {
+    try {
+      const request = this.request();
+      markControls(this.form, []);
+      const invalid = await checkModel(request.model);
+      if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
+      const { result, job } = await exec(request);
+      this.ctx.showModelErrors([]);
+      this.show(result, where);
+      return job;
+    } catch (e) {
+      const own = routeErrors(e?.errors, this.ctx.showModelErrors);
+      markControls(this.form, own);
+      throw runError(e, own, (e?.errors?.length ?? 0) - own.length);
+    }
+  }
+
+  // ------------------------------------------------------------ result
+
+  show(r, where) {
+    this.result = r;
+    this.out.hidden = false;
+    this.out.classList.remove('stale');
+    this.out.dataset.where = where;
+    this.out.dataset.status = r.status;
+    const t = r.target;
+    const what = `${LABEL[t.criterion]} (${t.set}${t.state ? `, state ${t.state}` : ', weighted'}) ≥ ${fmt(t.threshold)}`;
+    const parts = [
+      el('p', { class: `syn-status status-${r.status}`, id: 'syn-message' }, el('strong', { text: `${r.status.replaceAll('_', ' ')}: ` }), r.message),
+      el('p', { class: 'syn-summary', id: 'syn-summary' }, `Target ${what} · `, el('span', { id: 'syn-analyses', 'data-value': String(r.analyses), text: `${r.analyses} analyses` }), ` of D = ${r.steps.toLocaleString('en')} steps · ${fmt(r.timing.wall_ms)} ms on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`),
+      el('p', { class: 'stale-note', text: 'The model has changed since this run: run again to update.' }),
+    ];
+    const d = r.details;
+    if (d.grid) parts.push(this.gridTables(r, d.grid));
+    if (r.answer) parts.push(this.pointsTable(r));
+    if (d.bisect) parts.push(this.bisectDetails(r, d.bisect));
+    if (d.seed_search) parts.push(this.seedDetails(r, d.seed_search));
+    parts.push(
+      el('div', { class: 'downloads' }, el('button', {
+        type: 'button',
+        id: 'syn-download',
+        text: 'Download result JSON',
+        onclick: () => this.ctx.download(`${this.ctx.fileStem()}-synthesis.json`, 'application/json', JSON.stringify(this.result, null, 2) + '\n'),
+      })),
+    );
+    this.out.replaceChildren(...parts);
+  }
+
+  markStale() {
+    if (!this.out.hidden) this.out.classList.add('stale');
+  }
+
+  /** Grid tables: rows × columns, one table per page; cells F_YZ / F_ZX / F_YX. */
+  gridTables(r, g) {
+    const crit = r.target.criterion;
+    const [rows, cols, pages] = [g.params[0], g.params[1], g.params[2]];
+    const cheapest = g.cheapest ? g.cheapest.join(',') : null;
+    const byIndex = new Map(g.cells.map((c) => [c.index.join(','), c]));
+    const wrap = el('div', { class: 'syn-grid', id: 'syn-grid' });
+    const meets = g.cells.filter((c) => c.point.meets).length;
+    wrap.append(
+      el('p', { class: 'help', text: `Each cell: F_YZ / F_ZX / F_YX (${r.target.set} set, ${r.target.state ? `state ${r.target.state}` : 'weighted'}); ✓ marks the ${meets} of ${g.cells.length} cells with ${LABEL[crit]} ≥ ${fmt(r.target.threshold)}${cheapest ? ', the outlined one is the cheapest' : ''}.` }),
+    );
+    const pageValues = pages ? pages.values : [null];
+    pageValues.forEach((pv, k) => {
+      const table = el('table', { class: 'criteria syn-table' });
+      table.append(el('caption', { text: pages ? `${pages.name} = ${fmt(pv)}` : `${rows.name}${cols ? ` × ${cols.name}` : ''}` }));
+      const colValues = cols ? cols.values : [null];
+      table.append(
+        el('thead', {}, el('tr', {}, el('th', { scope: 'col', text: cols ? `${rows.name} \\ ${cols.name}` : rows.name }), ...colValues.map((cv) => el('th', { scope: 'col', text: cols ? `${cols.name} = ${fmt(cv)}` : LABEL.yz + ' / ' + LABEL.zx + ' / ' + LABEL.yx })))),
+      );
+      const body = el('tbody');
+      rows.values.forEach((rv, i) => {
+        const tr = el('tr', {}, el('th', { scope: 'row', text: `${rows.name} = ${fmt(rv)}` }));
+        colValues.forEach((_, j) => {
+          const index = [i, ...(cols ? [j] : []), ...(pages ? [k] : [])];
+          const key = index.join(',');
+          const cell = byIndex.get(key);
+          const p = cell?.point;
+          const td = el('td', {
+            class: `num syn-cell${p?.meets ? ' meets' : ''}${key === cheapest ? ' cheapest' : ''}`,
+            'data-index': key,
+            'data-yz': p?.yz ?? '',
+            'data-zx': p?.zx ?? '',
+            'data-yx': p?.yx ?? '',
+            'data-meets': String(!!p?.meets),
+            title: p ? `${Object.entries(p.params).map(([n, v]) => `${n} = ${v}`).join(', ')}: F_YZ ${p.yz}, F_ZX ${p.zx}, F_YX ${p.yx}${p.note ? ` (${p.note})` : ''}` : '',
+          });
+          if (p) {
+            for (const [n, c] of [['yz', 'F_YZ'], ['zx', 'F_ZX'], ['yx', 'F_YX']]) {
+              if (n !== 'yz') td.append(' / ');
+              td.append(el('span', { class: n === crit ? 'target-crit' : null, title: c, text: fmt(p[n]) }));
+            }
+            if (p.meets) td.append(el('span', { class: 'mark', 'aria-label': 'meets the target', text: ' ✓' }));
+          }
+          tr.append(td);
+        });
+        body.append(tr);
+      });
+      table.append(body);
+      wrap.append(table);
+    });
+    if (cheapest) {
+      const c = byIndex.get(cheapest);
+      wrap.append(el('p', { id: 'syn-cheapest', class: 'syn-answer', text: `Cheapest qualifying cell: ${paramsText(c.point.params)} — ${LABEL[crit]} = ${fmt(c.point.value)}.` }));
+    }
+    return wrap;
+  }
+
+  /** The answer and its verification (re-analysed point, and the looser one for bisect). */
+  pointsTable(r) {
+    const names = Object.keys(r.answer.params);
+    const table = el('table', { class: 'criteria syn-points', id: 'syn-points' });
+    table.append(el('caption', { text: r.verification ? `Answer and verification (${r.verification.passed ? 'passed' : 'FAILED'})` : 'Answer' }));
+    table.append(
+      el('thead', {}, el('tr', {}, el('th', { scope: 'col', text: 'point' }), ...names.map((n) => el('th', { scope: 'col', text: n })), ...['F_YZ', 'F_ZX', 'F_YX'].map((c) => el('th', { scope: 'col', text: c })), el('th', { scope: 'col', text: 'meets' }))),
+    );
+    const body = el('tbody');
+    const row = (label, key, p) => {
+      const tr = el('tr', { 'data-point': key }, el('th', { scope: 'row', text: label }));
+      for (const n of names) tr.append(el('td', { class: 'num', 'data-param': n, 'data-value': String(p.params[n]), text: fmt(p.params[n]) }));
+      for (const c of ['yz', 'zx', 'yx']) {
+        tr.append(el('td', { class: `num${c === r.target.criterion ? ' target-crit' : ''}`, 'data-criterion': c, 'data-value': p[c] ?? '', text: fmt(p[c]) }));
+      }
+      tr.append(el('td', { class: p.meets ? 'meets' : 'misses', text: p.meets ? 'yes ✓' : 'no' }));
+      body.append(tr);
+    };
+    row('answer', 'answer', r.answer);
+    if (r.verification) {
+      row('re-analysed', 'verified', r.verification.point);
+      if (r.verification.looser) row('1 % looser', 'looser', r.verification.looser);
+    }
+    table.append(body);
+    return table;
+  }
+
+  bisectDetails(r, b) {
+    const list = el('table', { class: 'criteria syn-evals' });
+    list.append(el('thead', {}, el('tr', {}, el('th', { scope: 'col', text: b.param }), el('th', { scope: 'col', text: `${LABEL[r.target.criterion]}` }), el('th', { scope: 'col', text: 'meets' }))));
+    const body = el('tbody');
+    for (const p of [...b.evaluations].sort((x, y) => x.params[b.param] - y.params[b.param])) {
+      body.append(el('tr', {}, el('td', { class: 'num', text: fmt(p.params[b.param]) }), el('td', { class: 'num', text: fmt(p.value) }), el('td', { text: p.meets ? '✓' : '' })));
+    }
+    list.append(body);
+    const bracket = b.bracket ? `bracket [${fmt(b.bracket[0])}, ${fmt(b.bracket[1])}], ` : '';
+    return el('details', { class: 'syn-details' }, el('summary', { text: `${b.evaluations.length} evaluations of ${b.param} (${bracket}${b.iterations} bisection steps)` }), list);
+  }
+
+  seedDetails(r, s) {
+    const list = el('table', { class: 'criteria syn-evals' });
+    const names = s.levels.map((l) => l.name);
+    list.append(el('thead', {}, el('tr', {}, ...names.map((n) => el('th', { scope: 'col', text: n })), el('th', { scope: 'col', text: LABEL[r.target.criterion] }), el('th', { scope: 'col', text: 'meets' }))));
+    const body = el('tbody');
+    for (const p of s.visited) {
+      body.append(el('tr', {}, ...names.map((n) => el('td', { class: 'num', text: fmt(p.params[n]) })), el('td', { class: 'num', text: fmt(p.value) }), el('td', { text: p.meets ? '✓' : '' })));
+    }
+    list.append(body);
+    return el('details', { class: 'syn-details' }, el('summary', { text: `${s.visited.length} of ${s.points_total} points visited (levels: ${s.levels.map((l) => `${l.name} ${l.values.map(fmt).join(', ')}`).join('; ')})` }), list);
+  }
+}
+
+/** The params, those that the error levels (φ, W, ψ, V, η₀) use first. */
+function errorParams(model) {
+  const text = JSON.stringify([model.system?.phi, model.system?.W, model.system?.eta0, model.measurement?.psi, model.measurement?.V]);
+  const names = Object.keys(model.params ?? {});
+  const used = names.filter((n) => new RegExp(`(^|[^A-Za-z0-9_])${n.replace(/[^A-Za-z0-9_]/g, '')}($|[^A-Za-z0-9_])`).test(text));
+  return [...used, ...names.filter((n) => !used.includes(n))];
+}
+
+function paramsText(params) {
+  return Object.entries(params)
+    .map(([n, v]) => `${n} = ${fmt(v)}`)
+    .join(', ');
+}

@@ -1,0 +1,65 @@
+// The tabs of the run pane: Analysis (app.js), Synthesis (synthesis.js) and Monte
+// Carlo (simulation.js), all on the model in the editor. Arrow keys move between the
+// tabs; Ctrl+Enter runs and Esc cancels in the tab shown.
+
+import { SimulationView } from './simulation.js';
+import { SynthesisView } from './synthesis.js';
+
+/**
+ * `ctx`: {model(), showModelErrors(errors), download(name, type, text), fileStem(),
+ * server: whether a kea server answers}. Returns the name of the tab shown, as a function.
+ */
+export function mountTabs(ctx) {
+  const pane = document.getElementById('results-pane');
+  const tabs = [...document.querySelectorAll('#run-tabs [role=tab]')];
+  const views = {
+    synthesis: new SynthesisView(document.getElementById('synthesis-panel'), ctx),
+    simulation: new SimulationView(document.getElementById('simulation-panel'), ctx),
+  };
+  if (!ctx.server) {
+    for (const v of Object.values(views)) v.bar.disableServer('No kea server answers here (open the page through `kea serve`).');
+  }
+  const current = () => pane.dataset.tab ?? 'analysis';
+
+  function show(name, focus = false) {
+    pane.dataset.tab = name;
+    for (const t of tabs) {
+      const on = t.dataset.tab === name;
+      t.setAttribute('aria-selected', String(on));
+      t.tabIndex = on ? 0 : -1;
+      if (on && focus) t.focus();
+    }
+    for (const [key, v] of Object.entries(views)) {
+      v.root.hidden = key !== name;
+      if (key === name) v.draw?.();
+    }
+  }
+
+  tabs.forEach((t, i) => {
+    t.addEventListener('click', () => show(t.dataset.tab));
+    t.addEventListener('keydown', (e) => {
+      const step = { ArrowRight: 1, ArrowLeft: -1 }[e.key];
+      let next = step === undefined ? null : (i + step + tabs.length) % tabs.length;
+      if (e.key === 'Home') next = 0;
+      if (e.key === 'End') next = tabs.length - 1;
+      if (next === null) return;
+      e.preventDefault();
+      show(tabs[next].dataset.tab, true);
+    });
+  });
+
+  document.addEventListener('kea:model-changed', () => {
+    for (const v of Object.values(views)) v.markStale();
+    views.synthesis.refreshChoices();
+  });
+
+  document.addEventListener('keydown', (e) => {
+    const view = views[current()];
+    if (!view) return;
+    if ((e.ctrlKey || e.metaKey) && e.key === 'Enter') view.bar.run();
+    if (e.key === 'Escape' && view.bar.running) view.bar.cancel();
+  });
+
+  show(current());
+  return current;
+}

@@ -242,13 +242,20 @@ export class SimulationView {
     const log = this.log.checked;
     const trace = r.traces.states[i];
     const clean = (v) => (v === null || v === undefined || (log && !(v > 0)) ? null : v);
+    // On a linear scale the axis fits potential and real; a much larger χ (|A| makes it
+    // grow fast for oscillating blocks) runs off the top instead of flattening them.
+    const top = (key) => Math.max(0, ...(trace[key] ?? []).filter((v) => v !== null && Number.isFinite(v)));
+    const fitted = Math.max(top('potential_sko'), top('filtered_sko'));
+    const clipChi = !log && fitted > 0 && top('chi') > 3 * fitted;
     const data = [r.traces.t];
     const series = [{ label: 't' }];
     for (const [key, label, stroke, dash] of SERIES) {
       if (!trace[key]) continue;
       data.push(trace[key].map(clean));
-      series.push({ label, stroke, width: key === 'filtered_sko' ? 1.2 : 2, dash, value: (_, v) => (v === null ? '—' : fmt(v)) });
+      const shown = key === 'chi' && clipChi ? `${label} (beyond the top)` : label;
+      series.push({ label: shown, stroke, width: key === 'filtered_sko' ? 1.2 : 2, dash, value: (_, v) => (v === null ? '—' : fmt(v)) });
     }
+    const y = log ? { distr: 3 } : clipChi ? { range: () => [0, fitted * 1.15] } : {};
     this.plot?.destroy();
     this.chart.replaceChildren();
     this.plot = new uPlot(
@@ -256,7 +263,7 @@ export class SimulationView {
         title: `${trace.state}: potential SKO √R_ii against the real one (R = ${r.request.runs} runs)`,
         width: this.width(),
         height: 320,
-        scales: { x: { time: false }, y: log ? { distr: 3 } : {} },
+        scales: { x: { time: false }, y },
         axes: [
           { label: 't', values: (_, ticks) => ticks.map(tick) },
           { label: 'SKO', size: 70, values: (_, ticks) => ticks.map(tick) },

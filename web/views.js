@@ -222,11 +222,12 @@ export function routeErrors(errors, showModelErrors) {
 /** A failed run as an Error whose message names the problem (and where to look). */
 export function runError(e, ownErrors, modelCount) {
   if (e?.kind === 'cancelled') return e;
-  const parts = [e?.title ?? String(e)];
-  if (ownErrors.length) parts.push(ownErrors.map((x) => (x.path ? `${x.path}: ${x.message}` : x.message)).join('; '));
-  else if (e?.detail && e.detail !== e.title) parts.push(e.detail);
+  const parts = [];
+  if (ownErrors.length) parts.push(`Invalid request: ${ownErrors.map((x) => (x.path ? `${x.path}: ${x.message}` : x.message)).join('; ')}`);
+  else if (!modelCount) parts.push(e?.title ?? String(e), e?.detail && e.detail !== e.title ? e.detail : null);
+  else parts.push(e?.title && !e.title.includes(': ') ? e.title : 'Invalid model');
   if (modelCount) parts.push('see the marked model fields');
-  return new Error(parts.join(' — '));
+  return new Error(parts.filter(Boolean).join(' — '));
 }
 
 /** Mark the view's controls named by error paths (data-request-path) as invalid. */

@@ -293,6 +293,29 @@ test('an invalid request is marked at its control; a model error at its cell', a
   await page.waitForSelector('td[data-path="system.a[0][0]"] .cell-error', { state: 'detached', timeout: 10000 });
 });
 
+test('a long Monte Carlo run is cancelled, in the browser and on the server', async () => {
+  await page.selectOption('#preset', 'seed-example');
+  await page.waitForFunction(() => location.hash === '#preset=seed-example');
+  await page.fill('input[data-path="time.steps"]', '100000');
+  await page.click('#tab-simulation');
+  await page.fill('#mc-runs', '20000'); // 2e9 runs × steps: many seconds on either side; a chunk of 256 steps is quick
+  for (const where of ['browser', 'server']) {
+    await page.evaluate(() => (document.getElementById('mc-progress').value = 0));
+    await page.check(`input[name=mc-where][value=${where}]`);
+    await page.click('#mc-run');
+    await page.waitForFunction(() => document.getElementById('mc-progress').value > 0, null, { timeout: 30000 });
+    assert.ok(await page.$eval('#mc-progress', (p) => p.value < 1));
+    const start = Date.now();
+    await page.keyboard.press('Escape');
+    await page.waitForFunction(() => document.getElementById('mc-status').textContent === 'Cancelled.', null, { timeout: 10000 });
+    assert.ok(Date.now() - start < 5000, `${where}: cancelling took under 5 s`);
+    assert.equal(await page.isDisabled('#mc-run'), false);
+  }
+  const jobs = await (await fetch(`${server.url}/v1/jobs`)).json();
+  const items = jobs.items ?? jobs.jobs ?? jobs;
+  assert.ok(items.some((j) => j.kind === 'simulation' && j.status === 'cancelled'), JSON.stringify(items).slice(0, 500));
+});
+
 test('the page logged no console errors', () => {
   assert.deepEqual(consoleErrors, []);
 });

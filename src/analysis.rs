@@ -57,15 +57,15 @@ pub fn run(model: &CompiledModel, progress: &mut dyn Progress) -> Result<Analysi
 
 /// Running sums of one criterion of one state (3.24).
 #[derive(Clone, Copy, Debug, Default)]
-struct Avg {
-    sum: f64,
-    count: u64,
-    excluded: u64,
+pub(crate) struct Avg {
+    pub(crate) sum: f64,
+    pub(crate) count: u64,
+    pub(crate) excluded: u64,
 }
 
 impl Avg {
     #[inline(always)]
-    fn add(&mut self, num: f64, den: f64) {
+    pub(crate) fn add(&mut self, num: f64, den: f64) {
         let f = num / den;
         if den > 0.0 && f.is_finite() {
             self.sum += f;
@@ -74,7 +74,7 @@ impl Avg {
             self.excluded += 1;
         }
     }
-    fn mean(&self) -> Option<f64> {
+    pub(crate) fn mean(&self) -> Option<f64> {
         (self.count > 0).then(|| self.sum / self.count as f64)
     }
 }
@@ -82,10 +82,10 @@ impl Avg {
 /// Accumulated criteria of one set (bound or covariance): ratios η/ζ, ζ/χ, η/χ per
 /// state; the constant factors z_B/y_B are applied at the end (y_B is a sup over k).
 #[derive(Clone, Debug)]
-struct SetSums {
-    yz: Vec<Avg>,
-    zx: Vec<Avg>,
-    yx: Vec<Avg>,
+pub(crate) struct SetSums {
+    pub(crate) yz: Vec<Avg>,
+    pub(crate) zx: Vec<Avg>,
+    pub(crate) yx: Vec<Avg>,
 }
 
 impl SetSums {
@@ -680,7 +680,9 @@ pub fn laplace_lambda(p: f64) -> f64 {
     Normal::standard().inverse_cdf((1.0 + p) / 2.0)
 }
 
-fn criteria_set(
+/// Averaged (3.24) and weighted (3.25) criteria of one set from its running sums;
+/// `invalid[c]` nulls criterion c (yz, zx, yx) for every state with that reason.
+pub(crate) fn criteria_set(
     m: &CompiledModel,
     s: &SetSums,
     y_max: &[f64],

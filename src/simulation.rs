@@ -14,6 +14,7 @@
 //! result is bit-identical for a given seed whatever the executor. Memory is
 //! O(R·N + blocks·chunk), independent of D.
 
+use crate::analysis::{Avg, SetSums, criteria_set};
 use crate::error::{Error, FieldError};
 use crate::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym, mul_vec};
 use crate::result::*;
@@ -23,7 +24,6 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
 use std::ops::ControlFlow;
 
 /// Largest accepted number of runs R.
@@ -945,29 +945,6 @@ fn chi2_band(dof: f64, scale: f64) -> [f64; 2] {
     [c.inverse_cdf(lo) / scale, c.inverse_cdf(1.0 - lo) / scale]
 }
 
-/// Running average of one criterion (3.24), as in the analysis.
-#[derive(Clone, Copy, Debug, Default)]
-struct Avg {
-    sum: f64,
-    count: u64,
-    excluded: u64,
-}
-
-impl Avg {
-    fn add(&mut self, num: f64, den: f64) {
-        let f = num / den;
-        if den > 0.0 && f.is_finite() {
-            self.sum += f;
-            self.count += 1;
-        } else {
-            self.excluded += 1;
-        }
-    }
-    fn mean(&self) -> Option<f64> {
-        (self.count > 0).then(|| self.sum / self.count as f64)
-    }
-}
-
 /// Bucket averages of variances for the traces.
 struct Rows {
     bucket: u64,
@@ -1212,7 +1189,19 @@ fn run_n<const N: usize, E: Executor>(
     }
 
     // --- assemble
-    let monte_carlo = criteria_set(m, &mc, &analysis.y_max, &analysis.z_max);
+    let mc = SetSums {
+        yz: mc.0,
+        zx: mc.1,
+        yx: mc.2,
+    };
+    let monte_carlo = criteria_set(
+        m,
+        &mc,
+        &analysis.y_max,
+        &analysis.z_max,
+        "monte_carlo",
+        [None; 3],
+    );
     let mut criteria = analysis.criteria.clone();
     criteria.monte_carlo = Some(monte_carlo);
 
@@ -1332,137 +1321,6 @@ fn run_n<const N: usize, E: Executor>(
 
 /// The `monte_carlo` criteria set (3.20)–(3.26) from the sample SKOs, with the
 /// analysis's y_B and z_B.
-fn criteria_set(
-    m: &CompiledModel,
-    s: &(Vec<Avg>, Vec<Avg>, Vec<Avg>),
-    y_max: &[f64],
-    z_max: &[f64],
-) -> CriteriaSet {
-    let n = m.n_states();
-    let mut per_state = Vec::with_capacity(n);
-    for i in 0..n {
-        let pair = m.pair_of_state[i];
-        let yb = y_max[i];
-        let mut undefined = BTreeMap::new();
-        let zb = pair.map(|j| z_max[j]);
-        let mut finish = |name: &str, avg: &Avg, factor: Option<f64>, paired: bool| {
-            let why = if !paired {
-                Some(format!(
-                    "state \"{}\" has no paired measurement",
-                    m.states[i]
-                ))
-            } else if yb == 0.0 {
-                Some(format!(
-                    "y_B = 0: the mean of \"{}\" is identically zero",
-                    m.states[i]
-                ))
-            } else if factor.is_none() {
-                Some("z_B = 0: the mean measurement is identically zero".to_string())
-            } else if avg.count == 0 {
-                Some("every step has a zero denominator in the monte_carlo set".to_string())
-            } else {
-                None
-            };
-            match why {
-                Some(w) => {
-                    undefined.insert(name.to_string(), w);
-                    None
-                }
-                None => avg.mean().zip(factor).map(|(v, f)| v * f),
-            }
-        };
-        let f_yz = zb.filter(|z| *z > 0.0).map(|z| z / yb);
-        let f_zx = zb.filter(|z| *z > 0.0).map(|z| yb / z);
-        let yz = finish("yz", &s.0[i], f_yz, pair.is_some());
-        let zx = finish("zx", &s.1[i], f_zx, pair.is_some());
-        let yx = finish("yx", &s.2[i], Some(1.0), true);
-        per_state.push(StateCriteria {
-            state: m.states[i].clone(),
-            measurement: pair.map(|j| m.measurements[j].clone()),
-            yz,
-            zx,
-            yx,
-            undefined,
-            excluded_steps: ExcludedSteps {
-                yz: s.0[i].excluded,
-                zx: s.1[i].excluded,
-                yx: s.2[i].excluded,
-            },
-        });
-    }
-    let mut undefined = BTreeMap::new();
-    let mut weighted = |name: &str, given: Option<&Vec<f64>>, values: Vec<Option<f64>>| {
-        let defined = values.iter().filter(|v| v.is_some()).count();
-        let w: Vec<f64> = match given {
-            Some(w) => w.clone(),
-            None if defined > 0 => values
-                .iter()
-                .map(|v| {
-                    if v.is_some() {
-                        1.0 / defined as f64
-                    } else {
-                        0.0
-                    }
-                })
-                .collect(),
-            None => vec![0.0; values.len()],
-        };
-        let bad = (0..values.len()).find(|&i| w[i] > 0.0 && values[i].is_none());
-        let v = if defined == 0 {
-            undefined.insert(
-                name.to_string(),
-                "the criterion is undefined for every state".into(),
-            );
-            None
-        } else if let Some(i) = bad {
-            undefined.insert(
-                name.to_string(),
-                format!(
-                    "the criterion is undefined for weighted state \"{}\"",
-                    m.states[i]
-                ),
-            );
-            None
-        } else {
-            Some(
-                (0..values.len())
-                    .map(|i| w[i] * values[i].unwrap_or(0.0))
-                    .sum(),
-            )
-        };
-        (w, v)
-    };
-    let (w_yz, yz) = weighted(
-        "yz",
-        m.weights_yz.as_ref(),
-        per_state.iter().map(|p| p.yz).collect(),
-    );
-    let (w_zx, zx) = weighted(
-        "zx",
-        m.weights_zx.as_ref(),
-        per_state.iter().map(|p| p.zx).collect(),
-    );
-    let (w_yx, yx) = weighted(
-        "yx",
-        m.weights_yx.as_ref(),
-        per_state.iter().map(|p| p.yx).collect(),
-    );
-    CriteriaSet {
-        per_state,
-        weighted: Weighted {
-            yz,
-            zx,
-            yx,
-            weights: WeightsOut {
-                yz: w_yz,
-                zx: w_zx,
-                yx: w_yx,
-            },
-            undefined,
-        },
-    }
-}
-
 /// Traces of a simulation as CSV: t, then per state the sample and potential SKOs.
 pub fn traces_csv(r: &SimulationResult) -> String {
     use std::fmt::Write;

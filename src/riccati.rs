@@ -108,10 +108,12 @@ impl JosephStep {
     /// measurements' non-zeros of C as (row, col, value) with rows 0..nm, and Rv_k
     /// (nm×nm). Returns false if q_k is not positive definite.
     ///
-    ///     r = A R Aᵀ + B                       (2.1)
-    ///     q = C r Cᵀ + Rv                      (2.3)
-    ///     p = r Cᵀ q⁻¹   (Cholesky solve)      (2.5)
-    ///     R = h r hᵀ + p Rv pᵀ,  h = I − pC    (2.7), Joseph form
+    /// ```text
+    /// r = A R Aᵀ + B                       (2.1)
+    /// q = C r Cᵀ + Rv                      (2.3)
+    /// p = r Cᵀ q⁻¹   (Cholesky solve)      (2.5)
+    /// R = h r hᵀ + p Rv pᵀ,  h = I − pC    (2.7), Joseph form
+    /// ```
     /// computed as M = h r = r − p S (S = C r), h r hᵀ = M − M Cᵀ pᵀ,
     /// R = M + (p Rv − M Cᵀ) pᵀ, upper triangle mirrored so R stays symmetric.
     /// `n` is the state dimension (pass a compile-time constant where possible: the

@@ -3,6 +3,7 @@
 //! of METHOD §1.8 — real (simulated) against potential (Riccati) accuracy.
 
 use crate::Run;
+use crate::parallel::Rayon;
 use kea_core::simulation::{
     Executor, ModelError, SimulationRequest, SimulationResult, Truth, Verdict,
 };
@@ -11,48 +12,6 @@ use std::fmt::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
-
-/// Items split into contiguous slices, one scoped thread each, results in item order.
-/// The core's simulation gives bit-identical results whatever `threads` is.
-#[derive(Clone, Copy, Debug)]
-pub struct ScopedThreads(pub usize);
-
-impl ScopedThreads {
-    /// One thread per available core.
-    pub fn available() -> Self {
-        ScopedThreads(std::thread::available_parallelism().map_or(1, |n| n.get()))
-    }
-}
-
-impl Executor for ScopedThreads {
-    fn map<T: Send, R: Send, F: Fn(T) -> R + Sync>(&self, items: Vec<T>, f: F) -> Vec<R> {
-        let threads = self.0.max(1);
-        if threads == 1 || items.len() < 2 {
-            return items.into_iter().map(f).collect();
-        }
-        let per = items.len().div_ceil(threads);
-        let mut parts: Vec<Vec<T>> = Vec::with_capacity(threads);
-        let mut it = items.into_iter().peekable();
-        while it.peek().is_some() {
-            parts.push(it.by_ref().take(per).collect());
-        }
-        let f = &f;
-        std::thread::scope(|s| {
-            let handles: Vec<_> = parts
-                .into_iter()
-                .map(|p| s.spawn(move || p.into_iter().map(f).collect::<Vec<R>>()))
-                .collect();
-            handles
-                .into_iter()
-                .flat_map(|h| h.join().expect("a simulation thread panicked"))
-                .collect()
-        })
-    }
-
-    fn threads(&self) -> usize {
-        self.0.max(1)
-    }
-}
 
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 pub enum TruthArg {
@@ -138,9 +97,12 @@ impl Run for Args {
             },
             trace_points: self.trace_points,
         };
-        let exec = match self.threads {
-            Some(t) => ScopedThreads(t.max(1)),
-            None => ScopedThreads::available(),
+        let exec = match Rayon::new(self.threads) {
+            Ok(x) => x,
+            Err(e) => {
+                eprintln!("{e}");
+                return ExitCode::from(super::EXIT_FAILURE);
+            }
         };
         let set: Overrides = self.set.into_iter().collect();
         let start = Instant::now();

@@ -2,7 +2,7 @@
 //! trace_points?}` → the core's Monte Carlo result (METHOD §1.8).
 
 use super::{JobKind, JobOutput, PreparedJob, Work};
-use crate::cli::simulate::ScopedThreads;
+use crate::parallel::Rayon;
 use crate::serve::request;
 use kea_core::simulation::SimulationRequest;
 use kea_core::{Error, FieldError, Model, Overrides, Progress};
@@ -133,7 +133,7 @@ impl PreparedJob for Prepared {
 
     fn run(self: Box<Self>, progress: &mut dyn Progress) -> Result<JobOutput, Error> {
         let start = Instant::now();
-        let exec = ScopedThreads::available();
+        let exec = Rayon::new(None).map_err(|e| Error::invalid("", e))?;
         let mut result =
             kea_core::simulation::simulate(&self.model, &self.set, &self.sim, &exec, progress)
                 .map_err(request::locate)?;

@@ -5,6 +5,7 @@ use std::fmt::Write;
 
 fn cell(x: Option<f64>) -> String {
     match x {
+        Some(v) if v != 0.0 && !(1e-3..1e6).contains(&v.abs()) => format!("{v:.4e}"),
         Some(v) => format!("{v:.4}"),
         None => "—".to_string(),
     }

@@ -127,6 +127,38 @@ pub fn unknown_members(obj: &Map<String, Value>, allowed: &[&str]) -> Vec<FieldE
 }
 
 /// Parse `set` (parameter overrides): an object of finite numbers.
+/// The `model` and `set` members of a job request; problems are added to `errors`
+/// with paths into the request (`model.system.a[0][0]`, `set.q`).
+pub fn model_and_set(
+    obj: &Map<String, Value>,
+    errors: &mut Vec<FieldError>,
+) -> (Option<kea_core::Model>, Overrides) {
+    let model = match obj.get("model") {
+        None => {
+            errors.push(FieldError::new(
+                "model",
+                "missing: give `model` (a model object) or `model_id` (a stored model)",
+            ));
+            None
+        }
+        Some(v) => match kea_core::model_from_value(v.clone()) {
+            Ok(m) => Some(m),
+            Err(e) => {
+                errors.extend(e.with_prefix("model").field_errors());
+                None
+            }
+        },
+    };
+    let set = match overrides(obj.get("set")) {
+        Ok(s) => s,
+        Err(e) => {
+            errors.extend(e);
+            Overrides::new()
+        }
+    };
+    (model, set)
+}
+
 pub fn overrides(set: Option<&Value>) -> Result<Overrides, Vec<FieldError>> {
     let Some(set) = set else {
         return Ok(Overrides::new());

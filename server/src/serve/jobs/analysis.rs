@@ -2,7 +2,7 @@
 
 use super::{JobKind, JobOutput, PreparedJob, Work};
 use crate::serve::request;
-use kea_core::{Error, FieldError, Model, Overrides, Progress};
+use kea_core::{Error, Model, Overrides, Progress};
 use serde_json::Value;
 use std::time::Instant;
 
@@ -22,29 +22,7 @@ impl JobKind for Analysis {
             return Err(Error::invalid("", "expected a JSON object"));
         };
         let mut errors = request::unknown_members(obj, MEMBERS);
-        let model = match obj.get("model") {
-            None => {
-                errors.push(FieldError::new(
-                    "model",
-                    "missing: give `model` (a model object) or `model_id` (a stored model)",
-                ));
-                None
-            }
-            Some(v) => match kea_core::model_from_value(v.clone()) {
-                Ok(m) => Some(m),
-                Err(e) => {
-                    errors.extend(e.with_prefix("model").field_errors());
-                    None
-                }
-            },
-        };
-        let set = match request::overrides(obj.get("set")) {
-            Ok(s) => s,
-            Err(e) => {
-                errors.extend(e);
-                Overrides::new()
-            }
-        };
+        let (model, set) = request::model_and_set(obj, &mut errors);
         let Some(model) = model.filter(|_| errors.is_empty()) else {
             return Err(Error::Invalid(errors));
         };

@@ -34,29 +34,7 @@ impl JobKind for Simulation {
             return Err(Error::invalid("", "expected a JSON object"));
         };
         let mut errors = request::unknown_members(obj, MEMBERS);
-        let model = match obj.get("model") {
-            None => {
-                errors.push(FieldError::new(
-                    "model",
-                    "missing: give `model` (a model object) or `model_id` (a stored model)",
-                ));
-                None
-            }
-            Some(v) => match kea_core::model_from_value(v.clone()) {
-                Ok(m) => Some(m),
-                Err(e) => {
-                    errors.extend(e.with_prefix("model").field_errors());
-                    None
-                }
-            },
-        };
-        let set = match request::overrides(obj.get("set")) {
-            Ok(s) => s,
-            Err(e) => {
-                errors.extend(e);
-                Overrides::new()
-            }
-        };
+        let (model, set) = request::model_and_set(obj, &mut errors);
         // The simulation's own members, each parsed at its own path.
         let mut sim = SimulationRequest::new(0, 0);
         fn member<T: serde::de::DeserializeOwned>(

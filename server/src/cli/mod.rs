@@ -25,6 +25,27 @@ pub fn report_error(err: &kea_core::Error) -> ExitCode {
     }
 }
 
+/// Print a result as pretty JSON on stdout; on failure say so and return the exit code.
+pub fn print_json<T: serde::Serialize>(value: &T) -> Result<(), ExitCode> {
+    match serde_json::to_string_pretty(value) {
+        Ok(s) => {
+            print_text(&format!("{s}\n"));
+            Ok(())
+        }
+        Err(e) => {
+            eprintln!("cannot serialise the result: {e}");
+            Err(ExitCode::from(EXIT_FAILURE))
+        }
+    }
+}
+
+/// Write to stdout; a closed pipe (`kea … | head`) ends the output quietly instead of
+/// panicking as `print!` does.
+pub fn print_text(text: &str) {
+    use std::io::Write;
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
+}
+
 /// Parse one `--set name=value` argument.
 pub fn parse_override(arg: &str) -> Result<(String, f64), String> {
     let (name, value) = arg

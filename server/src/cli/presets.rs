@@ -41,7 +41,7 @@ impl Run for ShowArgs {
     fn run(self) -> ExitCode {
         match kea_core::presets::get_json(&self.name) {
             Some(json) => {
-                print!("{json}");
+                super::print_text(json);
                 if !json.ends_with('\n') {
                     println!();
                 }

@@ -119,15 +119,11 @@ impl Run for Args {
             return ExitCode::from(super::EXIT_FAILURE);
         }
         if self.json {
-            match serde_json::to_string_pretty(&result) {
-                Ok(s) => println!("{s}"),
-                Err(e) => {
-                    eprintln!("cannot serialise the result: {e}");
-                    return ExitCode::from(super::EXIT_FAILURE);
-                }
+            if let Err(code) = super::print_json(&result) {
+                return code;
             }
         } else {
-            print!("{}", table(&result, exec.threads()));
+            super::print_text(&table(&result, exec.threads()));
         }
         ExitCode::SUCCESS
     }

@@ -116,15 +116,11 @@ impl Run for Args {
         };
         result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         if self.json {
-            match serde_json::to_string_pretty(&result) {
-                Ok(s) => println!("{s}"),
-                Err(e) => {
-                    eprintln!("cannot serialise the result: {e}");
-                    return ExitCode::from(super::EXIT_FAILURE);
-                }
+            if let Err(code) = super::print_json(&result) {
+                return code;
             }
         } else {
-            print!("{}", synthesis::render_text(&result));
+            super::print_text(&synthesis::render_text(&result));
         }
         match result.status {
             Status::Found | Status::Table => ExitCode::SUCCESS,

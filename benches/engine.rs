@@ -7,6 +7,9 @@
 //!
 //! Each workload is timed `runs` times after one warm-up; the median is printed,
 //! with the per-step figure. One core: the engine is single-threaded.
+//!
+//! `KEA_BENCH_STEPS=20000 KEA_BENCH_RUNS=1` shrink every workload, for counting
+//! instructions under `valgrind --tool=callgrind` (load-independent figures).
 
 use kea_core::{Model, NoProgress, analyze, model_from_value};
 use serde_json::json;
@@ -93,43 +96,49 @@ fn main() {
         .filter(|a| !a.starts_with("--"))
         .collect();
     let want = |name: &str| filter.is_empty() || filter.iter().any(|f| name.contains(f.as_str()));
-    let d = 1_000_000;
+    let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<u64>().ok());
+    let d = env("KEA_BENCH_STEPS").unwrap_or(1_000_000);
+    let runs = |r: usize| env("KEA_BENCH_RUNS").map_or(r, |v| v as usize);
     for p in [4, 6, 8, 9, 10] {
         let name = format!("table1 P={p} time-varying a(t)");
         if want(&name) {
-            time(&name, &chain(p, d, p, true), 5);
+            time(&name, &chain(p, d, p, true), runs(5));
         }
     }
     if want("peer N=10 n=5") {
         // The Python peer's model (benches/python_peer.py): time-invariant, no shortcut.
         time(
             "peer N=10 n=5 time-invariant, shortcut off",
-            &chain_measured(10, 5, 200_000, 0, false),
-            5,
+            &chain_measured(10, 5, d / 5, 0, false),
+            runs(5),
         );
     }
     if want("n30 time-varying a(t)") {
-        time("n30 time-varying a(t)", &chain(30, d, 30, true), 1);
+        time("n30 time-varying a(t)", &chain(30, d, 30, true), runs(1));
     }
     if want("shortcut P=10 time-invariant") {
         time(
             "shortcut P=10 time-invariant, shortcut on",
             &chain(10, d, 0, true),
-            5,
+            runs(5),
         );
         time(
             "shortcut P=10 time-invariant, shortcut off",
             &chain(10, d, 0, false),
-            5,
+            runs(5),
         );
     }
     if want("expressions") {
         let with = time(
             "expressions P=10, 10 time-varying entries",
             &chain(10, d, 10, false),
-            5,
+            runs(5),
         );
-        let without = time("expressions P=10, constant a", &chain(10, d, 0, false), 5);
+        let without = time(
+            "expressions P=10, constant a",
+            &chain(10, d, 0, false),
+            runs(5),
+        );
         println!(
             "expression share: {:.1} % of the time-varying run",
             (with - without) / with * 100.0

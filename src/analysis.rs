@@ -7,9 +7,10 @@
 
 use crate::decimate::Decimator;
 use crate::error::Error;
-use crate::linalg::{cov_rel_diff, mul, mul_abt_sym, mul_vec, predict_cov, sparse_mul_vec};
+use crate::expr::TimeMatrix;
+use crate::linalg::{SparseRows, cov_rel_diff, mul, mul_abt_sym, predict_cov, sparse_mul_vec};
 use crate::result::*;
-use crate::riccati::JosephStep;
+use crate::riccati::{Prepared, SequentialJoseph};
 use crate::steps::select_steps;
 use crate::validate::{CompiledModel, MeasurementNoise, StepPlan};
 use crate::{Progress, riccati};
@@ -74,6 +75,16 @@ impl Avg {
             self.excluded += 1;
         }
     }
+    /// Add a ratio computed by the caller; `den_positive`: its denominator was > 0.
+    #[inline(always)]
+    pub(crate) fn add_ratio(&mut self, f: f64, den_positive: bool) {
+        if den_positive && f.is_finite() {
+            self.sum += f;
+            self.count += 1;
+        } else {
+            self.excluded += 1;
+        }
+    }
     pub(crate) fn mean(&self) -> Option<f64> {
         (self.count > 0).then(|| self.sum / self.count as f64)
     }
@@ -117,8 +128,6 @@ struct Engine<'m, const N: usize> {
     /// N and n (measurements), L, M.
     nn: usize,
     nm: usize,
-    nl: usize,
-    ms: usize,
     dt: f64,
 }
 
@@ -131,8 +140,6 @@ impl<'m, const N: usize> Engine<'m, N> {
             steps,
             nn,
             nm: m.n_measurements(),
-            nl: m.b.cols,
-            ms: m.noise.sources(),
             dt: (m.t_end - m.t0) / steps as f64,
         }
     }
@@ -144,144 +151,16 @@ impl<'m, const N: usize> Engine<'m, N> {
 
     fn run(&self, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
         let n = self.n();
-        let (nm, nl, ms, dt) = (self.nm, self.nl, self.ms, self.dt);
+        let (nm, dt) = (self.nm, self.dt);
         let m = self.m;
         let t0 = m.t0;
-        let mut a_fn = m.a.clone();
-        let mut u_fn = m.u.clone();
-        let mut b_fn = m.b.clone();
-        let mut noise_fn = m.noise.clone();
-
-        // C as its non-zero entries (row, col, value): selection matrices cost O(n).
-        let c_nz: Vec<(usize, usize, f64)> = (0..nm)
-            .flat_map(|j| (0..n).map(move |i| (j, i)))
-            .filter_map(|(j, i)| {
-                let v = m.c[j * n + i];
-                (v != 0.0).then_some((j, i, v))
-            })
-            .collect();
-
-        // --- per-step inputs (recomputed only if time-varying)
-        // A = I + aΔt (1.11), dense, only for the stationary solution of invariant models
-        let mut big_a = if m.a.is_constant() {
-            vec![0.0; n * n]
-        } else {
-            Vec::new()
-        };
-        let mut bd = vec![0.0; n * nl]; // b Δt
-        let mut bw = vec![0.0; n * nl]; // (b Δt) W
-        let mut big_b = vec![0.0; n * n]; // B = bΔt W (bΔt)ᵀ (1.15)
-        let mut b_phi = vec![0.0; n]; // |bΔt| φ (3.16)
-        let mut gamma = vec![0.0; nm * ms]; // Γ_k
-        let mut gv = vec![0.0; nm * ms];
-        let mut rv = vec![0.0; nm * nm]; // Rv = Γ V Γᵀ
-        let mut zeta = vec![0.0; nm]; // ζ = |Γ| ψ (3.17)
-        let mut meas_sko = vec![0.0; nm]; // sqrt(diag Rv)
-        let mut u_dt = vec![0.0; n];
-
-        // The structure of a: entries that vary or are non-zero; A = I + E, E = aΔt.
-        let a_pattern: Vec<(usize, usize)> = (0..n)
-            .flat_map(|i| (0..n).map(move |j| (i, j)))
-            .filter(|&(i, j)| m.a.values[i * n + j] != 0.0 || m.a.varies(i * n + j))
-            .collect();
-        // |A| keeps the diagonal even where a_ii = 0 (A_ii = 1).
-        let abs_pattern: Vec<(usize, usize)> = (0..n)
-            .flat_map(|i| (0..n).map(move |j| (i, j)))
-            .filter(|&(i, j)| i == j || m.a.values[i * n + j] != 0.0 || m.a.varies(i * n + j))
-            .collect();
-        let mut e_nz: Vec<(usize, usize, f64)> =
-            a_pattern.iter().map(|&(i, j)| (i, j, 0.0)).collect();
-        let mut abs_nz: Vec<(usize, usize, f64)> =
-            abs_pattern.iter().map(|&(i, j)| (i, j, 0.0)).collect();
-        let update_a = |a_fn: &crate::expr::TimeMatrix,
-                        big_a: &mut [f64],
-                        e_nz: &mut [(usize, usize, f64)],
-                        abs_nz: &mut [(usize, usize, f64)]| {
-            for e in e_nz.iter_mut() {
-                e.2 = a_fn.values[e.0 * n + e.1] * dt;
-            }
-            for e in abs_nz.iter_mut() {
-                let v = a_fn.values[e.0 * n + e.1] * dt + if e.0 == e.1 { 1.0 } else { 0.0 };
-                e.2 = v.abs();
-            }
-            if !big_a.is_empty() {
-                for i in 0..n {
-                    for j in 0..n {
-                        big_a[i * n + j] =
-                            a_fn.values[i * n + j] * dt + if i == j { 1.0 } else { 0.0 };
-                    }
-                }
-            }
-        };
-        let w = &m.w;
-        let update_b = |b_fn: &crate::expr::TimeMatrix,
-                        bd: &mut [f64],
-                        bw: &mut [f64],
-                        big_b: &mut [f64],
-                        b_phi: &mut [f64]| {
-            for (d, s) in bd.iter_mut().zip(&b_fn.values) {
-                *d = s * dt;
-            }
-            mul(bw, bd, w, n, nl, nl);
-            mul_abt_sym(big_b, bw, bd, None, n, nl);
-            for i in 0..n {
-                b_phi[i] = (0..nl).map(|l| bd[i * nl + l].abs() * m.phi[l]).sum();
-            }
-        };
-        let v = &m.v;
-        let update_gamma = |noise_fn: &MeasurementNoise,
-                            gamma: &mut [f64],
-                            gv: &mut [f64],
-                            rv: &mut [f64],
-                            zeta: &mut [f64],
-                            meas_sko: &mut [f64]| {
-            match noise_fn {
-                MeasurementNoise::Gamma(g) => gamma.copy_from_slice(&g.values),
-                // Γ = C g (the seed's form Z = c (y + gΦ))
-                MeasurementNoise::SeedG(g) => mul(gamma, &m.c, &g.values, nm, n, ms),
-            }
-            mul(gv, gamma, v, nm, ms, ms);
-            mul_abt_sym(rv, gv, gamma, None, nm, ms);
-            for j in 0..nm {
-                zeta[j] = (0..ms).map(|l| gamma[j * ms + l].abs() * m.psi[l]).sum();
-                meas_sko[j] = rv[j * nm + j].max(0.0).sqrt();
-            }
-        };
-        let time_err = |path: &str, k: u64, t: f64| Error::Numerical {
-            step: k,
-            t,
-            path: path.to_string(),
-            message: "the expression is not finite here".to_string(),
-        };
-
-        // Constant inputs once.
-        a_fn.update(t0).map_err(|p| time_err(p, 0, t0))?;
-        b_fn.update(t0).map_err(|p| time_err(p, 0, t0))?;
-        update_a(&a_fn, &mut big_a, &mut e_nz, &mut abs_nz);
-        update_b(&b_fn, &mut bd, &mut bw, &mut big_b, &mut b_phi);
-        let t1 = t0 + dt;
-        update_noise(&mut noise_fn, t1).map_err(|p| time_err(&p, 1, t1))?;
-        update_gamma(
-            &noise_fn,
-            &mut gamma,
-            &mut gv,
-            &mut rv,
-            &mut zeta,
-            &mut meas_sko,
-        );
-        let a_const = a_fn.is_constant();
-        let b_const = b_fn.is_constant();
-        let g_const = noise_fn.matrix().is_constant();
-        let u_const = u_fn.is_constant();
-        u_fn.update(t0).map_err(|p| time_err(p, 0, t0))?;
-        for i in 0..n {
-            u_dt[i] = u_fn.values[i] * dt;
-        }
-        let invariant = a_const && b_const && g_const;
+        let mut inp = Inputs::new(m, n, dt);
+        inp.at(m, 1, true)?;
+        let invariant = m.is_time_invariant();
 
         // The stationary predicted covariance r∞ (doubling), for the shortcut.
         let r_inf = if invariant {
-            riccati::dare_doubling(&big_a, &c_nz, &big_b, &rv, n, nm)
+            riccati::dare_doubling(&inp.dense_a(), &inp.c_nz, &inp.big_b, &inp.rv, n, nm)
         } else {
             None
         };
@@ -294,8 +173,7 @@ impl<'m, const N: usize> Engine<'m, N> {
 
         // --- state
         let mut y = m.y0.clone();
-        let mut y_next = vec![0.0; n];
-        let mut ydot = vec![0.0; n];
+        let mut ey = vec![0.0; n];
         let mut y_max: Vec<f64> = y.iter().map(|v| v.abs()).collect();
         let mut ydot_max = vec![0.0f64; n];
         let mut big_r = vec![0.0; n * n]; // R_k
@@ -303,20 +181,20 @@ impl<'m, const N: usize> Engine<'m, N> {
             big_r[i * n + i] = m.eta0[i] * m.eta0[i];
         }
         let mut p_y = big_r.clone(); // open-loop covariance P^Y
+        let mut p_next = vec![0.0; n * n];
+        let mut work = vec![0.0; n * n];
         let mut eta = m.eta0.clone();
         let mut chi = vec![0.0; n]; // χ(t0) = 0 (3.18)
         let mut xi = vec![0.0; n];
-        let mut tmp_nn = vec![0.0; n * n];
-        let mut tmp_p = vec![0.0; n * n];
-        let mut joseph = JosephStep::new(n, nm);
+        let mut joseph = SequentialJoseph::new(n, nm);
+        let mut prep = Prepared::new(n, nm);
         let mut schedule = m.schedule.clone();
         let mut avail = vec![true; nm];
-        let mut c_nz_k: Vec<(usize, usize, f64)> = Vec::with_capacity(c_nz.len());
-        let mut rv_k = vec![0.0; nm * nm];
-        let mut gain_k = vec![0.0; n * nm];
+        let mut avail_prev: Option<Vec<bool>> = None;
         let mut abs_h = vec![0.0; n * n]; // |I − pC|
-        let mut abs_p = vec![0.0; n * nm];
-        let mut tmp_n = vec![0.0; n];
+        let mut pz = vec![0.0; n]; // |p| ζ (3.19)
+        let mut pot = vec![0.0; n]; // sqrt(diag R_k)
+        let mut inv_pot = vec![0.0; n];
 
         let mut bound = SetSums::new(n);
         let mut cov = SetSums::new(n);
@@ -332,51 +210,25 @@ impl<'m, const N: usize> Engine<'m, N> {
         let mut steady_cov: Option<(Vec<f64>, Vec<f64>)> = None;
 
         for k in 1..=self.steps {
-            let t_prev = t0 + (k - 1) as f64 * dt;
             let t_k = t0 + k as f64 * dt;
-
-            // (1.11)–(1.15) inputs at t_{k−1}; Γ at t_k.
-            if !a_const && k > 1 {
-                a_fn.update(t_prev).map_err(|p| time_err(p, k, t_prev))?;
-                update_a(&a_fn, &mut big_a, &mut e_nz, &mut abs_nz);
-            }
-            if !b_const && k > 1 {
-                b_fn.update(t_prev).map_err(|p| time_err(p, k, t_prev))?;
-                update_b(&b_fn, &mut bd, &mut bw, &mut big_b, &mut b_phi);
-            }
-            if !u_const && k > 1 {
-                u_fn.update(t_prev).map_err(|p| time_err(p, k, t_prev))?;
-                for i in 0..n {
-                    u_dt[i] = u_fn.values[i] * dt;
-                }
-            }
-            if !g_const && k > 1 {
-                update_noise(&mut noise_fn, t_k).map_err(|p| time_err(&p, k, t_k))?;
-                update_gamma(
-                    &noise_fn,
-                    &mut gamma,
-                    &mut gv,
-                    &mut rv,
-                    &mut zeta,
-                    &mut meas_sko,
-                );
+            if k > 1 {
+                inp.at(m, k, false)?;
             }
 
-            // ẏ(t_{k−1}) = a y + u (1.4); y_k = A y_{k−1} + uΔt (3.3)
-            mul_vec(&mut ydot, &a_fn.values, &y, n, n);
-            sparse_mul_vec(&mut y_next, &e_nz, &y, n);
+            // y_k = A y_{k−1} + uΔt (3.3), A = I + E; ẏ(t_{k−1}) = a y + u (1.4)
+            sparse_mul_vec(&mut ey, &inp.e.nz, &y, n);
             for i in 0..n {
-                let d = (ydot[i] + u_fn.values[i]).abs();
+                let d = (ey[i] / dt + inp.u[i]).abs();
                 if d > ydot_max[i] {
                     ydot_max[i] = d;
                 }
-                y[i] += y_next[i] + u_dt[i];
+                y[i] += ey[i] + inp.u_dt[i];
                 let ya = y[i].abs();
                 if ya > y_max[i] {
                     y_max[i] = ya;
                 }
             }
-            if !y[0].is_finite() || y.iter().any(|v| !v.is_finite()) {
+            if !y.iter().all(|v| v.is_finite()) {
                 return Err(Error::Numerical {
                     step: k,
                     t: t_k,
@@ -393,52 +245,17 @@ impl<'m, const N: usize> Engine<'m, N> {
                         .mask(k, t_k, &mut avail)
                         .map_err(|p| time_err(&p, k, t_k))?,
                 };
-                let ok = if all {
-                    joseph.step(n, &mut big_r, &e_nz, &big_b, &c_nz, &rv, nm)
-                } else {
-                    // Compact C and Rv to the available rows.
-                    let mut idx = Vec::with_capacity(nm);
-                    for (j, a) in avail.iter().enumerate() {
-                        if *a {
-                            idx.push(j);
-                        }
+                let mask_changed = avail_prev.as_deref() != Some(&avail[..]);
+                if k == 1 || inp.rv_changed || mask_changed {
+                    let mask = (!all).then_some(&avail[..]);
+                    prep.prepare(&m.c, &inp.rv, mask, n, nm)
+                        .map_err(|()| singular(k, t_k))?;
+                    if mask_changed {
+                        avail_prev = Some(avail.clone());
                     }
-                    let nk = idx.len();
-                    c_nz_k.clear();
-                    for &(j, i, c) in &c_nz {
-                        if let Some(jj) = idx.iter().position(|x| *x == j) {
-                            c_nz_k.push((jj, i, c));
-                        }
-                    }
-                    for (a, &ja) in idx.iter().enumerate() {
-                        for (b, &jb) in idx.iter().enumerate() {
-                            rv_k[a * nk + b] = rv[ja * nm + jb];
-                        }
-                    }
-                    let ok = joseph.step(n, &mut big_r, &e_nz, &big_b, &c_nz_k, &rv_k, nk);
-                    gain_k[..n * nk].copy_from_slice(&joseph.gain[..n * nk]);
-                    joseph.gain[..n * nm].fill(0.0);
-                    for i in 0..n {
-                        for (a, &j) in idx.iter().enumerate() {
-                            joseph.gain[i * nm + j] = gain_k[i * nk + a];
-                        }
-                    }
-                    ok
-                };
-                if !ok {
-                    return Err(Error::Numerical {
-                        step: k,
-                        t: t_k,
-                        path: "measurement".into(),
-                        message: "the innovation covariance q = C r Cᵀ + Γ V Γᵀ is singular (not positive definite): a measurement has no error and its direction of the state is already known exactly; give non-zero psi/V or eta0".into(),
-                    });
                 }
-                // |I − pC| and |p| for the bound (3.19)
-                for (h, x) in abs_h.iter_mut().zip(&joseph.h) {
-                    *h = x.abs();
-                }
-                for (ap, g) in abs_p.iter_mut().zip(&joseph.gain[..n * nm]) {
-                    *ap = g.abs();
+                if !joseph.step::<N>(n, &mut big_r, &inp.e, &inp.big_b, &prep) {
+                    return Err(singular(k, t_k));
                 }
                 for i in 0..n {
                     let d = big_r[i * n + i];
@@ -450,45 +267,52 @@ impl<'m, const N: usize> Engine<'m, N> {
                             message: "the filtered covariance overflowed: the model diverges faster than f64 can follow on this interval".into(),
                         });
                     }
+                    pot[i] = d.max(0.0).sqrt();
+                    inv_pot[i] = 1.0 / pot[i];
+                }
+                // |I − pC| and |p| ζ for the bound (3.19)
+                for (h, x) in abs_h.iter_mut().zip(&joseph.h) {
+                    *h = x.abs();
+                }
+                pz.fill(0.0);
+                for (j, g) in joseph.gain_t.chunks_exact(n).enumerate() {
+                    let z = inp.zeta[j];
+                    for (p, g) in pz.iter_mut().zip(g) {
+                        *p += g.abs() * z;
+                    }
                 }
                 // Steady state: r_k within STEADY_TOL of r∞ (then R, p are stationary too).
-                if let Some(r_inf) = &r_inf {
-                    if steady_at.is_none()
-                        && diag_close(&joseph.r_pred, r_inf, n, STEADY_TOL)
-                        && cov_rel_diff(&joseph.r_pred, r_inf, n) <= STEADY_TOL
-                    {
-                        steady_at = Some(k);
-                        steady_cov = Some((big_r.clone(), joseph.gain[..n * nm].to_vec()));
-                        if m.steady_state_shortcut {
-                            frozen_at = Some(k);
-                        }
+                if let Some(r_inf) = &r_inf
+                    && steady_at.is_none()
+                    && diag_close(&joseph.r_pred, r_inf, n, STEADY_TOL)
+                    && cov_rel_diff(&joseph.r_pred, r_inf, n) <= STEADY_TOL
+                {
+                    steady_at = Some(k);
+                    steady_cov = Some((big_r.clone(), gain_rows(&joseph.gain_t, n, nm)));
+                    if m.steady_state_shortcut {
+                        frozen_at = Some(k);
                     }
                 }
             }
 
             // Open-loop covariance P^Y = A P Aᵀ + B (§1.5, exact second moments)
             if open_diverged.is_none() {
-                tmp_p.copy_from_slice(&p_y);
-                predict_cov(&mut p_y, &tmp_p, &e_nz, &big_b, &mut tmp_nn, n);
+                predict_cov::<N>(&mut p_next, &p_y, &inp.e, &inp.big_b, &mut work, n);
+                std::mem::swap(&mut p_y, &mut p_next);
                 if !(0..n).all(|i| p_y[i * n + i].is_finite()) {
                     open_diverged = Some((k, t_k));
                 }
             }
 
-            // Bound propagation (3.16)–(3.19)
+            // Bound propagation (3.16)–(3.19): η = |A| η + |bΔt| φ, χ = |h| |A| χ + |p| ζ
             if bound_diverged.is_none() {
-                sparse_mul_vec(&mut tmp_n, &abs_nz, &eta, n);
+                sparse_mul_vec(&mut xi, &inp.abs_a.nz, &eta, n);
                 for i in 0..n {
-                    eta[i] = tmp_n[i] + b_phi[i];
+                    eta[i] = xi[i] + inp.b_phi[i];
                 }
-                sparse_mul_vec(&mut xi, &abs_nz, &chi, n);
-                mul_vec(&mut chi, &abs_h, &xi, n, n);
-                for i in 0..n {
-                    let mut s = 0.0;
-                    for j in 0..nm {
-                        s += abs_p[i * nm + j] * zeta[j];
-                    }
-                    chi[i] += s;
+                sparse_mul_vec(&mut xi, &inp.abs_a.nz, &chi, n);
+                for (c, (h, p)) in chi.iter_mut().zip(abs_h.chunks_exact(n).zip(&pz)) {
+                    *c = h.iter().zip(&xi).map(|(a, b)| a * b).sum::<f64>() + p;
                 }
                 if !eta.iter().chain(chi.iter()).all(|v| v.is_finite()) {
                     bound_diverged = Some((k, t_k));
@@ -500,21 +324,26 @@ impl<'m, const N: usize> Engine<'m, N> {
             // Criteria (3.23)–(3.24) as ratios; traces.
             dec.begin(t_k);
             for i in 0..n {
-                let pot = big_r[i * n + i].max(0.0).sqrt();
-                let open = p_y[i * n + i].max(0.0).sqrt();
                 let base = i * SERIES;
                 dec.put(base + S_Y, k, y[i]);
-                dec.put(base + S_POT, k, pot);
+                dec.put(base + S_POT, k, pot[i]);
+                let inv_chi = 1.0 / chi[i];
+                let ryx = eta[i] * inv_chi;
+                let open = if open_ok {
+                    p_y[i * n + i].max(0.0).sqrt()
+                } else {
+                    0.0
+                };
                 if bound_ok {
-                    bound.yx[i].add(eta[i], chi[i]);
+                    bound.yx[i].add_ratio(ryx, chi[i] > 0.0);
                     dec.put(base + S_ETA, k, eta[i]);
                     dec.put(base + S_CHI, k, chi[i]);
                     if chi[i] > 0.0 {
-                        dec.put(base + S_RYX, k, eta[i] / chi[i]);
+                        dec.put(base + S_RYX, k, ryx);
                     }
                 }
                 if open_ok {
-                    cov.yx[i].add(open, pot);
+                    cov.yx[i].add_ratio(open * inv_pot[i], pot[i] > 0.0);
                     dec.put(base + S_OPEN, k, open);
                 }
                 if let Some(j) = pair[i] {
@@ -526,22 +355,24 @@ impl<'m, const N: usize> Engine<'m, N> {
                         cov.zx[i].excluded += 1;
                         continue;
                     }
-                    let (zb, zc) = (zeta[j], meas_sko[j]);
+                    let (zb, zc) = (inp.zeta[j], inp.meas_sko[j]);
                     dec.put(base + S_ZETA, k, zb);
                     dec.put(base + S_MEAS, k, zc);
-                    cov.zx[i].add(zc, pot);
+                    cov.zx[i].add_ratio(zc * inv_pot[i], pot[i] > 0.0);
                     if bound_ok {
-                        bound.yz[i].add(eta[i], zb);
-                        bound.zx[i].add(zb, chi[i]);
+                        let ryz = eta[i] * inp.inv_zeta[j];
+                        let rzx = zb * inv_chi;
+                        bound.yz[i].add_ratio(ryz, zb > 0.0);
+                        bound.zx[i].add_ratio(rzx, chi[i] > 0.0);
                         if zb > 0.0 {
-                            dec.put(base + S_RYZ, k, eta[i] / zb);
+                            dec.put(base + S_RYZ, k, ryz);
                         }
                         if chi[i] > 0.0 {
-                            dec.put(base + S_RZX, k, zb / chi[i]);
+                            dec.put(base + S_RZX, k, rzx);
                         }
                     }
                     if open_ok {
-                        cov.yz[i].add(open, zc);
+                        cov.yz[i].add_ratio(open * inp.inv_meas[j], zc > 0.0);
                     }
                 }
             }
@@ -604,17 +435,17 @@ impl<'m, const N: usize> Engine<'m, N> {
                 })
             })
             .collect();
-        let zeta_state: Vec<f64> = zeta.clone();
+        let zeta_state: Vec<f64> = inp.zeta.clone();
         let final_ = Final {
             covariance: to_rows(&big_r, n),
-            gain: to_rows(&joseph.gain[..n * nm], nm),
+            gain: to_rows(&gain_rows(&joseph.gain_t, n, nm), nm),
             predicted_covariance: to_rows(&joseph.r_pred, n),
             eta: eta.clone(),
             zeta: zeta_state.clone(),
             chi: chi.clone(),
             potential_sko: (0..n).map(|i| big_r[i * n + i].max(0.0).sqrt()).collect(),
             open_loop_sko: (0..n).map(|i| p_y[i * n + i].max(0.0).sqrt()).collect(),
-            measured_sko: meas_sko.clone(),
+            measured_sko: inp.meas_sko.clone(),
             delta_y: eta.iter().map(|x| lambda * x).collect(),
             delta_z: zeta_state.iter().map(|x| lambda * x).collect(),
             delta_x: chi.iter().map(|x| lambda * x).collect(),
@@ -658,6 +489,193 @@ impl<'m, const N: usize> Engine<'m, N> {
             warnings,
         })
     }
+}
+
+/// The model's inputs at a step — A = I + aΔt (1.11), B = bΔt W (bΔt)ᵀ (1.15),
+/// uΔt, Rv = Γ V Γᵀ, and the bound's |A|, |bΔt| φ (3.16), ζ = |Γ| ψ (3.17) — at
+/// t_{k−1} (Γ at t_k). Constant parts are computed once; `at` re-evaluates the rest.
+struct Inputs {
+    n: usize,
+    nm: usize,
+    dt: f64,
+    a_fn: TimeMatrix,
+    b_fn: TimeMatrix,
+    u_fn: TimeMatrix,
+    noise_fn: MeasurementNoise,
+    /// C's non-zeros (row, col, value).
+    c_nz: Vec<(usize, usize, f64)>,
+    /// E = aΔt and |A| = |I + aΔt| on a's pattern (the diagonal always in |A|).
+    e: SparseRows,
+    abs_a: SparseRows,
+    bd: Vec<f64>,
+    bw: Vec<f64>,
+    big_b: Vec<f64>,
+    b_phi: Vec<f64>,
+    gamma: Vec<f64>,
+    gv: Vec<f64>,
+    rv: Vec<f64>,
+    /// Rv was re-evaluated at the last `at`.
+    rv_changed: bool,
+    zeta: Vec<f64>,
+    inv_zeta: Vec<f64>,
+    /// sqrt(diag Rv) and its reciprocal.
+    meas_sko: Vec<f64>,
+    inv_meas: Vec<f64>,
+    u: Vec<f64>,
+    u_dt: Vec<f64>,
+}
+
+impl Inputs {
+    fn new(m: &CompiledModel, n: usize, dt: f64) -> Self {
+        let nm = m.n_measurements();
+        let (nl, ms) = (m.b.cols, m.noise.sources());
+        let c_nz = (0..nm)
+            .flat_map(|j| (0..n).map(move |i| (j, i)))
+            .filter_map(|(j, i)| {
+                let v = m.c[j * n + i];
+                (v != 0.0).then_some((j, i, v))
+            })
+            .collect();
+        let in_a = |i: usize, j: usize| m.a.values[i * n + j] != 0.0 || m.a.varies(i * n + j);
+        let all = (0..n).flat_map(|i| (0..n).map(move |j| (i, j)));
+        Inputs {
+            n,
+            nm,
+            dt,
+            a_fn: m.a.clone(),
+            b_fn: m.b.clone(),
+            u_fn: m.u.clone(),
+            noise_fn: m.noise.clone(),
+            c_nz,
+            e: SparseRows::with_pattern(n, all.clone().filter(|&(i, j)| in_a(i, j)).collect()),
+            abs_a: SparseRows::with_pattern(
+                n,
+                all.filter(|&(i, j)| i == j || in_a(i, j)).collect(),
+            ),
+            bd: vec![0.0; n * nl],
+            bw: vec![0.0; n * nl],
+            big_b: vec![0.0; n * n],
+            b_phi: vec![0.0; n],
+            gamma: vec![0.0; nm * ms],
+            gv: vec![0.0; nm * ms],
+            rv: vec![0.0; nm * nm],
+            rv_changed: true,
+            zeta: vec![0.0; nm],
+            inv_zeta: vec![0.0; nm],
+            meas_sko: vec![0.0; nm],
+            inv_meas: vec![0.0; nm],
+            u: vec![0.0; n],
+            u_dt: vec![0.0; n],
+        }
+    }
+
+    /// Inputs of step k (a, b, u at t_{k−1}, Γ at t_k): everything when `first`,
+    /// else only what depends on t.
+    #[inline(always)]
+    fn at(&mut self, m: &CompiledModel, k: u64, first: bool) -> Result<(), Error> {
+        let (n, nm, dt) = (self.n, self.nm, self.dt);
+        let t_prev = m.t0 + (k - 1) as f64 * dt;
+        let t_k = m.t0 + k as f64 * dt;
+        if first || !self.a_fn.is_constant() {
+            self.a_fn
+                .update(t_prev)
+                .map_err(|p| time_err(p, k, t_prev))?;
+            let a = &self.a_fn.values;
+            for e in self.e.nz.iter_mut() {
+                e.2 = a[e.0 * n + e.1] * dt;
+            }
+            for e in self.abs_a.nz.iter_mut() {
+                let v = a[e.0 * n + e.1] * dt + if e.0 == e.1 { 1.0 } else { 0.0 };
+                e.2 = v.abs();
+            }
+        }
+        if first || !self.b_fn.is_constant() {
+            self.b_fn
+                .update(t_prev)
+                .map_err(|p| time_err(p, k, t_prev))?;
+            let nl = self.b_fn.cols;
+            for (d, s) in self.bd.iter_mut().zip(&self.b_fn.values) {
+                *d = s * dt;
+            }
+            mul(&mut self.bw, &self.bd, &m.w, n, nl, nl);
+            mul_abt_sym(&mut self.big_b, &self.bw, &self.bd, None, n, nl);
+            for i in 0..n {
+                self.b_phi[i] = (0..nl).map(|l| self.bd[i * nl + l].abs() * m.phi[l]).sum();
+            }
+        }
+        if first || !self.u_fn.is_constant() {
+            self.u_fn
+                .update(t_prev)
+                .map_err(|p| time_err(p, k, t_prev))?;
+            for i in 0..n {
+                self.u[i] = self.u_fn.values[i];
+                self.u_dt[i] = self.u[i] * dt;
+            }
+        }
+        self.rv_changed = first || !self.noise_fn.matrix().is_constant();
+        if self.rv_changed {
+            update_noise(&mut self.noise_fn, t_k).map_err(|p| time_err(&p, k, t_k))?;
+            let ms = self.gamma.len() / nm.max(1);
+            match &self.noise_fn {
+                MeasurementNoise::Gamma(g) => self.gamma.copy_from_slice(&g.values),
+                // Γ = C g (the seed's form Z = c (y + gΦ))
+                MeasurementNoise::SeedG(g) => mul(&mut self.gamma, &m.c, &g.values, nm, n, ms),
+            }
+            mul(&mut self.gv, &self.gamma, &m.v, nm, ms, ms);
+            mul_abt_sym(&mut self.rv, &self.gv, &self.gamma, None, nm, ms);
+            for j in 0..nm {
+                self.zeta[j] = (0..ms)
+                    .map(|l| self.gamma[j * ms + l].abs() * m.psi[l])
+                    .sum();
+                self.meas_sko[j] = self.rv[j * nm + j].max(0.0).sqrt();
+                self.inv_zeta[j] = 1.0 / self.zeta[j];
+                self.inv_meas[j] = 1.0 / self.meas_sko[j];
+            }
+        }
+        Ok(())
+    }
+
+    /// A = I + aΔt, dense (for the stationary solution).
+    fn dense_a(&self) -> Vec<f64> {
+        let n = self.n;
+        let mut a = vec![0.0; n * n];
+        for i in 0..n {
+            a[i * n + i] = 1.0;
+        }
+        for &(i, j, v) in &self.e.nz {
+            a[i * n + j] += v;
+        }
+        a
+    }
+}
+
+fn time_err(path: &str, k: u64, t: f64) -> Error {
+    Error::Numerical {
+        step: k,
+        t,
+        path: path.to_string(),
+        message: "the expression is not finite here".to_string(),
+    }
+}
+
+fn singular(k: u64, t: f64) -> Error {
+    Error::Numerical {
+        step: k,
+        t,
+        path: "measurement".into(),
+        message: "the innovation covariance q = C r Cᵀ + Γ V Γᵀ is singular (not positive definite): a measurement has no error and its direction of the state is already known exactly; give non-zero psi/V or eta0".into(),
+    }
+}
+
+/// p (N × nm, row-major) from pᵀ.
+fn gain_rows(gain_t: &[f64], n: usize, nm: usize) -> Vec<f64> {
+    let mut g = vec![0.0; n * nm];
+    for j in 0..nm {
+        for i in 0..n {
+            g[i * nm + j] = gain_t[j * n + i];
+        }
+    }
+    g
 }
 
 /// The cheap first test of the steady state: every diagonal entry within `tol`.

@@ -40,56 +40,115 @@ pub fn mul_abt_sym(c: &mut [f64], a: &[f64], b: &[f64], add: Option<&[f64]>, r: 
     }
 }
 
-/// out = A R Aᵀ + B for A = I + E with E sparse, given as (row, col, value), and R
-/// symmetric: the prediction (2.1) in O(nnz(E)·N) instead of O(N³). With T = A R,
-/// A R Aᵀ = A Tᵀ, so both products are row operations. `t` is an N×N work buffer.
-/// The result is symmetrised so it stays exactly symmetric.
+/// The non-zeros (row, col, value) of a sparse N×N matrix, sorted by row, with the
+/// start of each row's run.
+#[derive(Clone, Debug, Default)]
+pub struct SparseRows {
+    pub nz: Vec<(usize, usize, f64)>,
+    start: Vec<usize>,
+}
+
+impl SparseRows {
+    /// A matrix with the given non-zero positions (values 0 until set).
+    pub fn with_pattern(n: usize, mut pattern: Vec<(usize, usize)>) -> Self {
+        pattern.sort_unstable();
+        let mut start = vec![0; n + 1];
+        for &(i, _) in &pattern {
+            start[i + 1] += 1;
+        }
+        for i in 0..n {
+            start[i + 1] += start[i];
+        }
+        SparseRows {
+            nz: pattern.into_iter().map(|(i, j)| (i, j, 0.0)).collect(),
+            start,
+        }
+    }
+
+    /// The non-zeros of row i.
+    #[inline(always)]
+    pub fn row(&self, i: usize) -> &[(usize, usize, f64)] {
+        &self.nz[self.start[i]..self.start[i + 1]]
+    }
+}
+
+/// out = A R Aᵀ + B for A = I + E with E sparse and R, B symmetric: the prediction
+/// (2.1) in O(nnz(E)·N + N²) instead of O(N³). U = A R = R + E R by row operations,
+/// then the upper triangle of U Aᵀ, (U Aᵀ)_ab = U_ab + Σ_c E_bc U_ac, mirrored — so
+/// the result is exactly symmetric. `u` is an N×N work buffer. `N > 0`: the compile-time dimension (n = N).
 #[inline(always)]
-pub fn predict_cov(
+pub fn predict_cov<const N: usize>(
     out: &mut [f64],
     r: &[f64],
-    e_nz: &[(usize, usize, f64)],
+    e: &SparseRows,
     b: &[f64],
-    t: &mut [f64],
+    u: &mut [f64],
     n: usize,
 ) {
-    let (r, b, t) = (&r[..n * n], &b[..n * n], &mut t[..n * n]);
-    // T = A R = R + E R
-    t.copy_from_slice(r);
-    for &(i, k, v) in e_nz {
-        let src = &r[k * n..k * n + n];
-        let dst = &mut t[i * n..i * n + n];
-        for j in 0..n {
-            dst[j] += v * src[j];
+    if N > 0 {
+        return predict_fixed::<N>(mat_mut(out), mat(r), e, mat(b), mat_mut(u));
+    }
+    let (r, b, u, out) = (&r[..n * n], &b[..n * n], &mut u[..n * n], &mut out[..n * n]);
+    u.copy_from_slice(r);
+    for &(i, k, v) in &e.nz {
+        for (x, y) in u[i * n..i * n + n].iter_mut().zip(&r[k * n..k * n + n]) {
+            *x += v * y;
         }
     }
-    // out = Tᵀ, then out = A Tᵀ = Tᵀ + E Tᵀ (rows of Tᵀ are read from `out` before any
-    // row of `out` is changed: use B's slot afterwards) — so build Tᵀ in `out` first.
-    let out = &mut out[..n * n];
-    for i in 0..n {
-        for j in 0..n {
-            out[i * n + j] = t[j * n + i];
+    for a in 0..n {
+        let ua = &u[a * n..a * n + n];
+        for bb in a..n {
+            let mut s = ua[bb];
+            for &(_, c, v) in e.row(bb) {
+                s += v * ua[c];
+            }
+            s += b[a * n + bb];
+            out[a * n + bb] = s;
+            out[bb * n + a] = s;
         }
     }
-    // t := Tᵀ (copy), out := Tᵀ + B, then out += E Tᵀ row by row.
-    t.copy_from_slice(out);
-    for (o, x) in out.iter_mut().zip(b) {
-        *o += x;
-    }
-    for &(i, k, v) in e_nz {
-        let src = &t[k * n..k * n + n];
-        let dst = &mut out[i * n..i * n + n];
-        for j in 0..n {
-            dst[j] += v * src[j];
+}
+
+/// [`predict_cov`] on fixed-size arrays (every loop over N unrolled).
+#[inline(always)]
+fn predict_fixed<const N: usize>(
+    out: &mut [[f64; N]; N],
+    r: &[[f64; N]; N],
+    e: &SparseRows,
+    b: &[[f64; N]; N],
+    u: &mut [[f64; N]; N],
+) {
+    *u = *r;
+    for &(i, k, v) in &e.nz {
+        let (ui, rk) = (&mut u[i], &r[k]);
+        for j in 0..N {
+            ui[j] += v * rk[j];
         }
     }
-    for i in 0..n {
-        for j in i + 1..n {
-            let m = 0.5 * (out[i * n + j] + out[j * n + i]);
-            out[i * n + j] = m;
-            out[j * n + i] = m;
+    for a in 0..N {
+        let ua = &u[a];
+        for bb in a..N {
+            let mut s = ua[bb];
+            for &(_, c, v) in e.row(bb) {
+                s += v * ua[c];
+            }
+            s += b[a][bb];
+            out[a][bb] = s;
+            out[bb][a] = s;
         }
     }
+}
+
+/// View the first N·N entries of a row-major slice as an N×N array (N > 0).
+#[inline(always)]
+pub fn mat<const N: usize>(v: &[f64]) -> &[[f64; N]; N] {
+    v[..N * N].as_chunks::<N>().0.try_into().expect("N×N")
+}
+
+/// Mutable [`mat`].
+#[inline(always)]
+pub fn mat_mut<const N: usize>(v: &mut [f64]) -> &mut [[f64; N]; N] {
+    v[..N * N].as_chunks_mut::<N>().0.try_into().expect("N×N")
 }
 
 /// y = M x for a sparse M given as (row, col, value).

@@ -65,139 +65,359 @@ pub fn dare_doubling(
     None
 }
 
-use crate::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym, predict_cov};
+use crate::linalg::{SparseRows, mat_mut, predict_cov};
+
+/// The measurements used at one step, prepared for sequential (scalar) processing:
+/// Rv = L D Lᵀ (L unit lower triangular, D ≥ 0 diagonal), so the whitened
+/// measurements L⁻¹ Z have rows L⁻¹ C and independent noises of variance D. A
+/// diagonal Rv (the usual case: Γ = I or one noise per measurement) needs no whitening.
+#[derive(Clone, Debug)]
+pub struct Prepared {
+    /// Measurements in use at this step (indices into 0..nm).
+    pub idx: Vec<usize>,
+    /// Their (whitened) rows, nk × n.
+    rows: Vec<f64>,
+    /// Some((col, coef)) where a row is coef·e_col: its products cost O(1) or O(n).
+    unit: Vec<Option<(usize, f64)>>,
+    /// D: the noise variance of each whitened row.
+    d: Vec<f64>,
+    /// L⁻¹ (nk × nk, unit lower) when Rv is not diagonal.
+    linv: Option<Vec<f64>>,
+    work: Vec<f64>,
+}
+
+impl Prepared {
+    pub fn new(n: usize, nm: usize) -> Self {
+        Prepared {
+            idx: Vec::with_capacity(nm),
+            rows: vec![0.0; nm * n],
+            unit: vec![None; nm],
+            d: vec![0.0; nm],
+            linv: None,
+            work: vec![0.0; nm * nm],
+        }
+    }
+
+    /// Prepare the rows of C (nm × n) and Rv (nm × nm) of the measurements with
+    /// `avail[j]` (all when None). Err(()) if Rv is not positive semi-definite.
+    pub fn prepare(
+        &mut self,
+        c: &[f64],
+        rv: &[f64],
+        avail: Option<&[bool]>,
+        n: usize,
+        nm: usize,
+    ) -> Result<(), ()> {
+        self.idx.clear();
+        self.idx
+            .extend((0..nm).filter(|&j| avail.is_none_or(|a| a[j])));
+        let nk = self.idx.len();
+        let diagonal = self
+            .idx
+            .iter()
+            .all(|&a| self.idx.iter().all(|&b| a == b || rv[a * nm + b] == 0.0));
+        for (r, &j) in self.idx.iter().enumerate() {
+            self.rows[r * n..r * n + n].copy_from_slice(&c[j * n..j * n + n]);
+        }
+        if diagonal {
+            for (r, &j) in self.idx.iter().enumerate() {
+                self.d[r] = rv[j * nm + j];
+            }
+            self.linv = None;
+        } else {
+            // Rv_k = L D Lᵀ, then L⁻¹ by forward substitution, rows := L⁻¹ C.
+            let a = &mut self.work[..nk * nk];
+            for (r, &i) in self.idx.iter().enumerate() {
+                for (s, &j) in self.idx.iter().enumerate() {
+                    a[r * nk + s] = rv[i * nm + j];
+                }
+            }
+            ldl(a, &mut self.d[..nk], nk)?;
+            let mut linv = vec![0.0; nk * nk];
+            for j in 0..nk {
+                linv[j * nk + j] = 1.0;
+                for i in j + 1..nk {
+                    let mut s = 0.0;
+                    for k in j..i {
+                        s -= a[i * nk + k] * linv[k * nk + j];
+                    }
+                    linv[i * nk + j] = s;
+                }
+            }
+            let orig = self.rows[..nk * n].to_vec();
+            for i in 0..nk {
+                let row = &mut self.rows[i * n..i * n + n];
+                row.fill(0.0);
+                for k in 0..=i {
+                    let l = linv[i * nk + k];
+                    for (x, o) in row.iter_mut().zip(&orig[k * n..k * n + n]) {
+                        *x += l * o;
+                    }
+                }
+            }
+            self.linv = Some(linv);
+        }
+        for r in 0..nk {
+            let row = &self.rows[r * n..r * n + n];
+            let mut nz = row.iter().enumerate().filter(|(_, v)| **v != 0.0);
+            self.unit[r] = match (nz.next(), nz.next()) {
+                (Some((col, &coef)), None) => Some((col, coef)),
+                _ => None,
+            };
+        }
+        Ok(())
+    }
+
+    /// The number of measurements in use.
+    pub fn len(&self) -> usize {
+        self.idx.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.idx.is_empty()
+    }
+}
+
+/// a = L D Lᵀ in place (strict lower triangle of `a` := L), for a symmetric positive
+/// semi-definite a; a zero pivot zeroes its column of L. Err(()) on a negative pivot.
+fn ldl(a: &mut [f64], d: &mut [f64], m: usize) -> Result<(), ()> {
+    let scale = (0..m).map(|i| a[i * m + i].abs()).fold(0.0, f64::max);
+    let tiny = 1e-14 * scale;
+    for j in 0..m {
+        let mut dj = a[j * m + j];
+        for k in 0..j {
+            dj -= a[j * m + k] * a[j * m + k] * d[k];
+        }
+        if !dj.is_finite() || dj < -tiny {
+            return Err(());
+        }
+        if dj <= tiny {
+            dj = 0.0;
+        }
+        d[j] = dj;
+        for i in j + 1..m {
+            let mut s = a[i * m + j];
+            for k in 0..j {
+                s -= a[i * m + k] * a[j * m + k] * d[k];
+            }
+            a[i * m + j] = if dj > 0.0 { s / dj } else { 0.0 };
+        }
+    }
+    Ok(())
+}
 
 /// Work buffers and outputs of one step of the filter's covariance recursion
-/// (2.1)–(2.7) in Joseph form. Allocated once; `step` allocates nothing.
+/// (2.1)–(2.7). Allocated once; `step` allocates nothing.
+///
+/// The measurements are processed one (whitened) scalar at a time, each in Joseph
+/// form; for independent measurement noises this is the same update as the block
+/// form (2.3)–(2.7), at O(n·N²) instead of O(n·N² + n²·N + n³) and without a matrix
+/// solve. The block gain p_k of (2.5) is composed from the scalar gains.
 #[derive(Clone, Debug)]
-pub struct JosephStep {
-    n: usize,
-    tmp: Vec<f64>,
+pub struct SequentialJoseph {
+    u: Vec<f64>,
+    s: Vec<f64>,
+    /// The scalar gains, composed into the columns of the whitened block gain (nk × N).
+    kt: Vec<f64>,
     /// r_k, the predicted (a-priori) covariance (2.1).
     pub r_pred: Vec<f64>,
-    s_cr: Vec<f64>,
-    /// After `step`: the Cholesky factor of q_k (lower triangle), nm_k×nm_k.
-    pub q_chol: Vec<f64>,
-    x: Vec<f64>,
-    mm: Vec<f64>,
-    e: Vec<f64>,
-    /// p_k, N×nm_k (2.5), for the measurements used at this step.
-    pub gain: Vec<f64>,
-    /// I − p_k C (N×N).
+    /// p_kᵀ (nm × N): row j is the gain column of measurement j (zero when it is not
+    /// available at this step).
+    pub gain_t: Vec<f64>,
+    /// h_k = I − p_k C (N × N).
     pub h: Vec<f64>,
 }
 
-impl JosephStep {
+impl SequentialJoseph {
     pub fn new(n: usize, nm: usize) -> Self {
-        JosephStep {
-            n,
-            tmp: vec![0.0; n * n],
+        SequentialJoseph {
+            u: vec![0.0; n * n],
+            s: vec![0.0; n],
+            kt: vec![0.0; nm * n],
             r_pred: vec![0.0; n * n],
-            s_cr: vec![0.0; nm * n],
-            q_chol: vec![0.0; nm * nm],
-            x: vec![0.0; nm * n],
-            mm: vec![0.0; n * n],
-            e: vec![0.0; n * nm],
-            gain: vec![0.0; n * nm],
+            gain_t: vec![0.0; nm * n],
             h: vec![0.0; n * n],
         }
     }
 
-    /// One step: from R_{k−1} (`big_r`, overwritten with R_k), A_{k−1} = I + E given
-    /// as the non-zeros of E = a(t_{k−1})Δt (row, col, value), B_{k−1}, the
-    /// measurements' non-zeros of C as (row, col, value) with rows 0..nm, and Rv_k
-    /// (nm×nm). Returns false if q_k is not positive definite.
+    /// One step: from R_{k−1} (`big_r`, overwritten with R_k), A_{k−1} = I + E with E
+    /// given by its non-zeros, B_{k−1}, and the prepared measurements. Returns false
+    /// if an innovation variance is not positive (q_k singular).
     ///
     /// ```text
-    /// r = A R Aᵀ + B                       (2.1)
-    /// q = C r Cᵀ + Rv                      (2.3)
-    /// p = r Cᵀ q⁻¹   (Cholesky solve)      (2.5)
-    /// R = h r hᵀ + p Rv pᵀ,  h = I − pC    (2.7), Joseph form
+    /// r = A R Aᵀ + B                                   (2.1)
+    /// for each whitened measurement row c with noise variance d:
+    ///   s = r cᵀ,  q = c s + d                          (2.3)
+    ///   k = s / q                                       (2.5)
+    ///   r := (I − k c) r (I − k c)ᵀ + k d kᵀ            (2.7), Joseph form,
+    ///      = r − (k sᵀ + s kᵀ) + q k kᵀ                 exactly symmetric as computed
     /// ```
-    /// computed as M = h r = r − p S (S = C r), h r hᵀ = M − M Cᵀ pᵀ,
-    /// R = M + (p Rv − M Cᵀ) pᵀ, upper triangle mirrored so R stays symmetric.
-    /// `n` is the state dimension (pass a compile-time constant where possible: the
-    /// caller's const-generic N lets the compiler unroll every loop here).
+    /// The expansion holds for any k, so like the Joseph form it does not rely on k
+    /// being the optimal gain. `n` is the state dimension (a compile-time constant
+    /// at the call site lets the compiler unroll every loop here).
     #[inline(always)]
-    pub fn step(
+    pub fn step<const N: usize>(
         &mut self,
         n: usize,
         big_r: &mut [f64],
-        e_nz: &[(usize, usize, f64)],
+        e: &SparseRows,
         big_b: &[f64],
-        c_nz: &[(usize, usize, f64)],
-        rv: &[f64],
-        nm: usize,
+        prep: &Prepared,
     ) -> bool {
-        debug_assert_eq!(n, self.n);
-        predict_cov(&mut self.r_pred, big_r, e_nz, big_b, &mut self.tmp, n);
-        if nm == 0 {
-            big_r[..n * n].copy_from_slice(&self.r_pred[..n * n]);
-            for i in 0..n {
-                for j in 0..n {
-                    self.h[i * n + j] = if i == j { 1.0 } else { 0.0 };
-                }
-            }
-            return true;
-        }
-        let s_cr = &mut self.s_cr[..nm * n];
-        s_cr.fill(0.0);
-        for &(j, i, c) in c_nz {
-            for (s, r) in s_cr[j * n..j * n + n]
-                .iter_mut()
-                .zip(&self.r_pred[i * n..i * n + n])
-            {
-                *s += c * r;
-            }
-        }
-        let q = &mut self.q_chol[..nm * nm];
-        q.copy_from_slice(&rv[..nm * nm]);
-        for &(l, i, c) in c_nz {
-            for j in 0..nm {
-                q[j * nm + l] += c * s_cr[j * n + i];
-            }
-        }
-        if !cholesky(q, nm) {
+        let big_r = &mut big_r[..n * n];
+        predict_cov::<N>(&mut self.r_pred, big_r, e, big_b, &mut self.u, n);
+        big_r.copy_from_slice(&self.r_pred[..n * n]);
+        let nk = prep.len();
+        let ok = if N > 0 {
+            update_fixed::<N>(mat_mut(big_r), self.kt.as_chunks_mut::<N>().0, prep)
+        } else {
+            update_slices(n, big_r, &mut self.kt, &mut self.s, prep)
+        };
+        if !ok {
             return false;
         }
-        let x = &mut self.x[..nm * n];
-        x.copy_from_slice(s_cr);
-        cholesky_solve(q, x, nm, n);
-        let gain = &mut self.gain[..n * nm];
+        // p = K' L⁻¹: pᵀ row idx[j] = Σ_{m ≥ j} (L⁻¹)_mj K'ᵀ_m.
+        let nm = self.gain_t.len() / n.max(1);
+        if nk < nm {
+            self.gain_t.fill(0.0);
+        }
+        for (j, &jj) in prep.idx.iter().enumerate() {
+            let out = &mut self.gain_t[jj * n..jj * n + n];
+            match &prep.linv {
+                None => out.copy_from_slice(&self.kt[j * n..j * n + n]),
+                Some(linv) => {
+                    out.fill(0.0);
+                    for m in j..nk {
+                        let l = linv[m * nk + j];
+                        for (x, k) in out.iter_mut().zip(&self.kt[m * n..m * n + n]) {
+                            *x += l * k;
+                        }
+                    }
+                }
+            }
+        }
+        // h = I − p C = I − K' (L⁻¹ C).
+        let h = &mut self.h[..n * n];
+        h.fill(0.0);
         for i in 0..n {
-            for j in 0..nm {
-                gain[i * nm + j] = x[j * n + i];
-            }
+            h[i * n + i] = 1.0;
         }
-        mul(&mut self.mm, gain, s_cr, n, nm, n);
-        for (m, r) in self.mm.iter_mut().zip(&self.r_pred) {
-            *m = r - *m;
-        }
-        let e = &mut self.e[..n * nm];
-        mul(e, gain, rv, n, nm, nm);
-        for &(l, i, c) in c_nz {
-            for a in 0..n {
-                e[a * nm + l] -= c * self.mm[a * n + i];
-            }
-        }
-        mul_abt_sym(big_r, e, gain, None, n, nm);
-        for i in 0..n {
-            for j in i..n {
-                let v = big_r[i * n + j] + 0.5 * (self.mm[i * n + j] + self.mm[j * n + i]);
-                big_r[i * n + j] = v;
-                big_r[j * n + i] = v;
-            }
-        }
-        for i in 0..n {
-            for j in 0..n {
-                self.h[i * n + j] = if i == j { 1.0 } else { 0.0 };
-            }
-        }
-        for &(l, j, c) in c_nz {
-            for i in 0..n {
-                self.h[i * n + j] -= gain[i * nm + l] * c;
+        for j in 0..nk {
+            let k = &self.kt[j * n..j * n + n];
+            match prep.unit[j] {
+                Some((col, coef)) => {
+                    for (hi, &ka) in h.chunks_exact_mut(n).zip(k) {
+                        hi[col] -= ka * coef;
+                    }
+                }
+                None => {
+                    let row = &prep.rows[j * n..j * n + n];
+                    for (hi, &ka) in h.chunks_exact_mut(n).zip(k) {
+                        for (x, c) in hi.iter_mut().zip(row) {
+                            *x -= ka * c;
+                        }
+                    }
+                }
             }
         }
         true
     }
+}
+
+/// The scalar Joseph updates of [`SequentialJoseph::step`] on fixed-size arrays.
+#[inline(always)]
+fn update_fixed<const N: usize>(
+    r: &mut [[f64; N]; N],
+    kt: &mut [[f64; N]],
+    prep: &Prepared,
+) -> bool {
+    for j in 0..prep.len() {
+        let row: &[f64; N] = prep.rows[j * N..j * N + N].try_into().expect("row");
+        let unit = prep.unit[j];
+        let s: [f64; N] = match unit {
+            Some((col, coef)) => r[col].map(|x| coef * x),
+            None => std::array::from_fn(|a| (0..N).map(|b| r[a][b] * row[b]).sum()),
+        };
+        let q = match unit {
+            Some((col, coef)) => coef * s[col],
+            None => (0..N).map(|b| s[b] * row[b]).sum::<f64>(),
+        } + prep.d[j];
+        if !(q > 0.0 && q.is_finite()) {
+            return false;
+        }
+        let k: [f64; N] = s.map(|x| x / q);
+        for a in 0..N {
+            let (ka, sa) = (k[a], s[a]);
+            let ra = &mut r[a];
+            for b in 0..N {
+                ra[b] = ra[b] - (ka * s[b] + sa * k[b]) + (ka * k[b]) * q;
+            }
+        }
+        // Earlier gains pass through (I − k c): the block gain's columns.
+        let (done, rest) = kt.split_at_mut(j);
+        for km in done.iter_mut() {
+            let ck = match unit {
+                Some((col, coef)) => coef * km[col],
+                None => (0..N).map(|b| km[b] * row[b]).sum(),
+            };
+            for b in 0..N {
+                km[b] -= k[b] * ck;
+            }
+        }
+        rest[0] = k;
+    }
+    true
+}
+
+/// The scalar Joseph updates of [`SequentialJoseph::step`] for a runtime dimension.
+#[inline(always)]
+fn update_slices(
+    n: usize,
+    big_r: &mut [f64],
+    kt: &mut [f64],
+    s: &mut [f64],
+    prep: &Prepared,
+) -> bool {
+    let s = &mut s[..n];
+    for j in 0..prep.len() {
+        let row = &prep.rows[j * n..j * n + n];
+        let q = match prep.unit[j] {
+            Some((col, coef)) => {
+                for (x, r) in s.iter_mut().zip(&big_r[col * n..col * n + n]) {
+                    *x = coef * r;
+                }
+                coef * s[col] + prep.d[j]
+            }
+            None => {
+                for (x, ri) in s.iter_mut().zip(big_r.chunks_exact(n)) {
+                    *x = ri.iter().zip(row).map(|(a, b)| a * b).sum();
+                }
+                s.iter().zip(row).map(|(a, b)| a * b).sum::<f64>() + prep.d[j]
+            }
+        };
+        if !(q > 0.0 && q.is_finite()) {
+            return false;
+        }
+        let (done, rest) = kt.split_at_mut(j * n);
+        let k = &mut rest[..n];
+        for (k, s) in k.iter_mut().zip(s.iter()) {
+            *k = s / q;
+        }
+        for ((ri, &ka), &sa) in big_r.chunks_exact_mut(n).zip(k.iter()).zip(s.iter()) {
+            for ((x, &kb), &sb) in ri.iter_mut().zip(k.iter()).zip(s.iter()) {
+                *x = *x - (ka * sb + sa * kb) + (ka * kb) * q;
+            }
+        }
+        // Earlier gains pass through (I − k c): the block gain's columns.
+        for km in done.chunks_exact_mut(n) {
+            let ck = match prep.unit[j] {
+                Some((col, coef)) => coef * km[col],
+                None => km.iter().zip(row).map(|(a, b)| a * b).sum(),
+            };
+            for (x, &kb) in km.iter_mut().zip(k.iter()) {
+                *x -= kb * ck;
+            }
+        }
+    }
+    true
 }

@@ -269,6 +269,35 @@ fn engine_matches_plain_implementation_on_random_time_varying_models() {
     );
 }
 
+/// Correlated, singular measurement noise: two measurements share one noise source
+/// (Γ has equal rows, so Rv = Γ V Γᵀ has rank 1). The block form only needs
+/// q = C r Cᵀ + Rv to be positive definite; kea's sequential form whitens Rv with
+/// L D Lᵀ (one zero pivot) and must give the same R and gain.
+#[test]
+fn singular_correlated_measurement_noise_matches_the_block_form() {
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    for (n, nm) in [(3, 2), (13, 3)] {
+        let mut spec = random_spec(&mut rng, n, nm);
+        for l in 0..nm {
+            spec.g[nm + l] = spec.g[l]; // row 1 = row 0
+        }
+        let model = model_from_value(to_json(&spec)).unwrap();
+        let r = analyze(&model, &Default::default(), &mut NoProgress).unwrap();
+        let p = plain(&spec);
+        let (r_scale, g_scale) = (p.r.amax(), p.gain.amax());
+        for i in 0..n {
+            for j in 0..n {
+                let e = (r.final_.covariance[i][j] - p.r[(i, j)]).abs() / r_scale;
+                assert!(e < 1e-9, "N={n} R[{i}][{j}]: {e:e}");
+            }
+            for j in 0..nm {
+                let e = (r.final_.gain[i][j] - p.gain[(i, j)]).abs() / g_scale;
+                assert!(e < 1e-9, "N={n} gain[{i}][{j}]: {e:e}");
+            }
+        }
+    }
+}
+
 /// A scheduled measurement: with the only measurement missing at odd steps, the
 /// filtered covariance after an odd step equals the predicted one (R_k = r_k).
 #[test]
@@ -305,4 +334,40 @@ fn schedule_every_second_step_skips_updates_exactly() {
     }
     // YZ/ZX are averaged over the 5 steps with a measurement only
     assert_eq!(r.criteria.bound.per_state[0].excluded_steps.yz, 5);
+}
+
+/// A schedule makes the model time-varying for the filter: the steady-state shortcut
+/// must not freeze the recursion before a late outage (regression: it did).
+#[test]
+fn shortcut_does_not_skip_a_late_measurement_outage() {
+    let run = |shortcut: bool| {
+        let m = json!({
+            "time": {"t0": 0.0, "t_end": 10.0, "steps": 1000},
+            "system": {"states": ["x"], "a": [[-1.0]], "b": [[1.0]], "phi": [2.0], "y0": [1.0], "eta0": [1.0]},
+            "measurement": {"names": ["z"], "c": [[1.0]], "gamma": [[1.0]], "psi": [0.5],
+                            "schedule": [{"unavailable": [[8.0, 9.0]]}]},
+            "options": {"steady_state_shortcut": shortcut}
+        });
+        analyze(
+            &model_from_value(m).unwrap(),
+            &Default::default(),
+            &mut NoProgress,
+        )
+        .unwrap()
+    };
+    let (fast, full) = (run(true), run(false));
+    // at t = 9 the outage has let R grow towards the open-loop covariance
+    let at9 = |r: &AnalysisResult| {
+        let i = r
+            .traces
+            .t
+            .iter()
+            .position(|t| (t - 9.0).abs() < 1e-9)
+            .unwrap();
+        r.traces.states[0].potential_sko[i]
+    };
+    let steady = full.final_.potential_sko[0];
+    assert!(at9(&full) > 1.5 * steady, "{} vs {steady}", at9(&full));
+    assert_eq!(at9(&fast), at9(&full));
+    assert!(fast.steady_state.as_ref().is_none_or(|s| !s.shortcut_used));
 }

@@ -35,7 +35,7 @@ pub const CHUNK_STEPS: usize = 256;
 /// At most this many blocks of runs (more runs make bigger blocks).
 const MAX_BLOCKS: usize = 64;
 /// At least this many runs per block.
-const MIN_BLOCK_RUNS: usize = 16;
+const MIN_BLOCK_RUNS: usize = 32;
 /// Two-sided probability of the χ² acceptance bands.
 pub const BAND_PROBABILITY: f64 = 0.95;
 
@@ -341,8 +341,8 @@ struct Layout {
     gain: usize,   // p_k, N×n (zero columns for unavailable measurements)
     avail: usize,  // n flags (1.0 / 0.0)
     y: usize,      // mean y_k, N
-    r_chol: usize, // Cholesky factor of R_k, N×N (valid if flag)
-    q_chol: usize, // Cholesky factor of q_k, masked, n×n
+    r_chol: usize, // Cholesky factor of R_k, N×N (valid if flag), 1/L_ii on the diagonal
+    q_chol: usize, // Cholesky factor of q_k, masked, n×n, 1/L_ii on the diagonal
     flags: usize,  // [R_k factor valid, q_k factor valid, measurements available]
     size: usize,
 }
@@ -704,7 +704,19 @@ impl<'m> Plan<'m> {
         let rc = &mut rec[lay.r_chol..lay.r_chol + n * n];
         rc.copy_from_slice(&self.big_r);
         let r_ok = cholesky(rc, n);
-        rec[lay.q_chol..lay.q_chol + nm * nm].copy_from_slice(&self.q);
+        // Reciprocal diagonals: the per-run solves multiply instead of divide.
+        if r_ok {
+            for i in 0..n {
+                rc[i * n + i] = 1.0 / rc[i * n + i];
+            }
+        }
+        let qc = &mut rec[lay.q_chol..lay.q_chol + nm * nm];
+        qc.copy_from_slice(&self.q);
+        if n_avail > 0 {
+            for j in 0..nm {
+                qc[j * nm + j] = 1.0 / qc[j * nm + j];
+            }
+        }
         rec[lay.flags] = if r_ok { 1.0 } else { 0.0 };
         rec[lay.flags + 1] = if n_avail > 0 { 1.0 } else { 0.0 };
         rec[lay.flags + 2] = n_avail as f64;
@@ -731,6 +743,11 @@ struct Shared<'a> {
     truth: Truth,
     model_error: ModelError,
     c_nz: &'a [(usize, usize, f64)],
+    /// Entries of A = I + aΔt, bΔt and Γ that can be non-zero (row, col): the
+    /// per-run products skip the structural zeros.
+    a_nz: &'a [(usize, usize)],
+    bd_nz: &'a [(usize, usize)],
+    g_nz: &'a [(usize, usize)],
     /// Lower-triangular square roots of W (L×L) and V (M×M).
     w_sqrt: &'a [f64],
     v_sqrt: &'a [f64],
@@ -789,123 +806,198 @@ impl Block {
 
     /// Advance every run through a chunk of `steps` records; return the per-step sums
     /// (steps × `SumLayout::size`).
+    ///
+    /// Run-minor ("structure of arrays"): every quantity is stored as dim × runs, so
+    /// each product is a loop over the block's runs that the compiler vectorises. Each
+    /// run still draws from its own stream in the same order (F, then Φ, per step), and
+    /// the per-step sums run over the runs in order: results do not depend on threads.
     fn advance<const N: usize>(&mut self, sh: &Shared, chunk: &[f64], steps: usize) -> Vec<f64> {
         let d = sh.d;
         let n = if N == 0 { d.n } else { N };
         let (nm, nl, ms) = (d.nm, d.nl, d.ms);
+        let nr = self.runs;
         let lay = sh.lay;
         let sl = sh.sl;
         let mut sums = vec![0.0; steps * sl.size];
-        let mut f = vec![0.0; nl];
-        let mut phi = vec![0.0; ms];
+        // dim × runs buffers
+        let soa = |aos: &[f64], dim: usize| -> Vec<f64> {
+            let mut v = vec![0.0; dim * nr];
+            for r in 0..nr {
+                for i in 0..dim {
+                    v[i * nr + r] = aos[r * dim + i];
+                }
+            }
+            v
+        };
+        let mut ys = soa(&self.y, n);
+        let mut xs = soa(&self.x, n);
+        let mut f = soa(&self.f_const, nl);
+        let mut y_new = vec![0.0; n * nr];
+        let mut phi = vec![0.0; ms * nr];
+        let mut noise = vec![0.0; nm * nr];
+        let mut h = vec![0.0; n * nr];
+        let mut nu = vec![0.0; nm * nr];
+        let mut e = vec![0.0; n * nr];
+        let mut mean = vec![0.0; if sh.truth == Truth::Mean { n * nr } else { 0 }];
+        let mut w = vec![0.0; n.max(nm) * nr];
+        let mut norm2 = vec![0.0; nr];
         let mut xi = vec![0.0; nl.max(ms)];
-        let mut noise = vec![0.0; nm];
-        let mut h = vec![0.0; n];
-        let mut y_new = vec![0.0; n];
-        let mut truth = vec![0.0; n];
-        let mut nu = vec![0.0; nm];
-        let mut e = vec![0.0; n];
-        let mut w = vec![0.0; n.max(nm)];
-        for r in 0..self.runs {
-            let rng = &mut self.rngs[r];
-            let y = &mut self.y[r * n..r * n + n];
-            let x = &mut self.x[r * n..r * n + n];
-            let fc = &self.f_const[r * nl..r * nl + nl];
-            for s in 0..steps {
-                let rec = &chunk[s * lay.size..(s + 1) * lay.size];
-                let out = &mut sums[s * sl.size..(s + 1) * sl.size];
-                let a = &rec[lay.a..lay.a + n * n];
-                let u = &rec[lay.u..lay.u + n];
-                let bd = &rec[lay.bd..lay.bd + n * nl];
-                let ym = &rec[lay.y..lay.y + n];
-                // Step 21: Y_k = A Y + uΔt + bΔt F (F white or constant).
-                match sh.model_error {
-                    ModelError::White => draw(rng, sh.w_sqrt, nl, &mut xi, &mut f),
-                    ModelError::Constant => f.copy_from_slice(fc),
-                }
-                mul_vec(&mut y_new, a, y, n, n);
-                for i in 0..n {
-                    let mut bf = 0.0;
+        let mut one = vec![0.0; nl.max(ms)];
+        for s in 0..steps {
+            let rec = &chunk[s * lay.size..(s + 1) * lay.size];
+            let out = &mut sums[s * sl.size..(s + 1) * sl.size];
+            let a = &rec[lay.a..lay.a + n * n];
+            let u = &rec[lay.u..lay.u + n];
+            let bd = &rec[lay.bd..lay.bd + n * nl];
+            let ym = &rec[lay.y..lay.y + n];
+            let gamma = &rec[lay.gamma..lay.gamma + nm * ms];
+            let gain = &rec[lay.gain..lay.gain + n * nm];
+            // Draws, run by run: F (white model error), then Φ.
+            for (r, rng) in self.rngs.iter_mut().enumerate() {
+                if sh.model_error == ModelError::White {
+                    draw(rng, sh.w_sqrt, nl, &mut xi, &mut one);
                     for l in 0..nl {
-                        bf += bd[i * nl + l] * f[l];
+                        f[l * nr + r] = one[l];
                     }
-                    y_new[i] += u[i] + bf;
                 }
-                y.copy_from_slice(&y_new);
-                match sh.truth {
-                    Truth::Process => truth.copy_from_slice(y),
-                    Truth::Mean => truth.copy_from_slice(ym),
+                draw(rng, sh.v_sqrt, ms, &mut xi, &mut one);
+                for l in 0..ms {
+                    phi[l * nr + r] = one[l];
                 }
-                // Step 22: Z_k = C·truth + Γ_k Φ (Φ drawn every step, used where available).
-                draw(rng, sh.v_sqrt, ms, &mut xi, &mut phi);
-                mul_vec(
-                    &mut noise,
-                    &rec[lay.gamma..lay.gamma + nm * ms],
-                    &phi,
-                    nm,
-                    ms,
+            }
+            // Step 21: Y_k = A Y + uΔt + bΔt F.
+            for i in 0..n {
+                y_new[i * nr..(i + 1) * nr].fill(u[i]);
+            }
+            for &(i, j) in sh.a_nz {
+                axpy(&mut y_new, i, &ys, j, a[i * n + j], nr);
+            }
+            for &(i, l) in sh.bd_nz {
+                axpy(&mut y_new, i, &f, l, bd[i * nl + l], nr);
+            }
+            std::mem::swap(&mut ys, &mut y_new);
+            let truth: &[f64] = match sh.truth {
+                Truth::Process => &ys,
+                Truth::Mean => {
+                    for i in 0..n {
+                        mean[i * nr..(i + 1) * nr].fill(ym[i]);
+                    }
+                    &mean
+                }
+            };
+            // Step 22: Z_k = C·truth + Γ_k Φ (Φ drawn every step, used where available).
+            noise.fill(0.0);
+            for &(j, l) in sh.g_nz {
+                axpy(&mut noise, j, &phi, l, gamma[j * ms + l], nr);
+            }
+            // (2.8) H = A X + uΔt; (2.10) X = H + p (Z − C H)
+            for i in 0..n {
+                h[i * nr..(i + 1) * nr].fill(u[i]);
+            }
+            for &(i, j) in sh.a_nz {
+                axpy(&mut h, i, &xs, j, a[i * n + j], nr);
+            }
+            nu.copy_from_slice(&noise);
+            for &(j, i, c) in sh.c_nz {
+                let (t, hh) = (&truth[i * nr..(i + 1) * nr], &h[i * nr..(i + 1) * nr]);
+                for ((v, t), hh) in nu[j * nr..(j + 1) * nr].iter_mut().zip(t).zip(hh) {
+                    *v += c * (t - hh);
+                }
+            }
+            for j in 0..nm {
+                if rec[lay.avail + j] == 0.0 {
+                    nu[j * nr..(j + 1) * nr].fill(0.0);
+                }
+            }
+            xs.copy_from_slice(&h);
+            for i in 0..n {
+                for j in 0..nm {
+                    let g = gain[i * nm + j];
+                    if g != 0.0 {
+                        axpy(&mut xs, i, &nu, j, g, nr);
+                    }
+                }
+            }
+            // Errors and their sums (over the runs, in order).
+            for i in 0..n {
+                let (yi, xi_, ti) = (
+                    &ys[i * nr..(i + 1) * nr],
+                    &xs[i * nr..(i + 1) * nr],
+                    &truth[i * nr..(i + 1) * nr],
                 );
-                // (2.8) H = A X + uΔt; (2.10) X = H + p (Z − C H)
-                mul_vec(&mut h, a, x, n, n);
-                for i in 0..n {
-                    h[i] += u[i];
-                }
-                nu.copy_from_slice(&noise);
-                for &(j, i, c) in sh.c_nz {
-                    nu[j] += c * (truth[i] - h[i]);
-                }
-                for j in 0..nm {
-                    if rec[lay.avail + j] == 0.0 {
-                        nu[j] = 0.0;
-                    }
-                }
-                let gain = &rec[lay.gain..lay.gain + n * nm];
-                for i in 0..n {
-                    let mut s2 = 0.0;
-                    for j in 0..nm {
-                        s2 += gain[i * nm + j] * nu[j];
-                    }
-                    x[i] = h[i] + s2;
-                }
-                // Errors and their sums.
-                for i in 0..n {
-                    let ea = y[i] - ym[i];
+                let ei = &mut e[i * nr..(i + 1) * nr];
+                for r in 0..nr {
+                    let ea = yi[r] - ym[i];
                     out[sl.apriori + i] += ea * ea;
-                    e[i] = x[i] - truth[i];
-                    out[sl.filt2 + i] += e[i] * e[i];
-                    out[sl.filt1 + i] += e[i];
+                    let er = xi_[r] - ti[r];
+                    ei[r] = er;
+                    out[sl.filt2 + i] += er * er;
+                    out[sl.filt1 + i] += er;
                 }
-                for j in 0..nm {
-                    out[sl.meas2 + j] += noise[j] * noise[j];
+            }
+            for j in 0..nm {
+                for v in &noise[j * nr..(j + 1) * nr] {
+                    out[sl.meas2 + j] += v * v;
                 }
-                // NEES = ‖L⁻¹ e‖² with R_k = L Lᵀ.
-                if rec[lay.flags] != 0.0 {
-                    out[sl.nees] += forward_norm2(&rec[lay.r_chol..], &e, &mut w, n);
+            }
+            // NEES = ‖L⁻¹ e‖² with R_k = L Lᵀ.
+            if rec[lay.flags] != 0.0 {
+                forward_norm2(&rec[lay.r_chol..], &e, &mut w, &mut norm2, n, nr);
+                for v in &norm2 {
+                    out[sl.nees] += v;
                 }
-                // NIS = ‖Lq⁻¹ ν‖² (ν = 0 for unavailable measurements, q masked).
-                if rec[lay.flags + 1] != 0.0 {
-                    out[sl.nis] += forward_norm2(&rec[lay.q_chol..], &nu, &mut w, nm);
+            }
+            // NIS = ‖Lq⁻¹ ν‖² (ν = 0 for unavailable measurements, q masked).
+            if rec[lay.flags + 1] != 0.0 {
+                forward_norm2(&rec[lay.q_chol..], &nu, &mut w, &mut norm2, nm, nr);
+                for v in &norm2 {
+                    out[sl.nis] += v;
                 }
+            }
+        }
+        // back to runs × dim
+        for r in 0..nr {
+            for i in 0..n {
+                self.y[r * n + i] = ys[i * nr + r];
+                self.x[r * n + i] = xs[i * nr + r];
             }
         }
         sums
     }
 }
 
-/// ‖L⁻¹ v‖² for lower-triangular L (dim×dim, row-major).
+/// Row i of `dst` += v · row j of `src` (both dim × len).
 #[inline(always)]
-fn forward_norm2(l: &[f64], v: &[f64], w: &mut [f64], dim: usize) -> f64 {
-    let mut s = 0.0;
-    for i in 0..dim {
-        let mut acc = v[i];
-        for k in 0..i {
-            acc -= l[i * dim + k] * w[k];
-        }
-        let wi = acc / l[i * dim + i];
-        w[i] = wi;
-        s += wi * wi;
+fn axpy(dst: &mut [f64], i: usize, src: &[f64], j: usize, v: f64, len: usize) {
+    for (d, s) in dst[i * len..(i + 1) * len]
+        .iter_mut()
+        .zip(&src[j * len..(j + 1) * len])
+    {
+        *d += v * s;
     }
-    s
+}
+
+/// out[r] = ‖L⁻¹ v_r‖² for every run r (v, w: dim × runs) with L lower-triangular
+/// (dim×dim, row-major) stored with 1/L_ii on its diagonal.
+#[inline(always)]
+fn forward_norm2(l: &[f64], v: &[f64], w: &mut [f64], out: &mut [f64], dim: usize, nr: usize) {
+    out.fill(0.0);
+    for i in 0..dim {
+        let (done, rest) = w.split_at_mut(i * nr);
+        let wi = &mut rest[..nr];
+        wi.copy_from_slice(&v[i * nr..(i + 1) * nr]);
+        for k in 0..i {
+            let lik = l[i * dim + k];
+            for (x, y) in wi.iter_mut().zip(&done[k * nr..(k + 1) * nr]) {
+                *x -= lik * y;
+            }
+        }
+        let d = l[i * dim + i];
+        for (x, o) in wi.iter_mut().zip(out.iter_mut()) {
+            *x *= d;
+            *o += *x * *x;
+        }
+    }
 }
 
 /// Lower-triangular S with S Sᵀ = cov for a positive semi-definite cov (dim×dim):
@@ -1017,6 +1109,23 @@ fn run_n<const N: usize, E: Executor>(
     let w_sqrt = sqrt_psd(&m.w, d.nl);
     let v_sqrt = sqrt_psd(&m.v, d.ms);
     let c_nz = plan.c_nz.clone();
+    let pattern = |tm: &crate::expr::TimeMatrix, diag: bool| -> Vec<(usize, usize)> {
+        (0..tm.rows)
+            .flat_map(|i| (0..tm.cols).map(move |j| (i, j)))
+            .filter(|&(i, j)| {
+                (diag && i == j) || tm.values[i * tm.cols + j] != 0.0 || tm.varies(i * tm.cols + j)
+            })
+            .collect()
+    };
+    let a_nz = pattern(&m.a, true);
+    let bd_nz = pattern(&m.b, false);
+    // Γ = C g in the seed's form: Γ's pattern is not g's; take it dense then.
+    let g_nz = match &m.noise {
+        crate::validate::MeasurementNoise::Gamma(g) => pattern(g, false),
+        crate::validate::MeasurementNoise::SeedG(_) => (0..d.nm)
+            .flat_map(|i| (0..d.ms).map(move |j| (i, j)))
+            .collect(),
+    };
     let sh = Shared {
         d,
         lay,
@@ -1024,6 +1133,9 @@ fn run_n<const N: usize, E: Executor>(
         truth: req.truth,
         model_error: req.model_error,
         c_nz: &c_nz,
+        a_nz: &a_nz,
+        bd_nz: &bd_nz,
+        g_nz: &g_nz,
         w_sqrt: &w_sqrt,
         v_sqrt: &v_sqrt,
     };

@@ -250,7 +250,8 @@ impl SequentialJoseph {
     ///   s = r cᵀ,  q = c s + d                          (2.3)
     ///   k = s / q                                       (2.5)
     ///   r := (I − k c) r (I − k c)ᵀ + k d kᵀ            (2.7), Joseph form,
-    ///      = r − (k sᵀ + s kᵀ) + q k kᵀ                 exactly symmetric as computed
+    ///      = r − (k sᵀ + s kᵀ) + q k kᵀ                 upper triangle only
+    /// R = r, its lower triangle mirrored from the upper: exactly symmetric
     /// ```
     /// The expansion holds for any k, so like the Joseph form it does not rely on k
     /// being the optimal gain. `n` is the state dimension (a compile-time constant
@@ -334,9 +335,20 @@ fn update_fixed<const N: usize>(
     for j in 0..prep.len() {
         let row: &[f64; N] = prep.rows[j * N..j * N + N].try_into().expect("row");
         let unit = prep.unit[j];
+        // Only the upper triangle (a ≤ b) is current until the mirror at the end.
         let s: [f64; N] = match unit {
-            Some((col, coef)) => r[col].map(|x| coef * x),
-            None => std::array::from_fn(|a| (0..N).map(|b| r[a][b] * row[b]).sum()),
+            Some((col, coef)) => std::array::from_fn(|b| coef * r[b.min(col)][b.max(col)]),
+            None => {
+                let mut s = [0.0; N];
+                for a in 0..N {
+                    s[a] += r[a][a] * row[a];
+                    for b in a + 1..N {
+                        s[a] += r[a][b] * row[b];
+                        s[b] += r[a][b] * row[a];
+                    }
+                }
+                s
+            }
         };
         let q = match unit {
             Some((col, coef)) => coef * s[col],
@@ -349,7 +361,7 @@ fn update_fixed<const N: usize>(
         for a in 0..N {
             let (ka, sa) = (k[a], s[a]);
             let ra = &mut r[a];
-            for b in 0..N {
+            for b in a..N {
                 ra[b] = ra[b] - (ka * s[b] + sa * k[b]) + (ka * k[b]) * q;
             }
         }
@@ -366,6 +378,11 @@ fn update_fixed<const N: usize>(
         }
         rest[0] = k;
     }
+    for a in 1..N {
+        for b in 0..a {
+            r[a][b] = r[b][a];
+        }
+    }
     true
 }
 
@@ -381,16 +398,25 @@ fn update_slices(
     let s = &mut s[..n];
     for j in 0..prep.len() {
         let row = &prep.rows[j * n..j * n + n];
+        // Only the upper triangle (a ≤ b) is current until the mirror at the end.
         let q = match prep.unit[j] {
             Some((col, coef)) => {
-                for (x, r) in s.iter_mut().zip(&big_r[col * n..col * n + n]) {
-                    *x = coef * r;
+                for (b, x) in s.iter_mut().enumerate() {
+                    *x = coef * big_r[b.min(col) * n + b.max(col)];
                 }
                 coef * s[col] + prep.d[j]
             }
             None => {
-                for (x, ri) in s.iter_mut().zip(big_r.chunks_exact(n)) {
-                    *x = ri.iter().zip(row).map(|(a, b)| a * b).sum();
+                s.fill(0.0);
+                for a in 0..n {
+                    let ra = &big_r[a * n..a * n + n];
+                    s[a] += ra[a] * row[a];
+                    let mut acc = 0.0;
+                    for b in a + 1..n {
+                        acc += ra[b] * row[b];
+                        s[b] += ra[b] * row[a];
+                    }
+                    s[a] += acc;
                 }
                 s.iter().zip(row).map(|(a, b)| a * b).sum::<f64>() + prep.d[j]
             }
@@ -403,9 +429,14 @@ fn update_slices(
         for (k, s) in k.iter_mut().zip(s.iter()) {
             *k = s / q;
         }
-        for ((ri, &ka), &sa) in big_r.chunks_exact_mut(n).zip(k.iter()).zip(s.iter()) {
-            for ((x, &kb), &sb) in ri.iter_mut().zip(k.iter()).zip(s.iter()) {
-                *x = *x - (ka * sb + sa * kb) + (ka * kb) * q;
+        for a in 0..n {
+            let (ka, sa) = (k[a], s[a]);
+            // equal-length slices: the loop below has no bounds checks and vectorises
+            let ri = &mut big_r[a * n + a..a * n + n];
+            let (kk, ss) = (&k[a..n], &s[a..n]);
+            let len = ri.len().min(kk.len()).min(ss.len());
+            for b in 0..len {
+                ri[b] = ri[b] - (ka * ss[b] + sa * kk[b]) + (ka * kk[b]) * q;
             }
         }
         // Earlier gains pass through (I − k c): the block gain's columns.
@@ -414,9 +445,15 @@ fn update_slices(
                 Some((col, coef)) => coef * km[col],
                 None => km.iter().zip(row).map(|(a, b)| a * b).sum(),
             };
-            for (x, &kb) in km.iter_mut().zip(k.iter()) {
-                *x -= kb * ck;
+            let len = km.len().min(k.len());
+            for b in 0..len {
+                km[b] -= k[b] * ck;
             }
+        }
+    }
+    for a in 1..n {
+        for b in 0..a {
+            big_r[a * n + b] = big_r[b * n + a];
         }
     }
     true

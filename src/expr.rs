@@ -41,11 +41,12 @@ impl TimeFn {
     }
 }
 
-/// One compiled entry.
+/// One compiled entry. A `TimeFn` is large (exmex keeps its nodes inline), so it is
+/// boxed: matrices of mostly constant entries then move pointers, not kilobytes.
 #[derive(Clone, Debug)]
 pub enum Entry {
     Const(f64),
-    Time(TimeFn),
+    Time(Box<TimeFn>),
 }
 
 /// Compile one entry at `path`. `allow_t` false: `t` is an error (constant fields).
@@ -109,7 +110,7 @@ pub fn compile_entry(
                 ))
             }
         }
-        Some(t_slot) => Ok(Entry::Time(TimeFn { expr, vars, t_slot })),
+        Some(t_slot) => Ok(Entry::Time(Box::new(TimeFn { expr, vars, t_slot }))),
     }
 }
 
@@ -336,7 +337,7 @@ impl TimeMatrix {
         for (i, (e, path)) in entries.into_iter().enumerate() {
             match e {
                 Entry::Const(x) => values[i] = x,
-                Entry::Time(f) => varying.push((i, f, path)),
+                Entry::Time(f) => varying.push((i, *f, path)),
             }
         }
         TimeMatrix {

@@ -117,7 +117,7 @@ pub fn compile(
                 } else {
                     Availability::Never
                 }),
-                Ok(Entry::Time(f)) => items.push(Availability::When(f, p)),
+                Ok(Entry::Time(f)) => items.push(Availability::When(*f, p)),
                 Err(e) => {
                     errs.push(e);
                     items.push(Availability::Always);

@@ -190,7 +190,7 @@ impl<'m, const N: usize> Engine<'m, N> {
         let mut prep = Prepared::new(n, nm);
         let mut schedule = m.schedule.clone();
         let mut avail = vec![true; nm];
-        let mut avail_prev: Option<Vec<bool>> = None;
+        let mut avail_prev = vec![true; nm]; // the mask `prep` was prepared for
         let mut abs_h = vec![0.0; n * n]; // |I − pC|
         let mut pz = vec![0.0; n]; // |p| ζ (3.19)
         let mut pot = vec![0.0; n]; // sqrt(diag R_k)
@@ -245,14 +245,12 @@ impl<'m, const N: usize> Engine<'m, N> {
                         .mask(k, t_k, &mut avail)
                         .map_err(|p| time_err(&p, k, t_k))?,
                 };
-                let mask_changed = avail_prev.as_deref() != Some(&avail[..]);
+                let mask_changed = avail_prev != avail;
                 if k == 1 || inp.rv_changed || mask_changed {
                     let mask = (!all).then_some(&avail[..]);
                     prep.prepare(&m.c, &inp.rv, mask, n, nm)
                         .map_err(|()| singular(k, t_k))?;
-                    if mask_changed {
-                        avail_prev = Some(avail.clone());
-                    }
+                    avail_prev.copy_from_slice(&avail);
                 }
                 if !joseph.step::<N>(n, &mut big_r, &inp.e, &inp.big_b, &prep) {
                     return Err(singular(k, t_k));

@@ -81,8 +81,9 @@ pub struct Prepared {
     unit: Vec<Option<(usize, f64)>>,
     /// D: the noise variance of each whitened row.
     d: Vec<f64>,
-    /// L⁻¹ (nk × nk, unit lower) when Rv is not diagonal.
-    linv: Option<Vec<f64>>,
+    /// L⁻¹ (nk × nk, unit lower), used when `whitened` (Rv is not diagonal).
+    linv: Vec<f64>,
+    whitened: bool,
     work: Vec<f64>,
 }
 
@@ -93,7 +94,8 @@ impl Prepared {
             rows: vec![0.0; nm * n],
             unit: vec![None; nm],
             d: vec![0.0; nm],
-            linv: None,
+            linv: vec![0.0; nm * nm],
+            whitened: false,
             work: vec![0.0; nm * nm],
         }
     }
@@ -123,7 +125,7 @@ impl Prepared {
             for (r, &j) in self.idx.iter().enumerate() {
                 self.d[r] = rv[j * nm + j];
             }
-            self.linv = None;
+            self.whitened = false;
         } else {
             // Rv_k = L D Lᵀ, then L⁻¹ by forward substitution, rows := L⁻¹ C.
             let a = &mut self.work[..nk * nk];
@@ -133,7 +135,8 @@ impl Prepared {
                 }
             }
             ldl(a, &mut self.d[..nk], nk)?;
-            let mut linv = vec![0.0; nk * nk];
+            let linv = &mut self.linv[..nk * nk];
+            linv.fill(0.0);
             for j in 0..nk {
                 linv[j * nk + j] = 1.0;
                 for i in j + 1..nk {
@@ -144,18 +147,18 @@ impl Prepared {
                     linv[i * nk + j] = s;
                 }
             }
-            let orig = self.rows[..nk * n].to_vec();
-            for i in 0..nk {
-                let row = &mut self.rows[i * n..i * n + n];
-                row.fill(0.0);
-                for k in 0..=i {
+            // In place, last row first: row i needs the original rows k < i.
+            for i in (0..nk).rev() {
+                let (before, from_i) = self.rows.split_at_mut(i * n);
+                let row = &mut from_i[..n];
+                for k in 0..i {
                     let l = linv[i * nk + k];
-                    for (x, o) in row.iter_mut().zip(&orig[k * n..k * n + n]) {
+                    for (x, o) in row.iter_mut().zip(&before[k * n..k * n + n]) {
                         *x += l * o;
                     }
                 }
             }
-            self.linv = Some(linv);
+            self.whitened = true;
         }
         for r in 0..nk {
             let row = &self.rows[r * n..r * n + n];
@@ -284,12 +287,12 @@ impl SequentialJoseph {
         }
         for (j, &jj) in prep.idx.iter().enumerate() {
             let out = &mut self.gain_t[jj * n..jj * n + n];
-            match &prep.linv {
-                None => out.copy_from_slice(&self.kt[j * n..j * n + n]),
-                Some(linv) => {
+            match prep.whitened {
+                false => out.copy_from_slice(&self.kt[j * n..j * n + n]),
+                true => {
                     out.fill(0.0);
                     for m in j..nk {
-                        let l = linv[m * nk + j];
+                        let l = prep.linv[m * nk + j];
                         for (x, k) in out.iter_mut().zip(&self.kt[m * n..m * n + n]) {
                             *x += l * k;
                         }

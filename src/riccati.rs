@@ -287,16 +287,15 @@ impl SequentialJoseph {
         }
         for (j, &jj) in prep.idx.iter().enumerate() {
             let out = &mut self.gain_t[jj * n..jj * n + n];
-            match prep.whitened {
-                false => out.copy_from_slice(&self.kt[j * n..j * n + n]),
-                true => {
-                    out.fill(0.0);
-                    for m in j..nk {
-                        let l = prep.linv[m * nk + j];
-                        for (x, k) in out.iter_mut().zip(&self.kt[m * n..m * n + n]) {
-                            *x += l * k;
-                        }
-                    }
+            if !prep.whitened {
+                out.copy_from_slice(&self.kt[j * n..j * n + n]);
+                continue;
+            }
+            out.fill(0.0);
+            for m in j..nk {
+                let l = prep.linv[m * nk + j];
+                for (x, k) in out.iter_mut().zip(&self.kt[m * n..m * n + n]) {
+                    *x += l * k;
                 }
             }
         }

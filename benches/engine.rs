@@ -116,17 +116,13 @@ fn main() {
     if want("n30 time-varying a(t)") {
         time("n30 time-varying a(t)", &chain(30, d, 30, true), runs(1));
     }
-    if want("shortcut P=10 time-invariant") {
-        time(
-            "shortcut P=10 time-invariant, shortcut on",
-            &chain(10, d, 0, true),
-            runs(5),
-        );
-        time(
-            "shortcut P=10 time-invariant, shortcut off",
-            &chain(10, d, 0, false),
-            runs(5),
-        );
+    for (name, shortcut) in [
+        ("shortcut P=10 time-invariant, shortcut on", true),
+        ("shortcut P=10 time-invariant, shortcut off", false),
+    ] {
+        if want(name) {
+            time(name, &chain(10, d, 0, shortcut), runs(5));
+        }
     }
     if want("expressions") {
         let with = time(

@@ -56,6 +56,15 @@ pub fn run(model: &CompiledModel, progress: &mut dyn Progress) -> Result<Analysi
     Ok(result)
 }
 
+/// Whether the engine runs its AVX2 + FMA build: the CPU has both and
+/// `KEA_NO_SIMD` is not set (the switch lets the tests compare both builds).
+#[cfg(target_arch = "x86_64")]
+fn simd_enabled() -> bool {
+    std::arch::is_x86_feature_detected!("avx2")
+        && std::arch::is_x86_feature_detected!("fma")
+        && std::env::var_os("KEA_NO_SIMD").is_none()
+}
+
 /// Running sums of one criterion of one state (3.24).
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Avg {
@@ -149,7 +158,27 @@ impl<'m, const N: usize> Engine<'m, N> {
         if N == 0 { self.nn } else { N }
     }
 
+    /// Runs the recursion, compiled for AVX2 + FMA when the CPU has them (x86-64).
+    /// Rust never contracts a·b + c into an FMA and LLVM does not reorder
+    /// floating-point sums, so both builds of the loop give bit-identical results
+    /// (`tests/reference.rs::simd_and_baseline_builds_agree_bitwise`).
     fn run(&self, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
+        #[cfg(target_arch = "x86_64")]
+        if simd_enabled() {
+            // SAFETY: both features were detected on this CPU just above.
+            return unsafe { self.run_avx2(progress) };
+        }
+        self.run_body(progress)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn run_avx2(&self, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
+        self.run_body(progress)
+    }
+
+    #[inline(always)]
+    fn run_body(&self, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
         let n = self.n();
         let (nm, dt) = (self.nm, self.dt);
         let m = self.m;

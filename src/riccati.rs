@@ -253,7 +253,8 @@ impl SequentialJoseph {
     ///   s = r cᵀ,  q = c s + d                          (2.3)
     ///   k = s / q                                       (2.5)
     ///   r := (I − k c) r (I − k c)ᵀ + k d kᵀ            (2.7), Joseph form,
-    ///      = r − (k sᵀ + s kᵀ) + q k kᵀ                 upper triangle only
+    ///      = r − (k sᵀ + s kᵀ) + q k kᵀ                 upper triangle only;
+    ///        row a: r_a· − k_a s + (q k_a − s_a) k      (the same sum, regrouped)
     /// R = r, its lower triangle mirrored from the upper: exactly symmetric
     /// ```
     /// The expansion holds for any k, so like the Joseph form it does not rely on k
@@ -361,10 +362,11 @@ fn update_fixed<const N: usize>(
         }
         let k: [f64; N] = s.map(|x| x / q);
         for a in 0..N {
-            let (ka, sa) = (k[a], s[a]);
+            // r_a· − k_a s − s_a k + q k_a k, grouped as r_a· − k_a s + (q k_a − s_a) k
+            let (ka, beta) = (k[a], q * k[a] - s[a]);
             let ra = &mut r[a];
             for b in a..N {
-                ra[b] = ra[b] - (ka * s[b] + sa * k[b]) + (ka * k[b]) * q;
+                ra[b] = ra[b] - ka * s[b] + beta * k[b];
             }
         }
         // Earlier gains pass through (I − k c): the block gain's columns.
@@ -432,13 +434,14 @@ fn update_slices(
             *k = s / q;
         }
         for a in 0..n {
-            let (ka, sa) = (k[a], s[a]);
+            // as in `update_fixed`: r_a· − k_a s + (q k_a − s_a) k
+            let (ka, beta) = (k[a], q * k[a] - s[a]);
             // equal-length slices: the loop below has no bounds checks and vectorises
             let ri = &mut big_r[a * n + a..a * n + n];
             let (kk, ss) = (&k[a..n], &s[a..n]);
             let len = ri.len().min(kk.len()).min(ss.len());
             for b in 0..len {
-                ri[b] = ri[b] - (ka * ss[b] + sa * kk[b]) + (ka * kk[b]) * q;
+                ri[b] = ri[b] - ka * ss[b] + beta * kk[b];
             }
         }
         // Earlier gains pass through (I − k c): the block gain's columns.

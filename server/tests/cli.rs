@@ -1,0 +1,116 @@
+//! The `kea` command line as a user runs it: a process, a model file, its output.
+
+use serde_json::{Value, json};
+use std::process::Command;
+
+const KEA: &str = env!("CARGO_BIN_EXE_kea");
+
+/// `kea analyze FILE --json`, with `KEA_NO_SIMD` set or not; the result without
+/// its wall-clock timing.
+fn analyze(file: &std::path::Path, no_simd: bool) -> Value {
+    let mut cmd = Command::new(KEA);
+    cmd.arg("analyze").arg(file).arg("--json");
+    if no_simd {
+        cmd.env("KEA_NO_SIMD", "1");
+    } else {
+        cmd.env_remove("KEA_NO_SIMD");
+    }
+    let out = cmd.output().expect("kea runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut v: Value = serde_json::from_slice(&out.stdout).expect("JSON result");
+    v.as_object_mut().expect("object").remove("timing");
+    v
+}
+
+/// A 13-state chain (the runtime-sized kernels) with time-varying a(t), measurements
+/// that mix states, and correlated measurement noise (the whitened path).
+fn chain13() -> Value {
+    let n = 13;
+    let a: Vec<Vec<Value>> = (0..n)
+        .map(|i| {
+            (0..n)
+                .map(|j| match j {
+                    _ if j == i => json!(format!("-0.5 - 0.1*{i} + 0.2*sin(t + {i})")),
+                    _ if j == i + 1 => json!(1.0),
+                    _ => json!(0.0),
+                })
+                .collect()
+        })
+        .collect();
+    let eye = |k: usize| -> Vec<Vec<f64>> {
+        (0..k)
+            .map(|i| (0..k).map(|j| f64::from(u8::from(i == j))).collect())
+            .collect()
+    };
+    let c: Vec<Vec<f64>> = (0..n)
+        .map(|i| {
+            (0..n)
+                .map(|j| {
+                    if j == i {
+                        1.0
+                    } else if j == (i + 1) % n {
+                        0.5
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let gamma: Vec<Vec<f64>> = (0..n)
+        .map(|i| {
+            (0..n)
+                .map(|j| {
+                    if j == i {
+                        1.0
+                    } else if j == (i + 1) % n {
+                        0.3
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    json!({
+        "kea_model": 1,
+        "time": {"t0": 0.0, "t_end": 5.0, "steps": 3000},
+        "system": {
+            "states": (0..n).map(|i| format!("x{i}")).collect::<Vec<_>>(),
+            "a": a, "b": eye(n), "phi": vec![0.3; n],
+            "y0": vec![1.0; n], "eta0": vec![0.1; n]
+        },
+        "measurement": {
+            "names": (0..n).map(|i| format!("z{i}")).collect::<Vec<_>>(),
+            "c": c, "gamma": gamma, "psi": vec![1e-2; n]
+        }
+    })
+}
+
+/// The engine runs an AVX2 + FMA build of its loop where the CPU has them; it must
+/// give the same bits as the baseline build (`KEA_NO_SIMD=1`). On a CPU without
+/// AVX2 both runs take the baseline path and this test checks nothing more than
+/// determinism.
+#[test]
+fn simd_and_baseline_builds_agree_bitwise() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let big = dir.path().join("chain13.json");
+    std::fs::write(&big, chain13().to_string()).unwrap();
+    for file in [
+        root.join("presets/seed-example.json"),
+        root.join("presets/helicopter-range.json"),
+        big,
+    ] {
+        let (simd, base) = (analyze(&file, false), analyze(&file, true));
+        assert!(
+            simd["criteria"]["covariance"]["weighted"]["yx"].is_number(),
+            "{file:?}: {simd}"
+        );
+        assert_eq!(simd, base, "{file:?}");
+    }
+}

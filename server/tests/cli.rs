@@ -46,36 +46,21 @@ fn chain13() -> Value {
             .map(|i| (0..k).map(|j| f64::from(u8::from(i == j))).collect())
             .collect()
     };
-    let c: Vec<Vec<f64>> = (0..n)
-        .map(|i| {
-            (0..n)
-                .map(|j| {
-                    if j == i {
-                        1.0
-                    } else if j == (i + 1) % n {
-                        0.5
-                    } else {
-                        0.0
-                    }
-                })
-                .collect()
-        })
-        .collect();
-    let gamma: Vec<Vec<f64>> = (0..n)
-        .map(|i| {
-            (0..n)
-                .map(|j| {
-                    if j == i {
-                        1.0
-                    } else if j == (i + 1) % n {
-                        0.3
-                    } else {
-                        0.0
-                    }
-                })
-                .collect()
-        })
-        .collect();
+    // 1 on the diagonal, `off` on the (cyclic) superdiagonal
+    let bidiag = |off: f64| -> Vec<Vec<f64>> {
+        (0..n)
+            .map(|i| {
+                (0..n)
+                    .map(|j| match j {
+                        _ if j == i => 1.0,
+                        _ if j == (i + 1) % n => off,
+                        _ => 0.0,
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    let (c, gamma) = (bidiag(0.5), bidiag(0.3));
     json!({
         "kea_model": 1,
         "time": {"t0": 0.0, "t_end": 5.0, "steps": 3000},

@@ -161,7 +161,7 @@ impl<'m, const N: usize> Engine<'m, N> {
     /// Runs the recursion, compiled for AVX2 + FMA when the CPU has them (x86-64).
     /// Rust never contracts a·b + c into an FMA and LLVM does not reorder
     /// floating-point sums, so both builds of the loop give bit-identical results
-    /// (`tests/reference.rs::simd_and_baseline_builds_agree_bitwise`).
+    /// (`server/tests/cli.rs::simd_and_baseline_builds_agree_bitwise`).
     fn run(&self, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
         #[cfg(target_arch = "x86_64")]
         if simd_enabled() {

@@ -8,6 +8,7 @@
 use crate::decimate::Decimator;
 use crate::error::Error;
 use crate::expr::TimeMatrix;
+use crate::lanes::{Lanes, Scalar};
 use crate::linalg::{SparseRows, cov_rel_diff, mul, mul_abt_sym, predict_cov, sparse_mul_vec};
 use crate::result::*;
 use crate::riccati::{Prepared, SequentialJoseph};
@@ -168,17 +169,19 @@ impl<'m, const N: usize> Engine<'m, N> {
             // SAFETY: both features were detected on this CPU just above.
             return unsafe { self.run_avx2(progress) };
         }
-        self.run_body(progress)
+        self.run_body::<Scalar>(progress)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn run_avx2(&self, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
-        self.run_body(progress)
+        // The explicit AVX2 row kernels: this function is only entered on a CPU with AVX2.
+        self.run_body::<crate::lanes::Avx2>(progress)
     }
 
+    /// The recursion; `L` supplies the row kernels (portable or AVX2).
     #[inline(always)]
-    fn run_body(&self, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
+    fn run_body<L: Lanes>(&self, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
         let n = self.n();
         let (nm, dt) = (self.nm, self.dt);
         let m = self.m;
@@ -281,7 +284,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                         .map_err(|()| singular(k, t_k))?;
                     avail_prev.copy_from_slice(&avail);
                 }
-                if !joseph.step::<N>(n, &mut big_r, &inp.e, &inp.big_b, &prep) {
+                if !joseph.step::<N, L>(n, &mut big_r, &inp.e, &inp.big_b, &prep) {
                     return Err(singular(k, t_k));
                 }
                 for i in 0..n {
@@ -324,7 +327,7 @@ impl<'m, const N: usize> Engine<'m, N> {
 
             // Open-loop covariance P^Y = A P Aᵀ + B (§1.5, exact second moments)
             if open_diverged.is_none() {
-                predict_cov::<N>(&mut p_next, &p_y, &inp.e, &inp.big_b, &mut work, n);
+                predict_cov::<N, L>(&mut p_next, &p_y, &inp.e, &inp.big_b, &mut work, n);
                 std::mem::swap(&mut p_y, &mut p_next);
                 if !(0..n).all(|i| p_y[i * n + i].is_finite()) {
                     open_diverged = Some((k, t_k));

@@ -10,6 +10,7 @@ pub mod decimate;
 pub mod error;
 pub mod exec;
 pub mod expr;
+mod lanes;
 pub mod linalg;
 pub mod model;
 pub mod presets;

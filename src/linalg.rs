@@ -2,6 +2,8 @@
 //! vectorises them and, when called with a compile-time dimension, unrolls them.
 //! No allocation; callers own the buffers.
 
+use crate::lanes::Lanes;
+
 /// c (r×p) = a (r×k) · b (k×p).
 #[inline(always)]
 pub fn mul(c: &mut [f64], a: &[f64], b: &[f64], r: usize, k: usize, p: usize) {
@@ -77,7 +79,7 @@ impl SparseRows {
 /// then the upper triangle of U Aᵀ, (U Aᵀ)_ab = U_ab + Σ_c E_bc U_ac, mirrored — so
 /// the result is exactly symmetric. `u` is an N×N work buffer. `N > 0`: the compile-time dimension (n = N).
 #[inline(always)]
-pub fn predict_cov<const N: usize>(
+pub(crate) fn predict_cov<const N: usize, L: Lanes>(
     out: &mut [f64],
     r: &[f64],
     e: &SparseRows,
@@ -91,9 +93,7 @@ pub fn predict_cov<const N: usize>(
     let (r, b, u, out) = (&r[..n * n], &b[..n * n], &mut u[..n * n], &mut out[..n * n]);
     u.copy_from_slice(r);
     for &(i, k, v) in &e.nz {
-        for (x, y) in u[i * n..i * n + n].iter_mut().zip(&r[k * n..k * n + n]) {
-            *x += v * y;
-        }
+        L::add_scaled(&mut u[i * n..i * n + n], &r[k * n..k * n + n], v);
     }
     for a in 0..n {
         let ua = &u[a * n..a * n + n];

@@ -65,6 +65,7 @@ pub fn dare_doubling(
     None
 }
 
+use crate::lanes::Lanes;
 use crate::linalg::{SparseRows, mat_mut, predict_cov};
 
 /// The measurements used at one step, prepared for sequential (scalar) processing:
@@ -261,7 +262,7 @@ impl SequentialJoseph {
     /// being the optimal gain. `n` is the state dimension (a compile-time constant
     /// at the call site lets the compiler unroll every loop here).
     #[inline(always)]
-    pub fn step<const N: usize>(
+    pub(crate) fn step<const N: usize, L: Lanes>(
         &mut self,
         n: usize,
         big_r: &mut [f64],
@@ -270,13 +271,13 @@ impl SequentialJoseph {
         prep: &Prepared,
     ) -> bool {
         let big_r = &mut big_r[..n * n];
-        predict_cov::<N>(&mut self.r_pred, big_r, e, big_b, &mut self.u, n);
+        predict_cov::<N, L>(&mut self.r_pred, big_r, e, big_b, &mut self.u, n);
         big_r.copy_from_slice(&self.r_pred[..n * n]);
         let nk = prep.len();
         let ok = if N > 0 {
             update_fixed::<N>(mat_mut(big_r), self.kt.as_chunks_mut::<N>().0, prep)
         } else {
-            update_slices(n, big_r, &mut self.kt, &mut self.s, prep)
+            update_slices::<L>(n, big_r, &mut self.kt, &mut self.s, prep)
         };
         if !ok {
             return false;
@@ -392,7 +393,7 @@ fn update_fixed<const N: usize>(
 
 /// The scalar Joseph updates of [`SequentialJoseph::step`] for a runtime dimension.
 #[inline(always)]
-fn update_slices(
+fn update_slices<L: Lanes>(
     n: usize,
     big_r: &mut [f64],
     kt: &mut [f64],
@@ -436,13 +437,13 @@ fn update_slices(
         for a in 0..n {
             // as in `update_fixed`: r_a· − k_a s + (q k_a − s_a) k
             let (ka, beta) = (k[a], q * k[a] - s[a]);
-            // equal-length slices: the loop below has no bounds checks and vectorises
-            let ri = &mut big_r[a * n + a..a * n + n];
-            let (kk, ss) = (&k[a..n], &s[a..n]);
-            let len = ri.len().min(kk.len()).min(ss.len());
-            for b in 0..len {
-                ri[b] = ri[b] - ka * ss[b] + beta * kk[b];
-            }
+            L::sub_add(
+                &mut big_r[a * n + a..a * n + n],
+                &s[a..n],
+                ka,
+                &k[a..n],
+                beta,
+            );
         }
         // Earlier gains pass through (I − k c): the block gain's columns.
         for km in done.chunks_exact_mut(n) {
@@ -450,10 +451,7 @@ fn update_slices(
                 Some((col, coef)) => coef * km[col],
                 None => km.iter().zip(row).map(|(a, b)| a * b).sum(),
             };
-            let len = km.len().min(k.len());
-            for b in 0..len {
-                km[b] -= k[b] * ck;
-            }
+            L::sub_scaled(km, k, ck);
         }
     }
     for a in 1..n {

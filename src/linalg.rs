@@ -90,21 +90,32 @@ pub(crate) fn predict_cov<const N: usize, L: Lanes>(
     if N > 0 {
         return predict_fixed::<N>(mat_mut(out), mat(r), e, mat(b), mat_mut(u));
     }
+    // Runtime N: the same sums, arranged as row operations for the row kernels L.
+    // V = Uᵀ (transposed in place); W = A V = V + E V row by row, of which row b's
+    // first b + 1 entries are needed: W_ba = U_ab + Σ_c E_bc U_ac = (U Aᵀ)_ab with
+    // the same terms in the same order; then + B (exactly symmetric) and mirrored.
     let (r, b, u, out) = (&r[..n * n], &b[..n * n], &mut u[..n * n], &mut out[..n * n]);
     u.copy_from_slice(r);
     for &(i, k, v) in &e.nz {
         L::add_scaled(&mut u[i * n..i * n + n], &r[k * n..k * n + n], v);
     }
-    for a in 0..n {
-        let ua = &u[a * n..a * n + n];
-        for bb in a..n {
-            let mut s = ua[bb];
-            for &(_, c, v) in e.row(bb) {
-                s += v * ua[c];
-            }
-            s += b[a * n + bb];
-            out[a * n + bb] = s;
-            out[bb * n + a] = s;
+    for i in 0..n {
+        for j in i + 1..n {
+            u.swap(i * n + j, j * n + i);
+        }
+    }
+    for bb in 0..n {
+        let w = &mut out[bb * n..bb * n + bb + 1];
+        w.copy_from_slice(&u[bb * n..bb * n + bb + 1]);
+        for &(_, c, v) in e.row(bb) {
+            L::add_scaled(w, &u[c * n..c * n + bb + 1], v);
+        }
+        // + B_b· (1·x is exact, so this is the plain sum)
+        L::add_scaled(w, &b[bb * n..bb * n + bb + 1], 1.0);
+    }
+    for a in 1..n {
+        for bb in 0..a {
+            out[bb * n + a] = out[a * n + bb];
         }
     }
 }

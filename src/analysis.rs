@@ -604,12 +604,12 @@ impl Inputs {
     #[inline(always)]
     fn at(&mut self, m: &CompiledModel, k: u64, first: bool) -> Result<(), Error> {
         let (n, nm, dt) = (self.n, self.nm, self.dt);
-        let t_prev = m.t0 + (k - 1) as f64 * dt;
-        let t_k = m.t0 + k as f64 * dt;
+        // t_{k−1} and t_k are grid points k − 1 and k: `update_grid` evaluates the
+        // expressions for several steps at a time (the same values as one by one).
         if first || !self.a_fn.is_constant() {
             self.a_fn
-                .update(t_prev)
-                .map_err(|p| time_err(p, k, t_prev))?;
+                .update_grid(m.t0, dt, k - 1)
+                .map_err(|(p, t)| time_err(p, k, t))?;
             let a = &self.a_fn.values;
             for e in self.e.nz.iter_mut() {
                 e.2 = a[e.0 * n + e.1] * dt;
@@ -621,8 +621,8 @@ impl Inputs {
         }
         if first || !self.b_fn.is_constant() {
             self.b_fn
-                .update(t_prev)
-                .map_err(|p| time_err(p, k, t_prev))?;
+                .update_grid(m.t0, dt, k - 1)
+                .map_err(|(p, t)| time_err(p, k, t))?;
             let nl = self.b_fn.cols;
             for (d, s) in self.bd.iter_mut().zip(&self.b_fn.values) {
                 *d = s * dt;
@@ -635,8 +635,8 @@ impl Inputs {
         }
         if first || !self.u_fn.is_constant() {
             self.u_fn
-                .update(t_prev)
-                .map_err(|p| time_err(p, k, t_prev))?;
+                .update_grid(m.t0, dt, k - 1)
+                .map_err(|(p, t)| time_err(p, k, t))?;
             for i in 0..n {
                 self.u[i] = self.u_fn.values[i];
                 self.u_dt[i] = self.u[i] * dt;
@@ -644,7 +644,7 @@ impl Inputs {
         }
         self.rv_changed = first || !self.noise_fn.matrix().is_constant();
         if self.rv_changed {
-            update_noise(&mut self.noise_fn, t_k).map_err(|p| time_err(&p, k, t_k))?;
+            update_noise(&mut self.noise_fn, m.t0, dt, k).map_err(|(p, t)| time_err(&p, k, t))?;
             let ms = self.gamma.len() / nm.max(1);
             match &self.noise_fn {
                 MeasurementNoise::Gamma(g) => self.gamma.copy_from_slice(&g.values),
@@ -714,11 +714,17 @@ fn diag_close(a: &[f64], b: &[f64], n: usize, tol: f64) -> bool {
     (0..n).all(|i| (a[i * n + i] - b[i * n + i]).abs() <= tol * b[i * n + i].abs())
 }
 
-fn update_noise(noise: &mut MeasurementNoise, t: f64) -> Result<(), String> {
+/// Γ (or the seed's g) at the grid point t0 + k·Δt.
+fn update_noise(
+    noise: &mut MeasurementNoise,
+    t0: f64,
+    dt: f64,
+    k: u64,
+) -> Result<(), (String, f64)> {
     match noise {
-        MeasurementNoise::Gamma(g) | MeasurementNoise::SeedG(g) => {
-            g.update(t).map_err(|p| p.to_string())
-        }
+        MeasurementNoise::Gamma(g) | MeasurementNoise::SeedG(g) => g
+            .update_grid(t0, dt, k)
+            .map_err(|(p, t)| (p.to_string(), t)),
     }
 }
 

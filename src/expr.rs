@@ -2,9 +2,12 @@
 //!
 //! Expressions are parsed once with exmex; entries that do not depend on `t` are
 //! evaluated once at compile time, so only the time-varying entries cost anything
-//! per step (≈ 50 ns each, see BENCHMARKS.md).
+//! per step. The analysis steps through a time grid and evaluates them for
+//! [`LANES`] grid points at a time (`TimeMatrix::update_grid`, `expr_block`), which
+//! spreads exmex's interpretation cost over the lanes (BENCHMARKS.md).
 
 use crate::error::FieldError;
+use crate::expr_block::{Block, BlockEx, LANES};
 use crate::model::Value;
 use exmex::prelude::*;
 use std::collections::BTreeMap;
@@ -21,7 +24,8 @@ pub fn is_reserved(name: &str) -> bool {
     FUNCTIONS.contains(&name)
 }
 
-/// A time-varying scalar: compiled expression plus its variable vector.
+/// A time-varying scalar: compiled expression plus its variable vector, and the
+/// same expression parsed over blocks of [`LANES`] time points (`expr_block`).
 #[derive(Clone, Debug)]
 pub struct TimeFn {
     expr: FlatEx<f64>,
@@ -29,6 +33,8 @@ pub struct TimeFn {
     vars: Vec<f64>,
     /// Index of `t` in `vars`.
     t_slot: usize,
+    block: BlockEx,
+    block_vars: Vec<Block>,
 }
 
 impl TimeFn {
@@ -38,6 +44,15 @@ impl TimeFn {
         // Errors cannot happen after a successful parse with the right variable count;
         // NaN makes the caller's finiteness check fire with the entry's path.
         self.expr.eval(&self.vars).unwrap_or(f64::NAN)
+    }
+
+    /// The values at LANES time points, each equal to `eval` at that point.
+    #[inline]
+    pub fn eval_block(&mut self, t: [f64; LANES]) -> [f64; LANES] {
+        self.block_vars[self.t_slot] = Block(t);
+        self.block
+            .eval(&self.block_vars)
+            .map_or([f64::NAN; LANES], |b| b.0)
     }
 }
 
@@ -110,7 +125,21 @@ pub fn compile_entry(
                 ))
             }
         }
-        Some(t_slot) => Ok(Entry::Time(Box::new(TimeFn { expr, vars, t_slot }))),
+        Some(t_slot) => {
+            // The same text over blocks; it parses whenever the f64 parse did (the
+            // operator sets are the same, `expr_block`'s test).
+            let block = BlockEx::parse(&plain).map_err(|e| {
+                FieldError::new(path, format!("cannot parse expression \"{text}\": {e}"))
+            })?;
+            let block_vars = vars.iter().map(|&v| Block([v; LANES])).collect();
+            Ok(Entry::Time(Box::new(TimeFn {
+                expr,
+                vars,
+                t_slot,
+                block,
+                block_vars,
+            })))
+        }
     }
 }
 
@@ -317,6 +346,10 @@ pub struct TimeMatrix {
     pub values: Vec<f64>,
     /// (flat index, function, path) of each time-varying entry.
     varying: Vec<(usize, TimeFn, String)>,
+    /// `update_grid`'s cache: the grid (t0, Δt bits), the first grid index held,
+    /// and LANES values of each varying entry.
+    block_grid: Option<(u64, u64, u64)>,
+    block_values: Vec<[f64; LANES]>,
 }
 
 impl TimeMatrix {
@@ -327,6 +360,8 @@ impl TimeMatrix {
             cols,
             values,
             varying: Vec::new(),
+            block_grid: None,
+            block_values: Vec::new(),
         }
     }
 
@@ -344,6 +379,8 @@ impl TimeMatrix {
             rows,
             cols,
             values,
+            block_grid: None,
+            block_values: vec![[0.0; LANES]; varying.len()],
             varying,
         }
     }
@@ -370,6 +407,36 @@ impl TimeMatrix {
                 return Err(path.as_str());
             }
             self.values[*i] = v;
+        }
+        Ok(())
+    }
+
+    /// Re-evaluate the time-varying entries at the grid point t = t0 + i·Δt — the
+    /// same t, and the same values, as `update(t0 + i as f64 * dt)` — evaluating
+    /// LANES consecutive grid points at a time: for stepping through a grid in order.
+    /// Err((path, t)) if one is not finite at this point.
+    #[inline]
+    pub fn update_grid(&mut self, t0: f64, dt: f64, i: u64) -> Result<(), (&str, f64)> {
+        let grid = (t0.to_bits(), dt.to_bits());
+        let lane = match self.block_grid {
+            Some((g0, gd, first)) if (g0, gd) == grid && i >= first && i - first < LANES as u64 => {
+                (i - first) as usize
+            }
+            _ => {
+                let ts: [f64; LANES] = std::array::from_fn(|l| t0 + (i + l as u64) as f64 * dt);
+                for ((_, f, _), out) in self.varying.iter_mut().zip(&mut self.block_values) {
+                    *out = f.eval_block(ts);
+                }
+                self.block_grid = Some((grid.0, grid.1, i));
+                0
+            }
+        };
+        for ((idx, _, path), vals) in self.varying.iter().zip(&self.block_values) {
+            let v = vals[lane];
+            if !v.is_finite() {
+                return Err((path.as_str(), t0 + i as f64 * dt));
+            }
+            self.values[*idx] = v;
         }
         Ok(())
     }

@@ -10,6 +10,7 @@ pub mod decimate;
 pub mod error;
 pub mod exec;
 pub mod expr;
+pub mod expr_block;
 mod lanes;
 pub mod linalg;
 pub mod model;

@@ -136,16 +136,31 @@ fn predict_fixed<const N: usize>(
             ui[j] += v * rk[j];
         }
     }
-    for a in 0..N {
-        let ua = &u[a];
-        for bb in a..N {
-            let mut s = ua[bb];
-            for &(_, c, v) in e.row(bb) {
-                s += v * ua[c];
+    // As in `predict_cov`'s runtime branch: transpose, then row b of A·Uᵀ.
+    for i in 0..N {
+        for j in i + 1..N {
+            let x = u[i][j];
+            u[i][j] = u[j][i];
+            u[j][i] = x;
+        }
+    }
+    for bb in 0..N {
+        let w = &mut out[bb][..=bb];
+        w.copy_from_slice(&u[bb][..=bb]);
+        for &(_, c, v) in e.row(bb) {
+            let uc = &u[c][..=bb];
+            for a in 0..=bb {
+                w[a] += v * uc[a];
             }
-            s += b[a][bb];
-            out[a][bb] = s;
-            out[bb][a] = s;
+        }
+        let bb_row = &b[bb][..=bb];
+        for a in 0..=bb {
+            w[a] += bb_row[a];
+        }
+    }
+    for a in 1..N {
+        for bb in 0..a {
+            out[bb][a] = out[a][bb];
         }
     }
 }

@@ -33,8 +33,11 @@ pub struct TimeFn {
     vars: Vec<f64>,
     /// Index of `t` in `vars`.
     t_slot: usize,
-    block: BlockEx,
-    block_vars: Vec<Block>,
+    /// The parsed text, and its block form with its variables, built on the first
+    /// `eval_block`: a parsed exmex expression is ≈ 20 KB (its nodes are inline), so
+    /// only the copy an analysis steps with carries the second one.
+    text: Box<str>,
+    block: Option<Box<(BlockEx, Vec<Block>)>>,
 }
 
 impl TimeFn {
@@ -49,10 +52,20 @@ impl TimeFn {
     /// The values at LANES time points, each equal to `eval` at that point.
     #[inline]
     pub fn eval_block(&mut self, t: [f64; LANES]) -> [f64; LANES] {
-        self.block_vars[self.t_slot] = Block(t);
-        self.block
-            .eval(&self.block_vars)
-            .map_or([f64::NAN; LANES], |b| b.0)
+        if self.block.is_none() {
+            // `compile_entry` checked that the text parses over blocks.
+            let Ok(ex) = BlockEx::parse(&self.text) else {
+                return [f64::NAN; LANES];
+            };
+            let vars = self.vars.iter().map(|&v| Block([v; LANES])).collect();
+            self.block = Some(Box::new((ex, vars)));
+        }
+        let Some(block) = self.block.as_deref_mut() else {
+            return [f64::NAN; LANES];
+        };
+        let (ex, vars) = block;
+        vars[self.t_slot] = Block(t);
+        ex.eval(vars).map_or([f64::NAN; LANES], |b| b.0)
     }
 }
 
@@ -126,18 +139,18 @@ pub fn compile_entry(
             }
         }
         Some(t_slot) => {
-            // The same text over blocks; it parses whenever the f64 parse did (the
-            // operator sets are the same, `expr_block`'s test).
-            let block = BlockEx::parse(&plain).map_err(|e| {
+            // The same text over blocks parses whenever the f64 parse did (the
+            // operator sets are the same, `expr_block`'s test); checked here so that
+            // the lazy parse in `eval_block` cannot fail.
+            BlockEx::parse(&plain).map_err(|e| {
                 FieldError::new(path, format!("cannot parse expression \"{text}\": {e}"))
             })?;
-            let block_vars = vars.iter().map(|&v| Block([v; LANES])).collect();
             Ok(Entry::Time(Box::new(TimeFn {
                 expr,
                 vars,
                 t_slot,
-                block,
-                block_vars,
+                text: plain.into(),
+                block: None,
             })))
         }
     }

@@ -341,7 +341,17 @@ fn update_fixed<const N: usize>(
         let unit = prep.unit[j];
         // Only the upper triangle (a ≤ b) is current until the mirror at the end.
         let s: [f64; N] = match unit {
-            Some((col, coef)) => std::array::from_fn(|b| coef * r[b.min(col)][b.max(col)]),
+            Some((col, coef)) => {
+                // column col above the diagonal, row col from it
+                let mut s = [0.0; N];
+                for b in 0..col {
+                    s[b] = coef * r[b][col];
+                }
+                for b in col..N {
+                    s[b] = coef * r[col][b];
+                }
+                s
+            }
             None => {
                 let mut s = [0.0; N];
                 for a in 0..N {
@@ -406,8 +416,12 @@ fn update_slices<L: Lanes>(
         // Only the upper triangle (a ≤ b) is current until the mirror at the end.
         let q = match prep.unit[j] {
             Some((col, coef)) => {
-                for (b, x) in s.iter_mut().enumerate() {
-                    *x = coef * big_r[b.min(col) * n + b.max(col)];
+                // column col above the diagonal, row col from it
+                for b in 0..col {
+                    s[b] = coef * big_r[b * n + col];
+                }
+                for (x, r) in s[col..].iter_mut().zip(&big_r[col * n + col..col * n + n]) {
+                    *x = coef * r;
                 }
                 coef * s[col] + prep.d[j]
             }

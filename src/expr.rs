@@ -33,10 +33,9 @@ pub struct TimeFn {
     vars: Vec<f64>,
     /// Index of `t` in `vars`.
     t_slot: usize,
-    /// The parsed text, and its block form with its variables, built on the first
+    /// The block form of `expr`'s text with its variables, parsed on the first
     /// `eval_block`: a parsed exmex expression is ≈ 20 KB (its nodes are inline), so
     /// only the copy an analysis steps with carries the second one.
-    text: Box<str>,
     block: Option<Box<(BlockEx, Vec<Block>)>>,
 }
 
@@ -54,7 +53,7 @@ impl TimeFn {
     pub fn eval_block(&mut self, t: [f64; LANES]) -> [f64; LANES] {
         if self.block.is_none() {
             // `compile_entry` checked that the text parses over blocks.
-            let Ok(ex) = BlockEx::parse(&self.text) else {
+            let Ok(ex) = BlockEx::parse(self.expr.unparse()) else {
                 return [f64::NAN; LANES];
             };
             let vars = self.vars.iter().map(|&v| Block([v; LANES])).collect();
@@ -149,7 +148,6 @@ pub fn compile_entry(
                 expr,
                 vars,
                 t_slot,
-                text: plain.into(),
                 block: None,
             })))
         }

@@ -10,7 +10,7 @@ use crate::error::FieldError;
 use crate::expr_block::{Block, BlockEx, LANES};
 use crate::model::Value;
 use exmex::prelude::*;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 
 /// Names that are functions or constants in expressions, not parameters.
 const FUNCTIONS: &[&str] = &[
@@ -348,6 +348,12 @@ fn unknown(
     )
 }
 
+/// The most distinct time-dependent expressions one model may have. A parsed
+/// expression takes ≈ 20 KB (exmex keeps its nodes inline) and the analysis adds its
+/// 16-lane form (≈ 23 KB), so this bounds a model's expressions to ≈ 90 MB.
+/// Entries of one matrix with the same text share one parse and count once.
+pub const MAX_TIME_EXPRESSIONS: usize = 2000;
+
 /// A matrix (row-major) whose entries may vary with time.
 #[derive(Clone, Debug)]
 pub struct TimeMatrix {
@@ -355,10 +361,14 @@ pub struct TimeMatrix {
     pub cols: usize,
     /// Current values, row-major; constant entries are set once.
     pub values: Vec<f64>,
-    /// (flat index, function, path) of each time-varying entry.
-    varying: Vec<(usize, TimeFn, String)>,
+    /// (flat index, index into `fns`, path) of each time-varying entry, by index.
+    varying: Vec<(usize, usize, String)>,
+    /// The distinct time-dependent expressions (entries with one text share one).
+    fns: Vec<TimeFn>,
+    /// `update`'s value of each of `fns`.
+    fn_values: Vec<f64>,
     /// `update_grid`'s cache: the grid (t0, Δt bits), the first grid index held,
-    /// and LANES values of each varying entry.
+    /// and LANES values of each of `fns`.
     block_grid: Option<(u64, u64, u64)>,
     block_values: Vec<[f64; LANES]>,
 }
@@ -371,28 +381,10 @@ impl TimeMatrix {
             cols,
             values,
             varying: Vec::new(),
+            fns: Vec::new(),
+            fn_values: Vec::new(),
             block_grid: None,
             block_values: Vec::new(),
-        }
-    }
-
-    /// Build from compiled entries; `paths[i]` names entry i for error messages.
-    pub fn from_entries(rows: usize, cols: usize, entries: Vec<(Entry, String)>) -> Self {
-        let mut values = vec![0.0; rows * cols];
-        let mut varying = Vec::new();
-        for (i, (e, path)) in entries.into_iter().enumerate() {
-            match e {
-                Entry::Const(x) => values[i] = x,
-                Entry::Time(f) => varying.push((i, *f, path)),
-            }
-        }
-        TimeMatrix {
-            rows,
-            cols,
-            values,
-            block_grid: None,
-            block_values: vec![[0.0; LANES]; varying.len()],
-            varying,
         }
     }
 
@@ -402,18 +394,28 @@ impl TimeMatrix {
 
     /// Whether entry `i` (flat, row-major) depends on t.
     pub fn varies(&self, i: usize) -> bool {
-        self.varying.iter().any(|(k, _, _)| *k == i)
+        self.varying.binary_search_by_key(&i, |v| v.0).is_ok()
     }
 
+    /// How many entries depend on t.
     pub fn varying_count(&self) -> usize {
         self.varying.len()
     }
 
-    /// Re-evaluate the time-varying entries at t. Err(path) if one is not finite.
+    /// How many distinct expressions those entries share.
+    pub fn expression_count(&self) -> usize {
+        self.fns.len()
+    }
+
+    /// Re-evaluate the time-varying entries at t. Err(path) names the first entry
+    /// (row-major) that is not finite.
     #[inline]
     pub fn update(&mut self, t: f64) -> Result<(), &str> {
-        for (i, f, path) in self.varying.iter_mut() {
-            let v = f.eval(t);
+        for (f, v) in self.fns.iter_mut().zip(&mut self.fn_values) {
+            *v = f.eval(t);
+        }
+        for (i, f, path) in &self.varying {
+            let v = self.fn_values[*f];
             if !v.is_finite() {
                 return Err(path.as_str());
             }
@@ -435,21 +437,107 @@ impl TimeMatrix {
             }
             _ => {
                 let ts: [f64; LANES] = std::array::from_fn(|l| t0 + (i + l as u64) as f64 * dt);
-                for ((_, f, _), out) in self.varying.iter_mut().zip(&mut self.block_values) {
+                for (f, out) in self.fns.iter_mut().zip(&mut self.block_values) {
                     *out = f.eval_block(ts);
                 }
                 self.block_grid = Some((grid.0, grid.1, i));
                 0
             }
         };
-        for ((idx, _, path), vals) in self.varying.iter().zip(&self.block_values) {
-            let v = vals[lane];
+        for (idx, f, path) in &self.varying {
+            let v = self.block_values[*f][lane];
             if !v.is_finite() {
                 return Err((path.as_str(), t0 + i as f64 * dt));
             }
             self.values[*idx] = v;
         }
         Ok(())
+    }
+}
+
+/// Compiles a [`TimeMatrix`] entry by entry, in row-major order. Entries with the
+/// same expression text are compiled once and share the result: a model that
+/// repeats `"0.3*sin(2*t)"` over a 200 × 200 matrix parses it once and evaluates it
+/// once per step.
+#[derive(Debug)]
+pub struct TimeMatrixBuilder {
+    m: TimeMatrix,
+    by_text: HashMap<String, Shared>,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Shared {
+    Const(f64),
+    Fn(usize),
+}
+
+impl TimeMatrixBuilder {
+    pub fn new(rows: usize, cols: usize) -> Self {
+        TimeMatrixBuilder {
+            m: TimeMatrix::constant(rows, cols, vec![0.0; rows * cols]),
+            by_text: HashMap::new(),
+        }
+    }
+
+    /// Compile entry `i` (flat, row-major; after every entry before it) at `path`.
+    /// `expressions`: the model's distinct time-dependent expressions so far, at
+    /// most [`MAX_TIME_EXPRESSIONS`] (one more once that was exceeded). On error the
+    /// entry stays 0.
+    pub fn set(
+        &mut self,
+        i: usize,
+        value: &Value,
+        params: &BTreeMap<String, f64>,
+        path: String,
+        t0: f64,
+        expressions: &mut usize,
+    ) -> Result<(), FieldError> {
+        debug_assert!(self.m.varying.last().is_none_or(|v| v.0 < i));
+        let text = match value {
+            Value::Expr(s) => Some(s.as_str()),
+            Value::Number(_) => None,
+        };
+        let shared = match text.and_then(|s| self.by_text.get(s)) {
+            Some(&s) => s,
+            // Past the limit (reported once, at the first entry beyond it): the
+            // model is refused, so the rest of it is not parsed.
+            None if *expressions > MAX_TIME_EXPRESSIONS => return Ok(()),
+            None => {
+                let s = match compile_entry(value, params, &path, true, t0)? {
+                    Entry::Const(x) => Shared::Const(x),
+                    Entry::Time(f) => {
+                        if *expressions >= MAX_TIME_EXPRESSIONS {
+                            *expressions += 1;
+                            return Err(FieldError::new(
+                                &path,
+                                format!(
+                                    "more than {MAX_TIME_EXPRESSIONS} distinct time-dependent expressions in one model (the limit: each costs ≈ 45 KB); entries of one matrix with the same text count once"
+                                ),
+                            ));
+                        }
+                        *expressions += 1;
+                        self.m.fns.push(*f);
+                        Shared::Fn(self.m.fns.len() - 1)
+                    }
+                };
+                if let Some(text) = text {
+                    self.by_text.insert(text.to_string(), s);
+                }
+                s
+            }
+        };
+        match shared {
+            Shared::Const(x) => self.m.values[i] = x,
+            Shared::Fn(f) => self.m.varying.push((i, f, path)),
+        }
+        Ok(())
+    }
+
+    pub fn finish(self) -> TimeMatrix {
+        let mut m = self.m;
+        m.fn_values = vec![0.0; m.fns.len()];
+        m.block_values = vec![[0.0; LANES]; m.fns.len()];
+        m
     }
 }
 

@@ -3,7 +3,7 @@
 
 use crate::Overrides;
 use crate::error::{Error, FieldError};
-use crate::expr::{Entry, TimeMatrix, compile_const, compile_entry};
+use crate::expr::{TimeMatrix, TimeMatrixBuilder, compile_const};
 use crate::model::{MODEL_FORMAT_VERSION, Model, Steps, Value};
 use std::collections::BTreeMap;
 
@@ -256,9 +256,21 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         return Err(Error::Invalid(errs.0));
     }
 
-    let a = time_matrix(&sys.a, n, Some(n), "system.a", "N", &params, t0, &mut errs);
+    // Distinct time-dependent expressions of the model (≤ MAX_TIME_EXPRESSIONS).
+    let mut exprs = 0;
+    let a = time_matrix(
+        &sys.a,
+        n,
+        Some(n),
+        "system.a",
+        "N",
+        &params,
+        t0,
+        &mut exprs,
+        &mut errs,
+    );
     let u = match &sys.u {
-        Some(u) => time_vector(u, n, "system.u", "N", &params, t0, &mut errs),
+        Some(u) => time_vector(u, n, "system.u", "N", &params, t0, &mut exprs, &mut errs),
         None => TimeMatrix::constant(n, 1, vec![0.0; n]),
     };
     // b: N rows, L columns (L from the first row).
@@ -274,6 +286,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         "N",
         &params,
         t0,
+        &mut exprs,
         &mut errs,
     );
     let y0 = const_vector(
@@ -357,6 +370,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
                 "n",
                 &params,
                 t0,
+                &mut exprs,
                 &mut errs,
             )))
         }
@@ -373,6 +387,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
                 "N",
                 &params,
                 t0,
+                &mut exprs,
                 &mut errs,
             )))
         }
@@ -594,6 +609,7 @@ fn time_matrix(
     rows_sym: &str,
     params: &BTreeMap<String, f64>,
     t0: f64,
+    expressions: &mut usize,
     errs: &mut Errors,
 ) -> TimeMatrix {
     let cols_n = cols.unwrap_or(0);
@@ -603,26 +619,23 @@ fn time_matrix(
         _ => "M, from row 0",
     };
     let shape_ok = check_shape(m, rows, cols, path, rows_sym, cols_sym, errs);
-    let mut entries = Vec::with_capacity(rows * cols_n);
-    for i in 0..rows {
-        for j in 0..cols_n {
-            let p = format!("{path}[{i}][{j}]");
-            let e = match m.get(i).and_then(|r| r.get(j)) {
-                Some(v) if shape_ok => match compile_entry(v, params, &p, true, t0) {
-                    Ok(e) => e,
-                    Err(e) => {
+    let mut out = TimeMatrixBuilder::new(rows, cols_n);
+    if shape_ok {
+        for i in 0..rows {
+            for j in 0..cols_n {
+                if let Some(v) = m.get(i).and_then(|r| r.get(j)) {
+                    let p = format!("{path}[{i}][{j}]");
+                    if let Err(e) = out.set(i * cols_n + j, v, params, p, t0, expressions) {
                         errs.push(e);
-                        Entry::Const(0.0)
                     }
-                },
-                _ => Entry::Const(0.0),
-            };
-            entries.push((e, p));
+                }
+            }
         }
     }
-    TimeMatrix::from_entries(rows, cols_n, entries)
+    out.finish()
 }
 
+#[allow(clippy::too_many_arguments)]
 fn time_vector(
     v: &[Value],
     n: usize,
@@ -630,6 +643,7 @@ fn time_vector(
     sym: &str,
     params: &BTreeMap<String, f64>,
     t0: f64,
+    expressions: &mut usize,
     errs: &mut Errors,
 ) -> TimeMatrix {
     if v.len() != n {
@@ -638,19 +652,13 @@ fn time_vector(
             format!("has {} entries, expected {n} ({sym} = {n})", v.len()),
         );
     }
-    let mut entries = Vec::with_capacity(n);
-    for i in 0..n {
-        let p = format!("{path}[{i}]");
-        let e = match v.get(i) {
-            Some(x) => compile_entry(x, params, &p, true, t0).unwrap_or_else(|e| {
-                errs.push(e);
-                Entry::Const(0.0)
-            }),
-            None => Entry::Const(0.0),
-        };
-        entries.push((e, p));
+    let mut out = TimeMatrixBuilder::new(n, 1);
+    for (i, x) in v.iter().enumerate().take(n) {
+        if let Err(e) = out.set(i, x, params, format!("{path}[{i}]"), t0, expressions) {
+            errs.push(e);
+        }
     }
-    TimeMatrix::from_entries(n, 1, entries)
+    out.finish()
 }
 
 fn const_vector(

@@ -430,3 +430,70 @@ fn cancellation_stops_the_run() {
     let e = analyze(&m, &Overrides::new(), &mut cancel_second).unwrap_err();
     assert_eq!(e, Error::Cancelled);
 }
+
+/// An N-state chain whose a entries are `text(i, j)`.
+fn chain(n: usize, text: impl Fn(usize, usize) -> String) -> Value {
+    let id = |i: usize, j: usize| if i == j { 1.0 } else { 0.0 };
+    json!({
+        "time": {"t0": 0.0, "t_end": 1.0, "steps": 50},
+        "system": {
+            "states": (0..n).map(|i| format!("s{i}")).collect::<Vec<_>>(),
+            "a": (0..n).map(|i| (0..n).map(|j| text(i, j)).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "b": (0..n).map(|i| (0..n).map(|j| id(i, j)).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "y0": vec![1.0; n],
+            "eta0": vec![0.5; n],
+            "phi": vec![0.1; n]
+        },
+        "measurement": {
+            "names": (0..n).map(|j| format!("m{j}")).collect::<Vec<_>>(),
+            "c": (0..n).map(|i| (0..n).map(|j| id(i, j)).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "gamma": (0..n).map(|i| (0..n).map(|j| id(i, j)).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "psi": vec![0.01; n]
+        }
+    })
+}
+
+#[test]
+fn distinct_time_expressions_are_limited_and_reported_once() {
+    // 50 × 50 distinct time-dependent entries: entry 2000 (row-major) is the first
+    // beyond the limit of 2000, and the limit is reported there only.
+    let m = model_from_value(chain(50, |i, j| format!("-0.5*t*{}", i * 50 + j + 1))).unwrap();
+    let err = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap_err();
+    let errors = err.field_errors();
+    assert_eq!(errors.len(), 1, "{errors:#?}");
+    assert_eq!(errors[0].path, "system.a[40][0]");
+    assert!(
+        errors[0]
+            .message
+            .contains("more than 2000 distinct time-dependent expressions")
+    );
+}
+
+#[test]
+fn repeated_expressions_are_shared_with_the_same_results() {
+    // Every a entry of a 60-state model is time-dependent, with 3 distinct texts:
+    // 3600 entries, over the limit if each counted. A 12-state copy whose entries
+    // are written "(…)+0*k" parses 144 separate expressions; shared or separate,
+    // the results must agree bit for bit.
+    let text = |i: usize, j: usize| match (i == j, j == i + 1) {
+        (true, _) => "-1-0.2*sin(t)".to_string(),
+        (_, true) => "0.5+0.1*t".to_string(),
+        _ => "0.001*cos(3*t)".to_string(),
+    };
+    let m = model_from_value(chain(60, text)).unwrap();
+    let r = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap();
+    assert!(r.criteria.covariance.weighted.yx.unwrap().is_finite());
+
+    let n = 12;
+    let shared = model_from_value(chain(n, text)).unwrap();
+    let separate =
+        model_from_value(chain(n, |i, j| format!("({})+0*{}", text(i, j), i * n + j))).unwrap();
+    let a = analyze(&shared, &Overrides::new(), &mut NoProgress).unwrap();
+    let b = analyze(&separate, &Overrides::new(), &mut NoProgress).unwrap();
+    let strip = |r: &kea_core::AnalysisResult| {
+        let mut v = serde_json::to_value(r).unwrap();
+        v["timing"] = Value::Null;
+        v
+    };
+    assert_eq!(strip(&a), strip(&b));
+}

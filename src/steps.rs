@@ -16,25 +16,27 @@ pub struct Selected {
     pub selection: StepSelection,
 }
 
-/// One Euler step of the mean (3.3) at time t with step dt.
+/// One Euler step k of the mean (3.3) on the grid t0 + iΔt, from t_{k−1}:
+/// the expressions are evaluated for several grid points at a time
+/// (`TimeMatrix::update_grid`, the same values as one by one).
 fn mean_step(
     a: &mut TimeMatrix,
     u: &mut TimeMatrix,
     y: &mut [f64],
     tmp: &mut [f64],
-    t: f64,
+    t0: f64,
     dt: f64,
     k: u64,
 ) -> Result<(), Error> {
     let n = y.len();
-    let err = |p: &str| Error::Numerical {
+    let err = |(p, t): (&str, f64)| Error::Numerical {
         step: k,
         t,
         path: p.to_string(),
         message: "the expression is not finite here".into(),
     };
-    a.update(t).map_err(err)?;
-    u.update(t).map_err(err)?;
+    a.update_grid(t0, dt, k - 1).map_err(err)?;
+    u.update_grid(t0, dt, k - 1).map_err(err)?;
     for i in 0..n {
         let mut s = 0.0;
         for j in 0..n {
@@ -84,26 +86,10 @@ pub fn select_steps(
         let mut sum = 0.0;
         let mut ymax = yc.iter().fold(0.0f64, |a, b| a.max(b.abs()));
         for k in 1..=d {
-            mean_step(
-                &mut ac,
-                &mut uc,
-                &mut yc,
-                &mut tmp,
-                m.t0 + (k - 1) as f64 * dtc,
-                dtc,
-                k,
-            )?;
+            mean_step(&mut ac, &mut uc, &mut yc, &mut tmp, m.t0, dtc, k)?;
             for h in 0..2u64 {
                 let kf = 2 * k - 1 + h;
-                mean_step(
-                    &mut af,
-                    &mut uf,
-                    &mut yf,
-                    &mut tmp,
-                    m.t0 + (kf - 1) as f64 * dtf,
-                    dtf,
-                    kf,
-                )?;
+                mean_step(&mut af, &mut uf, &mut yf, &mut tmp, m.t0, dtf, kf)?;
             }
             let mut worst = 0.0f64;
             for i in 0..n {

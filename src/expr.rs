@@ -100,6 +100,13 @@ pub fn compile_entry(
             "empty expression: expected a number or an expression such as \"-s/m\"",
         ));
     }
+    let chars = text.chars().count();
+    if chars > MAX_EXPRESSION_CHARS {
+        return Err(FieldError::new(
+            path,
+            format!("expression of {chars} characters; the limit is {MAX_EXPRESSION_CHARS}"),
+        ));
+    }
     check_identifiers(text, params, path, allow_t)?;
     let plain = unary_minus_binds_loosely(&expand_exponents(text));
     let expr = FlatEx::<f64>::parse(&plain).map_err(|e| {
@@ -348,11 +355,49 @@ fn unknown(
     )
 }
 
-/// The most distinct time-dependent expressions one model may have. A parsed
-/// expression takes ≈ 20 KB (exmex keeps its nodes inline) and the analysis adds its
-/// 16-lane form (≈ 23 KB), so this bounds a model's expressions to ≈ 90 MB.
-/// Entries of one matrix with the same text share one parse and count once.
+/// The longest expression text, in characters. exmex's parse time grows faster than
+/// linearly for some shapes (a product of many parenthesised negations: 10 000
+/// characters 0.26 s, 40 000 characters 5.9 s), so texts are bounded before parsing.
+pub const MAX_EXPRESSION_CHARS: usize = 1000;
+
+/// The most distinct time-dependent expressions one model may have, and their total
+/// length. A parsed expression takes ≈ 20 KB plus ≈ 1.2 KB per character with the
+/// analysis's 16-lane form (≈ 23 KB), so these bound a model's expressions to
+/// ≈ 150 MB. Entries of one matrix with the same text share one parse and count once.
 pub const MAX_TIME_EXPRESSIONS: usize = 2000;
+pub const MAX_TIME_EXPRESSION_CHARS: usize = 50_000;
+
+/// What a model's distinct time-dependent expressions use of the limits above.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ExprBudget {
+    count: usize,
+    chars: usize,
+    /// A limit was exceeded (reported once; the rest of the model is not parsed).
+    exceeded: bool,
+}
+
+impl ExprBudget {
+    /// Take one expression of `chars` characters, or say which limit it exceeds.
+    fn take(&mut self, chars: usize) -> Result<(), String> {
+        let why = if self.count >= MAX_TIME_EXPRESSIONS {
+            format!(
+                "more than {MAX_TIME_EXPRESSIONS} distinct time-dependent expressions in one model (the limit: each costs ≈ 45 KB)"
+            )
+        } else if self.chars + chars > MAX_TIME_EXPRESSION_CHARS {
+            format!(
+                "the model's distinct time-dependent expressions exceed {MAX_TIME_EXPRESSION_CHARS} characters in total (the limit: each character costs ≈ 1.2 KB parsed)"
+            )
+        } else {
+            self.count += 1;
+            self.chars += chars;
+            return Ok(());
+        };
+        self.exceeded = true;
+        Err(format!(
+            "{why}; entries of one matrix with the same text count once"
+        ))
+    }
+}
 
 /// A matrix (row-major) whose entries may vary with time.
 #[derive(Clone, Debug)]
@@ -480,9 +525,8 @@ impl TimeMatrixBuilder {
     }
 
     /// Compile entry `i` (flat, row-major; after every entry before it) at `path`.
-    /// `expressions`: the model's distinct time-dependent expressions so far, at
-    /// most [`MAX_TIME_EXPRESSIONS`] (one more once that was exceeded). On error the
-    /// entry stays 0.
+    /// `budget`: what the model's distinct time-dependent expressions have used so
+    /// far (see [`MAX_TIME_EXPRESSIONS`]). On error the entry stays 0.
     pub fn set(
         &mut self,
         i: usize,
@@ -490,7 +534,7 @@ impl TimeMatrixBuilder {
         params: &BTreeMap<String, f64>,
         path: String,
         t0: f64,
-        expressions: &mut usize,
+        budget: &mut ExprBudget,
     ) -> Result<(), FieldError> {
         debug_assert!(self.m.varying.last().is_none_or(|v| v.0 < i));
         let text = match value {
@@ -499,23 +543,17 @@ impl TimeMatrixBuilder {
         };
         let shared = match text.and_then(|s| self.by_text.get(s)) {
             Some(&s) => s,
-            // Past the limit (reported once, at the first entry beyond it): the
-            // model is refused, so the rest of it is not parsed.
-            None if *expressions > MAX_TIME_EXPRESSIONS => return Ok(()),
+            // Past a limit (reported once, at the first entry beyond it): the model is
+            // refused, so the rest of it is not parsed.
+            None if budget.exceeded => return Ok(()),
             None => {
                 let s = match compile_entry(value, params, &path, true, t0)? {
                     Entry::Const(x) => Shared::Const(x),
                     Entry::Time(f) => {
-                        if *expressions >= MAX_TIME_EXPRESSIONS {
-                            *expressions += 1;
-                            return Err(FieldError::new(
-                                &path,
-                                format!(
-                                    "more than {MAX_TIME_EXPRESSIONS} distinct time-dependent expressions in one model (the limit: each costs ≈ 45 KB); entries of one matrix with the same text count once"
-                                ),
-                            ));
-                        }
-                        *expressions += 1;
+                        let chars = text.map_or(0, |s| s.chars().count());
+                        budget
+                            .take(chars)
+                            .map_err(|why| FieldError::new(&path, why))?;
                         self.m.fns.push(*f);
                         Shared::Fn(self.m.fns.len() - 1)
                     }

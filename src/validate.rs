@@ -3,7 +3,7 @@
 
 use crate::Overrides;
 use crate::error::{Error, FieldError};
-use crate::expr::{TimeMatrix, TimeMatrixBuilder, compile_const};
+use crate::expr::{ExprBudget, TimeMatrix, TimeMatrixBuilder, compile_const};
 use crate::model::{MODEL_FORMAT_VERSION, Model, Steps, Value};
 use std::collections::BTreeMap;
 
@@ -256,8 +256,8 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         return Err(Error::Invalid(errs.0));
     }
 
-    // Distinct time-dependent expressions of the model (≤ MAX_TIME_EXPRESSIONS).
-    let mut exprs = 0;
+    // What the model's distinct time-dependent expressions use (expr::MAX_TIME_*).
+    let mut exprs = ExprBudget::default();
     let a = time_matrix(
         &sys.a,
         n,
@@ -609,7 +609,7 @@ fn time_matrix(
     rows_sym: &str,
     params: &BTreeMap<String, f64>,
     t0: f64,
-    expressions: &mut usize,
+    expressions: &mut ExprBudget,
     errs: &mut Errors,
 ) -> TimeMatrix {
     let cols_n = cols.unwrap_or(0);
@@ -643,7 +643,7 @@ fn time_vector(
     sym: &str,
     params: &BTreeMap<String, f64>,
     t0: f64,
-    expressions: &mut usize,
+    expressions: &mut ExprBudget,
     errs: &mut Errors,
 ) -> TimeMatrix {
     if v.len() != n {

@@ -497,3 +497,42 @@ fn repeated_expressions_are_shared_with_the_same_results() {
     };
     assert_eq!(strip(&a), strip(&b));
 }
+
+#[test]
+fn expression_length_is_limited() {
+    // exmex parses some shapes in superlinear time: bounded before parsing.
+    let long = format!("t{}", "*(-1)".repeat(400));
+    expect(
+        |v| v["system"]["u"][1] = json!(long),
+        &[],
+        "system.u[1]",
+        "expression of 2001 characters; the limit is 1000",
+    );
+    // Distinct time-dependent texts of ≈ 999 characters: the total is limited too,
+    // reported at the first entry beyond 50 000 characters.
+    let text = |k: usize| {
+        let head = format!("t*{k}");
+        format!("{head}{}", "+0".repeat((999 - head.len()) / 2))
+    };
+    let n = 8;
+    let mut total = 0;
+    let first_over = (0..n * n)
+        .find(|&k| {
+            total += text(k).len();
+            total > 50_000
+        })
+        .unwrap();
+    let m = model_from_value(chain(n, |i, j| text(i * n + j))).unwrap();
+    let err = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap_err();
+    let errors = err.field_errors();
+    assert_eq!(errors.len(), 1, "{errors:#?}");
+    assert_eq!(
+        errors[0].path,
+        format!("system.a[{}][{}]", first_over / n, first_over % n)
+    );
+    assert!(
+        errors[0]
+            .message
+            .contains("exceed 50000 characters in total")
+    );
+}

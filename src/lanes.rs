@@ -16,6 +16,8 @@ pub(crate) trait Lanes: Copy {
     fn sub_add(d: &mut [f64], x: &[f64], a: f64, y: &[f64], b: f64);
     /// d ← d + a·x.
     fn add_scaled(d: &mut [f64], x: &[f64], a: f64);
+    /// d ← s + a·x (a copy of s fused with the first `add_scaled`).
+    fn set_scaled(d: &mut [f64], s: &[f64], x: &[f64], a: f64);
     /// d ← d − a·x.
     fn sub_scaled(d: &mut [f64], x: &[f64], a: f64);
 }
@@ -37,6 +39,13 @@ impl Lanes for Scalar {
         let x = &x[..d.len()];
         for (d, x) in d.iter_mut().zip(x) {
             *d += a * x;
+        }
+    }
+    #[inline(always)]
+    fn set_scaled(d: &mut [f64], s: &[f64], x: &[f64], a: f64) {
+        let (s, x) = (&s[..d.len()], &x[..d.len()]);
+        for i in 0..d.len() {
+            d[i] = s[i] + a * x[i];
         }
     }
     #[inline(always)]
@@ -69,14 +78,21 @@ impl Lanes for Avx2 {
         let n = d.len();
         let x = &x[..n];
         // SAFETY: as in `sub_add`.
-        unsafe { avx2::axpy::<false>(d.as_mut_ptr(), x.as_ptr(), a, n) }
+        unsafe { avx2::axpy::<false>(d.as_mut_ptr(), d.as_ptr(), x.as_ptr(), a, n) }
+    }
+    #[inline(always)]
+    fn set_scaled(d: &mut [f64], s: &[f64], x: &[f64], a: f64) {
+        let n = d.len();
+        let (s, x) = (&s[..n], &x[..n]);
+        // SAFETY: as in `sub_add`.
+        unsafe { avx2::axpy::<false>(d.as_mut_ptr(), s.as_ptr(), x.as_ptr(), a, n) }
     }
     #[inline(always)]
     fn sub_scaled(d: &mut [f64], x: &[f64], a: f64) {
         let n = d.len();
         let x = &x[..n];
         // SAFETY: as in `sub_add`.
-        unsafe { avx2::axpy::<true>(d.as_mut_ptr(), x.as_ptr(), a, n) }
+        unsafe { avx2::axpy::<true>(d.as_mut_ptr(), d.as_ptr(), x.as_ptr(), a, n) }
     }
 }
 
@@ -143,26 +159,32 @@ mod avx2 {
         }
     }
 
-    /// d[i] = d[i] ± a·x[i] for i < n (− when `SUB`).
+    /// d[i] = s[i] ± a·x[i] for i < n (− when `SUB`); s may be d.
     ///
     /// # Safety
-    /// As [`sub_add`].
+    /// As [`sub_add`], and s is valid for n elements.
     #[inline]
     #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn axpy<const SUB: bool>(d: *mut f64, x: *const f64, a: f64, n: usize) {
+    pub(super) unsafe fn axpy<const SUB: bool>(
+        d: *mut f64,
+        s: *const f64,
+        x: *const f64,
+        a: f64,
+        n: usize,
+    ) {
         let va = _mm256_set1_pd(a);
         let mut i = 0;
         // SAFETY: every access is below n (whole chunks, then the masked rest).
         unsafe {
             while i + 4 <= n {
                 let p = _mm256_mul_pd(va, _mm256_loadu_pd(x.add(i)));
-                _mm256_storeu_pd(d.add(i), add_or_sub::<SUB>(_mm256_loadu_pd(d.add(i)), p));
+                _mm256_storeu_pd(d.add(i), add_or_sub::<SUB>(_mm256_loadu_pd(s.add(i)), p));
                 i += 4;
             }
             if i < n {
                 let m = tail_mask(n - i);
                 let p = _mm256_mul_pd(va, _mm256_maskload_pd(x.add(i), m));
-                let r = add_or_sub::<SUB>(_mm256_maskload_pd(d.add(i), m), p);
+                let r = add_or_sub::<SUB>(_mm256_maskload_pd(s.add(i), m), p);
                 _mm256_maskstore_pd(d.add(i), m, r);
             }
         }
@@ -186,6 +208,7 @@ mod tests {
                 .map(|i| ((i as f64 + s) * 0.7318).sin() * 1e3)
                 .collect()
         };
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         for n in 0..=13 {
             let (x, y) = (v(n, 1.0), v(n, 2.0));
             let mut a = v(n, 3.0);
@@ -196,7 +219,10 @@ mod tests {
             Avx2::add_scaled(&mut b, &x, 1.3);
             Scalar::sub_scaled(&mut a, &y, 0.11);
             Avx2::sub_scaled(&mut b, &y, 0.11);
-            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            let (mut c, mut e) = (vec![0.0; n], vec![0.0; n]);
+            Scalar::set_scaled(&mut c, &a, &x, -0.73);
+            Avx2::set_scaled(&mut e, &b, &x, -0.73);
+            assert_eq!(bits(&c), bits(&e), "set_scaled, n = {n}");
             assert_eq!(bits(&a), bits(&b), "n = {n}");
         }
         // A masked chunk writes nothing past the row.

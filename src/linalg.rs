@@ -95,9 +95,18 @@ pub(crate) fn predict_cov<const N: usize, L: Lanes>(
     // first b + 1 entries are needed: W_ba = U_ab + Σ_c E_bc U_ac = (U Aᵀ)_ab with
     // the same terms in the same order; then + B (exactly symmetric) and mirrored.
     let (r, b, u, out) = (&r[..n * n], &b[..n * n], &mut u[..n * n], &mut out[..n * n]);
-    u.copy_from_slice(r);
-    for &(i, k, v) in &e.nz {
-        L::add_scaled(&mut u[i * n..i * n + n], &r[k * n..k * n + n], v);
+    // (Each row's first term is fused with the copy it adds to: the same sums.)
+    for i in 0..n {
+        let (ui, ri) = (&mut u[i * n..i * n + n], &r[i * n..i * n + n]);
+        match e.row(i).split_first() {
+            None => ui.copy_from_slice(ri),
+            Some((&(_, k, v), rest)) => {
+                L::set_scaled(ui, ri, &r[k * n..k * n + n], v);
+                for &(_, k, v) in rest {
+                    L::add_scaled(ui, &r[k * n..k * n + n], v);
+                }
+            }
+        }
     }
     for i in 0..n {
         for j in i + 1..n {
@@ -106,12 +115,18 @@ pub(crate) fn predict_cov<const N: usize, L: Lanes>(
     }
     for bb in 0..n {
         let w = &mut out[bb * n..bb * n + bb + 1];
-        w.copy_from_slice(&u[bb * n..bb * n + bb + 1]);
-        for &(_, c, v) in e.row(bb) {
-            L::add_scaled(w, &u[c * n..c * n + bb + 1], v);
-        }
+        let (ub, b_row) = (&u[bb * n..bb * n + bb + 1], &b[bb * n..bb * n + bb + 1]);
         // + B_b· (1·x is exact, so this is the plain sum)
-        L::add_scaled(w, &b[bb * n..bb * n + bb + 1], 1.0);
+        match e.row(bb).split_first() {
+            None => L::set_scaled(w, ub, b_row, 1.0),
+            Some((&(_, c, v), rest)) => {
+                L::set_scaled(w, ub, &u[c * n..c * n + bb + 1], v);
+                for &(_, c, v) in rest {
+                    L::add_scaled(w, &u[c * n..c * n + bb + 1], v);
+                }
+                L::add_scaled(w, b_row, 1.0);
+            }
+        }
     }
     for a in 1..n {
         for bb in 0..a {
@@ -129,11 +144,22 @@ fn predict_fixed<const N: usize>(
     b: &[[f64; N]; N],
     u: &mut [[f64; N]; N],
 ) {
-    *u = *r;
-    for &(i, k, v) in &e.nz {
-        let (ui, rk) = (&mut u[i], &r[k]);
-        for j in 0..N {
-            ui[j] += v * rk[j];
+    for i in 0..N {
+        let (ui, ri) = (&mut u[i], &r[i]);
+        match e.row(i).split_first() {
+            None => *ui = *ri,
+            Some((&(_, k, v), rest)) => {
+                let rk = &r[k];
+                for j in 0..N {
+                    ui[j] = ri[j] + v * rk[j];
+                }
+                for &(_, k, v) in rest {
+                    let rk = &r[k];
+                    for j in 0..N {
+                        ui[j] += v * rk[j];
+                    }
+                }
+            }
         }
     }
     // As in `predict_cov`'s runtime branch: transpose, then row b of A·Uᵀ.

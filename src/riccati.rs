@@ -282,25 +282,6 @@ impl SequentialJoseph {
         if !ok {
             return false;
         }
-        // p = K' L⁻¹: pᵀ row idx[j] = Σ_{m ≥ j} (L⁻¹)_mj K'ᵀ_m.
-        let nm = self.gain_t.len() / n.max(1);
-        if nk < nm {
-            self.gain_t.fill(0.0);
-        }
-        for (j, &jj) in prep.idx.iter().enumerate() {
-            let out = &mut self.gain_t[jj * n..jj * n + n];
-            if !prep.whitened {
-                out.copy_from_slice(&self.kt[j * n..j * n + n]);
-                continue;
-            }
-            out.fill(0.0);
-            for m in j..nk {
-                let l = prep.linv[m * nk + j];
-                for (x, k) in out.iter_mut().zip(&self.kt[m * n..m * n + n]) {
-                    *x += l * k;
-                }
-            }
-        }
         // h = I − p C = I − K' (L⁻¹ C).
         let h = &mut self.h[..n * n];
         h.fill(0.0);
@@ -322,6 +303,32 @@ impl SequentialJoseph {
                             *x -= ka * c;
                         }
                     }
+                }
+            }
+        }
+        // p = K' L⁻¹: pᵀ row idx[j] = Σ_{m ≥ j} (L⁻¹)_mj K'ᵀ_m.
+        let nm = self.gain_t.len() / n.max(1);
+        if !prep.whitened && nk == nm {
+            // Every measurement in use, in order: the gains are pᵀ as they stand. (The
+            // update writes each row of kt before it reads it, so kt may take any
+            // contents.)
+            std::mem::swap(&mut self.gain_t, &mut self.kt);
+            return true;
+        }
+        if nk < nm {
+            self.gain_t.fill(0.0);
+        }
+        for (j, &jj) in prep.idx.iter().enumerate() {
+            let out = &mut self.gain_t[jj * n..jj * n + n];
+            if !prep.whitened {
+                out.copy_from_slice(&self.kt[j * n..j * n + n]);
+                continue;
+            }
+            out.fill(0.0);
+            for m in j..nk {
+                let l = prep.linv[m * nk + j];
+                for (x, k) in out.iter_mut().zip(&self.kt[m * n..m * n + n]) {
+                    *x += l * k;
                 }
             }
         }

@@ -120,7 +120,7 @@ impl SetSums {
 }
 
 /// Series kept in the traces, per state (in this order).
-const SERIES: usize = 10;
+pub(crate) const SERIES: usize = 10;
 const S_Y: usize = 0;
 const S_ETA: usize = 1;
 const S_ZETA: usize = 2;

@@ -250,12 +250,16 @@ pub fn check_request(req: &SimulationRequest, model: &CompiledModel) -> Result<(
             format!("{} runs is more than the limit of {MAX_RUNS}", req.runs),
         ));
     }
+    let max_rows = crate::validate::max_trace_rows(model.n_states() * T_SERIES + 2);
     if let Some(tp) = req.trace_points
-        && !(2..=crate::validate::MAX_TRACE_POINTS).contains(&tp)
+        && !(2..=max_rows).contains(&tp)
     {
         errs.push(FieldError::new(
             "trace_points",
-            format!("expected 2 to {} rows", crate::validate::MAX_TRACE_POINTS),
+            format!(
+                "expected 2 to {max_rows} rows (at most {} values in all)",
+                crate::validate::MAX_TRACE_VALUES
+            ),
         ));
     }
     let w = work(req.runs, model.max_steps(), model.n_states());

@@ -13,6 +13,14 @@ pub const MAX_STEPS: u64 = 100_000_000;
 pub const MAX_STATES: usize = 200;
 /// Largest accepted number of trace rows.
 pub const MAX_TRACE_POINTS: usize = 100_000;
+/// Largest number of values (rows × series) the traces of one result may hold:
+/// ≈ 32 MB in memory and ≈ 40 MB of JSON. The default 1000 rows fit every N ≤ 200.
+pub const MAX_TRACE_VALUES: usize = 2_000_000;
+
+/// The most trace rows a result with `series` series may have.
+pub fn max_trace_rows(series: usize) -> usize {
+    (MAX_TRACE_VALUES / series.max(1)).min(MAX_TRACE_POINTS)
+}
 /// Weights must sum to 1 within this.
 const WEIGHT_TOL: f64 = 1e-9;
 
@@ -501,11 +509,20 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
 
     // --- options
     let op = &model.options;
-    if op.trace_points == 1 || op.trace_points > MAX_TRACE_POINTS {
+    let max_rows = max_trace_rows(n * crate::analysis::SERIES);
+    if op.trace_points == 1 || op.trace_points > max_rows {
+        let why = if max_rows < MAX_TRACE_POINTS {
+            format!(
+                " (with N = {n} the traces hold {} series, at most {MAX_TRACE_VALUES} values in all)",
+                n * crate::analysis::SERIES
+            )
+        } else {
+            String::new()
+        };
         errs.at(
             "options.trace_points",
             format!(
-                "expected 0 (no traces) or 2 to {MAX_TRACE_POINTS}, got {}",
+                "expected 0 (no traces) or 2 to {max_rows}, got {}{why}",
                 op.trace_points
             ),
         );

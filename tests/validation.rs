@@ -536,3 +536,26 @@ fn expression_length_is_limited() {
             .contains("exceed 50000 characters in total")
     );
 }
+
+#[test]
+fn trace_size_is_limited_by_the_values_it_holds() {
+    // 10 series per state: N = 100 allows 2 000 000 / 1000 = 2000 rows.
+    let with_points = |tp: usize| {
+        let mut v = chain(100, |i, j| if i == j { "-1" } else { "0" }.to_string());
+        v["options"] = json!({"trace_points": tp});
+        v
+    };
+    let m = model_from_value(with_points(2001)).unwrap();
+    let err = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap_err();
+    let e = &err.field_errors()[0];
+    assert_eq!(e.path, "options.trace_points");
+    assert!(
+        e.message
+            .contains("expected 0 (no traces) or 2 to 2000, got 2001"),
+        "{}",
+        e.message
+    );
+    let m = model_from_value(with_points(2000)).unwrap();
+    let r = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap();
+    assert_eq!(r.traces.t.len(), 50); // 50 steps, one row each
+}

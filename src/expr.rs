@@ -340,14 +340,20 @@ fn unknown(
     path: &str,
     allow_t: bool,
 ) -> FieldError {
-    let mut known: Vec<String> = params.keys().cloned().collect();
-    if allow_t {
-        known.insert(0, "t".into());
-    }
-    let known = if known.is_empty() {
-        "no params are defined".to_string()
-    } else {
-        format!("known: {}", known.join(", "))
+    // A model may define thousands of params: list a few, not all of them.
+    const LISTED: usize = 12;
+    let all = params.len() + usize::from(allow_t);
+    let names = allow_t
+        .then_some("t")
+        .into_iter()
+        .chain(params.keys().map(String::as_str))
+        .take(LISTED)
+        .collect::<Vec<_>>()
+        .join(", ");
+    let known = match all {
+        0 => "no params are defined".to_string(),
+        1..=LISTED => format!("known: {names}"),
+        _ => format!("known: {names}, … ({all} names in all)"),
     };
     FieldError::new(
         path,

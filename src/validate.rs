@@ -120,9 +120,26 @@ impl CompiledModel {
 /// Collects errors; the first error per field is enough.
 struct Errors(Vec<FieldError>);
 
+/// The most field errors one response lists (then one line says how many more).
+pub const MAX_REPORTED_ERRORS: usize = 100;
+
 impl Errors {
     fn push(&mut self, e: FieldError) {
         self.0.push(e);
+    }
+    /// The errors as `Error::Invalid`, at most [`MAX_REPORTED_ERRORS`] of them.
+    fn into_error(mut self) -> Error {
+        let more = self.0.len().saturating_sub(MAX_REPORTED_ERRORS);
+        if more > 0 {
+            self.0.truncate(MAX_REPORTED_ERRORS);
+            self.0.push(FieldError::new(
+                "",
+                format!(
+                    "… and {more} more errors (only the first {MAX_REPORTED_ERRORS} are listed)"
+                ),
+            ));
+        }
+        Error::Invalid(self.0)
     }
     fn at(&mut self, path: &str, msg: impl Into<String>) {
         self.0.push(FieldError::new(path, msg));
@@ -186,7 +203,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         }
     }
     if !errs.0.is_empty() {
-        return Err(Error::Invalid(errs.0));
+        return Err(errs.into_error());
     }
 
     // --- time
@@ -261,7 +278,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
     }
     check_names(&sys.states, "system.states", &mut errs);
     if !errs.0.is_empty() {
-        return Err(Error::Invalid(errs.0));
+        return Err(errs.into_error());
     }
 
     // What the model's distinct time-dependent expressions use (expr::MAX_TIME_*).
@@ -529,7 +546,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
     }
 
     if !errs.0.is_empty() {
-        return Err(Error::Invalid(errs.0));
+        return Err(errs.into_error());
     }
     Ok(CompiledModel {
         states: sys.states.clone(),

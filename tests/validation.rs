@@ -559,3 +559,27 @@ fn trace_size_is_limited_by_the_values_it_holds() {
     let r = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap();
     assert_eq!(r.traces.t.len(), 50); // 50 steps, one row each
 }
+
+#[test]
+fn many_errors_are_listed_up_to_a_limit_and_name_lists_stay_short() {
+    // 144 entries naming an unknown parameter, with 500 params defined: the response
+    // lists 100 errors and says how many more; each lists 12 known names and a count.
+    let mut v = chain(12, |_, _| "zz".to_string());
+    v["params"] = (0..500).map(|i| (format!("p{i:03}"), json!(1.0))).collect();
+    let err = model_from_value(v).and_then(|m| analyze(&m, &Overrides::new(), &mut NoProgress));
+    let errors = err.unwrap_err().field_errors();
+    assert_eq!(errors.len(), 101);
+    assert_eq!(errors[0].path, "system.a[0][0]");
+    assert!(
+        errors[0].message.contains(
+            "unknown parameter \"zz\" in \"zz\" (known: t, p000, p001, p002, p003, p004, p005, p006, p007, p008, p009, p010, … (501 names in all))"
+        ),
+        "{}",
+        errors[0].message
+    );
+    assert_eq!(errors[100].path, "");
+    assert_eq!(
+        errors[100].message,
+        "… and 44 more errors (only the first 100 are listed)"
+    );
+}

@@ -11,6 +11,8 @@ use std::collections::BTreeMap;
 pub const MAX_STEPS: u64 = 100_000_000;
 /// Largest accepted state dimension N.
 pub const MAX_STATES: usize = 200;
+/// Largest accepted number of noise sources: L (columns of b) and M (of gamma or g).
+pub const MAX_SOURCES: usize = 200;
 /// Largest accepted number of trace rows.
 pub const MAX_TRACE_POINTS: usize = 100_000;
 /// Largest number of values (rows × series) the traces of one result may hold:
@@ -277,6 +279,38 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         );
     }
     check_names(&sys.states, "system.states", &mut errs);
+    if !errs.0.is_empty() {
+        return Err(errs.into_error());
+    }
+
+    // Noise sources: W and V are L×L and M×M, so these are bounded before anything
+    // is sized by them.
+    let sources = [
+        ("system.b[0]", "L (columns of b)", sys.b.first()),
+        (
+            "measurement.gamma[0]",
+            "M (columns of gamma)",
+            model.measurement.gamma.as_ref().and_then(|g| g.first()),
+        ),
+        (
+            "measurement.g[0]",
+            "M (columns of g)",
+            model.measurement.g.as_ref().and_then(|g| g.first()),
+        ),
+    ];
+    for (path, what, row) in sources {
+        if let Some(row) = row
+            && row.len() > MAX_SOURCES
+        {
+            errs.at(
+                path,
+                format!(
+                    "{what} = {}: more than the limit of {MAX_SOURCES} noise sources",
+                    row.len()
+                ),
+            );
+        }
+    }
     if !errs.0.is_empty() {
         return Err(errs.into_error());
     }

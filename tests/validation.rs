@@ -583,3 +583,26 @@ fn many_errors_are_listed_up_to_a_limit_and_name_lists_stay_short() {
         "… and 44 more errors (only the first 100 are listed)"
     );
 }
+
+#[test]
+fn noise_sources_are_limited_before_anything_is_sized_by_them() {
+    // W is L × L: 300 000 columns of b asked for 720 GB and aborted the process.
+    expect(
+        |v| {
+            v["system"]["b"] = json!([vec![0.0; 201], vec![1.0; 201]]);
+            v["system"]["phi"] = json!(vec![0.5; 201]);
+        },
+        &[],
+        "system.b[0]",
+        "L (columns of b) = 201: more than the limit of 200 noise sources",
+    );
+    expect(
+        |v| {
+            v["measurement"]["gamma"] = json!([vec![1.0; 300_000]]);
+            v["measurement"]["psi"] = json!(vec![0.1; 300_000]);
+        },
+        &[],
+        "measurement.gamma[0]",
+        "M (columns of gamma) = 300000: more than the limit of 200 noise sources",
+    );
+}

@@ -510,17 +510,17 @@ impl<'m> Plan<'m> {
         let Dims { n, nm, nl, ms } = self.d;
         let m = self.m;
         let dt = self.dt;
-        let t_prev = m.t0 + (k - 1) as f64 * dt;
         let t_k = m.t0 + k as f64 * dt;
-        let err = |path: &str, t: f64| Error::Numerical {
+        let err = |(path, t): (&str, f64)| Error::Numerical {
             step: k,
             t,
             path: path.to_string(),
             message: "the expression is not finite here".to_string(),
         };
-        // (1.11)–(1.15): A, uΔt, bΔt at t_{k−1}; Γ at t_k.
+        // (1.11)–(1.15): A, uΔt, bΔt at t_{k−1}; Γ at t_k — grid points k − 1 and k,
+        // evaluated several steps at a time (the same values as one by one).
         if k == 1 || !self.a_fn.is_constant() {
-            self.a_fn.update(t_prev).map_err(|p| err(p, t_prev))?;
+            self.a_fn.update_grid(m.t0, dt, k - 1).map_err(err)?;
             for i in 0..n {
                 for j in 0..n {
                     self.big_a[i * n + j] =
@@ -529,13 +529,13 @@ impl<'m> Plan<'m> {
             }
         }
         if k == 1 || !self.u_fn.is_constant() {
-            self.u_fn.update(t_prev).map_err(|p| err(p, t_prev))?;
+            self.u_fn.update_grid(m.t0, dt, k - 1).map_err(err)?;
             for i in 0..n {
                 self.u_dt[i] = self.u_fn.values[i] * dt;
             }
         }
         if k == 1 || !self.b_fn.is_constant() {
-            self.b_fn.update(t_prev).map_err(|p| err(p, t_prev))?;
+            self.b_fn.update_grid(m.t0, dt, k - 1).map_err(err)?;
             for (d, s) in self.bd.iter_mut().zip(&self.b_fn.values) {
                 *d = s * dt;
             }
@@ -549,11 +549,11 @@ impl<'m> Plan<'m> {
         if k == 1 || !self.noise_fn.matrix().is_constant() {
             match &mut self.noise_fn {
                 MeasurementNoise::Gamma(g) => {
-                    g.update(t_k).map_err(|p| err(p, t_k))?;
+                    g.update_grid(m.t0, dt, k).map_err(err)?;
                     self.gamma.copy_from_slice(&g.values);
                 }
                 MeasurementNoise::SeedG(g) => {
-                    g.update(t_k).map_err(|p| err(p, t_k))?;
+                    g.update_grid(m.t0, dt, k).map_err(err)?;
                     mul(&mut self.gamma, &m.c, &g.values, nm, n, ms);
                 }
             }
@@ -570,7 +570,7 @@ impl<'m> Plan<'m> {
         if let Some(sched) = &mut self.schedule {
             sched
                 .mask(k, t_k, &mut self.avail)
-                .map_err(|p| err(&p, t_k))?;
+                .map_err(|p| err((&p, t_k)))?;
         }
         let n_avail = self.avail.iter().filter(|a| **a).count();
 

@@ -453,11 +453,6 @@ impl TimeMatrix {
         self.varying.len()
     }
 
-    /// How many distinct expressions those entries share.
-    pub fn expression_count(&self) -> usize {
-        self.fns.len()
-    }
-
     /// Re-evaluate the time-varying entries at t. Err(path) names the first entry
     /// (row-major) that is not finite.
     #[inline]

@@ -23,6 +23,8 @@ pub const MAX_TRACE_VALUES: usize = 2_000_000;
 pub fn max_trace_rows(series: usize) -> usize {
     (MAX_TRACE_VALUES / series.max(1)).min(MAX_TRACE_POINTS)
 }
+/// The most field errors one response lists (then one line says how many more).
+pub const MAX_REPORTED_ERRORS: usize = 100;
 /// Weights must sum to 1 within this.
 const WEIGHT_TOL: f64 = 1e-9;
 
@@ -121,9 +123,6 @@ impl CompiledModel {
 
 /// Collects errors; the first error per field is enough.
 struct Errors(Vec<FieldError>);
-
-/// The most field errors one response lists (then one line says how many more).
-pub const MAX_REPORTED_ERRORS: usize = 100;
 
 impl Errors {
     fn push(&mut self, e: FieldError) {

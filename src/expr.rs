@@ -416,8 +416,6 @@ pub struct TimeMatrix {
     varying: Vec<(usize, usize, String)>,
     /// The distinct time-dependent expressions (entries with one text share one).
     fns: Vec<TimeFn>,
-    /// `update`'s value of each of `fns`.
-    fn_values: Vec<f64>,
     /// `update_grid`'s cache: the grid (t0, Δt bits), the first grid index held,
     /// and LANES values of each of `fns`.
     block_grid: Option<(u64, u64, u64)>,
@@ -433,7 +431,6 @@ impl TimeMatrix {
             values,
             varying: Vec::new(),
             fns: Vec::new(),
-            fn_values: Vec::new(),
             block_grid: None,
             block_values: Vec::new(),
         }
@@ -448,30 +445,8 @@ impl TimeMatrix {
         self.varying.binary_search_by_key(&i, |v| v.0).is_ok()
     }
 
-    /// How many entries depend on t.
-    pub fn varying_count(&self) -> usize {
-        self.varying.len()
-    }
-
-    /// Re-evaluate the time-varying entries at t. Err(path) names the first entry
-    /// (row-major) that is not finite.
-    #[inline]
-    pub fn update(&mut self, t: f64) -> Result<(), &str> {
-        for (f, v) in self.fns.iter_mut().zip(&mut self.fn_values) {
-            *v = f.eval(t);
-        }
-        for (i, f, path) in &self.varying {
-            let v = self.fn_values[*f];
-            if !v.is_finite() {
-                return Err(path.as_str());
-            }
-            self.values[*i] = v;
-        }
-        Ok(())
-    }
-
     /// Re-evaluate the time-varying entries at the grid point t = t0 + i·Δt — the
-    /// same t, and the same values, as `update(t0 + i as f64 * dt)` — evaluating
+    /// same t, and the same values, as `TimeFn::eval(t0 + i as f64 * dt)` — evaluating
     /// LANES consecutive grid points at a time: for stepping through a grid in order.
     /// Err((path, t)) if one is not finite at this point.
     #[inline]
@@ -574,7 +549,6 @@ impl TimeMatrixBuilder {
 
     pub fn finish(self) -> TimeMatrix {
         let mut m = self.m;
-        m.fn_values = vec![0.0; m.fns.len()];
         m.block_values = vec![[0.0; LANES]; m.fns.len()];
         m
     }
@@ -583,6 +557,55 @@ impl TimeMatrixBuilder {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A 2 × 2 matrix: two entries share `text`, one is constant, one is `other`.
+    fn grid_matrix(text: &str, other: &str) -> TimeMatrix {
+        let mut b = TimeMatrixBuilder::new(2, 2);
+        let mut budget = ExprBudget::default();
+        for (i, v) in [text, "s/m", other, text].iter().enumerate() {
+            b.set(
+                i,
+                &(*v).into(),
+                &params(),
+                format!("x[{i}]"),
+                0.0,
+                &mut budget,
+            )
+            .unwrap();
+        }
+        b.finish()
+    }
+
+    #[test]
+    fn update_grid_equals_one_point_evaluation_in_any_order() {
+        let (text, other) = ("0.3*sin(2*t)+m*t^2", "exp(-t/s)");
+        let mut m = grid_matrix(text, other);
+        assert_eq!(m.fns.len(), 2, "entries 0 and 3 share one parse");
+        let eval = |e: &str, t: f64| match compile_entry(&e.into(), &params(), "p", true, 0.0) {
+            Ok(Entry::Time(mut f)) => f.eval(t),
+            _ => panic!("time-varying"),
+        };
+        // In order, backwards, across block edges, and on a second grid.
+        let visits = (0..40u64)
+            .chain([39, 3, 16, 15, 0, 33])
+            .map(|i| (0.5, 1e-3, i));
+        for (t0, dt, i) in visits.chain((0..20).map(|i| (0.0, 0.37, i))) {
+            m.update_grid(t0, dt, i).unwrap();
+            let t = t0 + i as f64 * dt;
+            assert_eq!(m.values[0].to_bits(), eval(text, t).to_bits(), "t = {t}");
+            assert_eq!(m.values[3].to_bits(), m.values[0].to_bits());
+            assert_eq!(m.values[2].to_bits(), eval(other, t).to_bits(), "t = {t}");
+            assert_eq!(m.values[1], 37.17 / 100.0);
+        }
+    }
+
+    #[test]
+    fn update_grid_names_the_first_entry_that_is_not_finite() {
+        // Both entries of `ln(2.5 - t)` fail from t = 2.5: the first (row-major) is named.
+        let mut m = grid_matrix("ln(2.5-t)", "t");
+        m.update_grid(0.0, 0.5, 4).unwrap();
+        assert_eq!(m.update_grid(0.0, 0.5, 5), Err(("x[0]", 2.5)));
+    }
 
     fn params() -> BTreeMap<String, f64> {
         [("m".to_string(), 100.0), ("s".to_string(), 37.17)]

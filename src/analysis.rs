@@ -85,16 +85,6 @@ impl Avg {
             self.excluded += 1;
         }
     }
-    /// Add a ratio computed by the caller; `den_positive`: its denominator was > 0.
-    #[inline(always)]
-    pub(crate) fn add_ratio(&mut self, f: f64, den_positive: bool) {
-        if den_positive && f.is_finite() {
-            self.sum += f;
-            self.count += 1;
-        } else {
-            self.excluded += 1;
-        }
-    }
     pub(crate) fn mean(&self) -> Option<f64> {
         (self.count > 0).then(|| self.sum / self.count as f64)
     }
@@ -109,17 +99,81 @@ pub(crate) struct SetSums {
     pub(crate) yx: Vec<Avg>,
 }
 
-impl SetSums {
+/// The running sums (3.24) of the six criteria of every state during a run, as
+/// parallel arrays indexed [criterion · n + state] (criteria in the order of the
+/// `C_*` constants) so that a step's update is one vectorisable loop.
+struct Running {
+    sum: Vec<f64>,
+    count: Vec<u64>,
+    excluded: Vec<u64>,
+}
+
+const C_BOUND_YZ: usize = 0;
+const C_BOUND_ZX: usize = 1;
+const C_BOUND_YX: usize = 2;
+const C_COV_YZ: usize = 3;
+const C_COV_ZX: usize = 4;
+const C_COV_YX: usize = 5;
+
+impl Running {
     fn new(n: usize) -> Self {
-        SetSums {
-            yz: vec![Avg::default(); n],
-            zx: vec![Avg::default(); n],
-            yx: vec![Avg::default(); n],
+        Running {
+            sum: vec![0.0; 6 * n],
+            count: vec![0; 6 * n],
+            excluded: vec![0; 6 * n],
         }
+    }
+
+    /// One step: `ratio` holds the six criteria's ratios (laid out as the sums); for
+    /// every entry where `part` is 1, a finite ratio counts and any other (NaN where
+    /// its denominator is not positive) is an excluded step.
+    #[inline(always)]
+    fn add(&mut self, ratio: &[f64], part: &[u64]) {
+        let len = self.sum.len();
+        let (sum, count, excluded) = (
+            &mut self.sum[..],
+            &mut self.count[..len],
+            &mut self.excluded[..len],
+        );
+        let (ratio, part) = (&ratio[..len], &part[..len]);
+        for x in 0..len {
+            let f = ratio[x];
+            let take = part[x] & u64::from(f.is_finite());
+            // + 0.0 leaves a sum alone (a sum of +0.0 and ratios is never −0.0).
+            sum[x] += if take != 0 { f } else { 0.0 };
+            count[x] += take;
+            excluded[x] += part[x] - take;
+        }
+    }
+
+    /// The bound and the covariance set.
+    fn into_sets(self, n: usize) -> (SetSums, SetSums) {
+        let avg = |c: usize| -> Vec<Avg> {
+            (c * n..c * n + n)
+                .map(|x| Avg {
+                    sum: self.sum[x],
+                    count: self.count[x],
+                    excluded: self.excluded[x],
+                })
+                .collect()
+        };
+        (
+            SetSums {
+                yz: avg(C_BOUND_YZ),
+                zx: avg(C_BOUND_ZX),
+                yx: avg(C_BOUND_YX),
+            },
+            SetSums {
+                yz: avg(C_COV_YZ),
+                zx: avg(C_COV_ZX),
+                yx: avg(C_COV_YX),
+            },
+        )
     }
 }
 
-/// Series kept in the traces, per state (in this order).
+/// Series kept in the traces for every state (in this order; a step's row holds
+/// series s of state i at s · n + i).
 pub(crate) const SERIES: usize = 10;
 const S_Y: usize = 0;
 const S_ETA: usize = 1;
@@ -228,9 +282,19 @@ impl<'m, const N: usize> Engine<'m, N> {
         let mut pot = vec![0.0; n]; // sqrt(diag R_k)
         let mut inv_pot = vec![0.0; n];
 
-        let mut bound = SetSums::new(n);
-        let mut cov = SetSums::new(n);
+        let mut running = Running::new(n);
         let pair = &m.pair_of_state;
+        // A step's trace values (NaN: no value), followed by its covariance-set
+        // ratios (NaN: excluded), so that the six criteria's ratios are contiguous
+        // (the bound set's are the last three trace series); which criteria take part.
+        let mut row = vec![f64::NAN; (SERIES + 3) * n];
+        let mut part = vec![0u64; 6 * n];
+        let mut part_for: Option<(bool, bool)> = None; // (bound_ok, open_ok) of `part`
+        // Per state: ζ, σ_Z and their reciprocals while its measurement is available
+        // (NaN when unpaired or unavailable, which makes every measured ratio NaN).
+        let (mut zeta_s, mut meas_s) = (vec![f64::NAN; n], vec![f64::NAN; n]);
+        let (mut inv_zeta_s, mut inv_meas_s) = (vec![f64::NAN; n], vec![f64::NAN; n]);
+        let mut has_meas = vec![false; n];
         let mut dec = Decimator::new(self.steps, n * SERIES, m.trace_points);
 
         let mut frozen_at: Option<u64> = None;
@@ -283,6 +347,12 @@ impl<'m, const N: usize> Engine<'m, N> {
                     prep.prepare(&m.c, &inp.rv, mask, n, nm)
                         .map_err(|()| singular(k, t_k))?;
                     avail_prev.copy_from_slice(&avail);
+                    if k == 1 || mask_changed {
+                        for (h, p) in has_meas.iter_mut().zip(pair) {
+                            *h = p.is_some_and(|j| avail[j]);
+                        }
+                        part_for = None;
+                    }
                 }
                 if !joseph.step::<N, L>(n, &mut big_r, &inp.e, &inp.big_b, &prep) {
                     return Err(singular(k, t_k));
@@ -351,61 +421,86 @@ impl<'m, const N: usize> Engine<'m, N> {
             let bound_ok = bound_diverged.is_none();
             let open_ok = open_diverged.is_none();
 
-            // Criteria (3.23)–(3.24) as ratios; traces.
-            dec.begin(t_k);
-            for i in 0..n {
-                let base = i * SERIES;
-                dec.put(base + S_Y, k, y[i]);
-                dec.put(base + S_POT, k, pot[i]);
-                let inv_chi = 1.0 / chi[i];
-                let ryx = eta[i] * inv_chi;
-                let open = if open_ok {
-                    p_y[i * n + i].max(0.0).sqrt()
-                } else {
-                    0.0
-                };
-                if bound_ok {
-                    bound.yx[i].add_ratio(ryx, chi[i] > 0.0);
-                    dec.put(base + S_ETA, k, eta[i]);
-                    dec.put(base + S_CHI, k, chi[i]);
-                    if chi[i] > 0.0 {
-                        dec.put(base + S_RYX, k, ryx);
-                    }
-                }
-                if open_ok {
-                    cov.yx[i].add_ratio(open * inv_pot[i], pot[i] > 0.0);
-                    dec.put(base + S_OPEN, k, open);
-                }
-                if let Some(j) = pair[i] {
-                    if !avail[j] {
-                        // No measured information at this step: excluded from YZ/ZX.
-                        bound.yz[i].excluded += 1;
-                        bound.zx[i].excluded += 1;
-                        cov.yz[i].excluded += 1;
-                        cov.zx[i].excluded += 1;
-                        continue;
-                    }
-                    let (zb, zc) = (inp.zeta[j], inp.meas_sko[j]);
-                    dec.put(base + S_ZETA, k, zb);
-                    dec.put(base + S_MEAS, k, zc);
-                    cov.zx[i].add_ratio(zc * inv_pot[i], pot[i] > 0.0);
-                    if bound_ok {
-                        let ryz = eta[i] * inp.inv_zeta[j];
-                        let rzx = zb * inv_chi;
-                        bound.yz[i].add_ratio(ryz, zb > 0.0);
-                        bound.zx[i].add_ratio(rzx, chi[i] > 0.0);
-                        if zb > 0.0 {
-                            dec.put(base + S_RYZ, k, ryz);
-                        }
-                        if chi[i] > 0.0 {
-                            dec.put(base + S_RZX, k, rzx);
-                        }
-                    }
-                    if open_ok {
-                        cov.yz[i].add_ratio(open * inp.inv_meas[j], zc > 0.0);
-                    }
+            // Criteria (3.23)–(3.24) as ratios; traces. Each series is one loop over
+            // the states (vectorised).
+            if inp.rv_changed || part_for.is_none() {
+                for (i, p) in pair.iter().enumerate() {
+                    let j = p.filter(|_| has_meas[i]);
+                    zeta_s[i] = j.map_or(f64::NAN, |j| inp.zeta[j]);
+                    meas_s[i] = j.map_or(f64::NAN, |j| inp.meas_sko[j]);
+                    inv_zeta_s[i] = j.map_or(f64::NAN, |j| inp.inv_zeta[j]);
+                    inv_meas_s[i] = j.map_or(f64::NAN, |j| inp.inv_meas[j]);
                 }
             }
+            if part_for != Some((bound_ok, open_ok)) {
+                // A paired state whose measurement is unavailable has no measured
+                // information at this step: an excluded step of YZ and ZX (its
+                // ratios are NaN).
+                for i in 0..n {
+                    let paired = pair[i].is_some();
+                    let without = paired && !has_meas[i];
+                    let p = |on: bool| u64::from(on);
+                    part[C_BOUND_YZ * n + i] = p(paired && bound_ok || without);
+                    part[C_BOUND_ZX * n + i] = p(paired && bound_ok || without);
+                    part[C_BOUND_YX * n + i] = p(bound_ok);
+                    part[C_COV_YZ * n + i] = p(paired && open_ok || without);
+                    part[C_COV_ZX * n + i] = p(paired);
+                    part[C_COV_YX * n + i] = p(open_ok);
+                }
+                part_for = Some((bound_ok, open_ok));
+            }
+            {
+                let nan = f64::NAN;
+                let (r_y, rest) = row.split_at_mut(n);
+                let (r_eta, rest) = rest.split_at_mut(n);
+                let (r_zeta, rest) = rest.split_at_mut(n);
+                let (r_chi, rest) = rest.split_at_mut(n);
+                let (r_pot, rest) = rest.split_at_mut(n);
+                let (r_open, rest) = rest.split_at_mut(n);
+                let (r_meas, rest) = rest.split_at_mut(n);
+                let (r_ryz, rest) = rest.split_at_mut(n);
+                let (r_rzx, rest) = rest.split_at_mut(n);
+                let (r_ryx, rest) = rest.split_at_mut(n);
+                let (c_yz, rest) = rest.split_at_mut(n);
+                let (c_zx, c_yx) = rest.split_at_mut(n);
+                let (eta, chi, pot, inv_pot) = (&eta[..n], &chi[..n], &pot[..n], &inv_pot[..n]);
+                let (zeta_s, meas_s) = (&zeta_s[..n], &meas_s[..n]);
+                let (inv_zeta_s, inv_meas_s) = (&inv_zeta_s[..n], &inv_meas_s[..n]);
+                r_y.copy_from_slice(&y[..n]);
+                r_pot.copy_from_slice(pot);
+                r_zeta.copy_from_slice(zeta_s);
+                r_meas.copy_from_slice(meas_s);
+                for i in 0..n {
+                    r_open[i] = p_y[i * n + i].max(0.0).sqrt();
+                }
+                for i in 0..n {
+                    let (open, zc, po) = (r_open[i], meas_s[i], pot[i]);
+                    c_yz[i] = if zc > 0.0 { open * inv_meas_s[i] } else { nan };
+                    c_zx[i] = if po > 0.0 { zc * inv_pot[i] } else { nan };
+                    c_yx[i] = if po > 0.0 { open * inv_pot[i] } else { nan };
+                }
+                for i in 0..n {
+                    let (e, c, zb) = (eta[i], chi[i], zeta_s[i]);
+                    let inv_chi = 1.0 / c;
+                    r_ryx[i] = if c > 0.0 { e * inv_chi } else { nan };
+                    r_ryz[i] = if zb > 0.0 { e * inv_zeta_s[i] } else { nan };
+                    r_rzx[i] = if c > 0.0 { zb * inv_chi } else { nan };
+                }
+                r_eta.copy_from_slice(eta);
+                r_chi.copy_from_slice(chi);
+            }
+            running.add(&row[S_RYZ * n..], &part);
+            // Series without a value at this step (after the sums: their parts are 0).
+            if !bound_ok {
+                for s in [S_ETA, S_CHI, S_RYZ, S_RZX, S_RYX] {
+                    row[s * n..s * n + n].fill(f64::NAN);
+                }
+            }
+            if !open_ok {
+                row[S_OPEN * n..S_OPEN * n + n].fill(f64::NAN);
+            }
+            dec.begin(t_k);
+            dec.put_row(k, &row[..SERIES * n]);
             dec.end(k);
 
             if k % PROGRESS_EVERY == 0
@@ -421,6 +516,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             .map(|j| (0..n).map(|i| m.c[j * n + i].abs() * y_max[i]).sum())
             .collect();
         let lambda = laplace_lambda(m.confidence);
+        let (bound, cov) = running.into_sets(n);
         let bound_why = bound_diverged.map(|(k, t)| format!(
             "the bound (modulus procedure) overflowed at step {k} (t = {t}): |A| taken element-wise grows where A does not (oscillatory or feedback dynamics), so the bound is not informative here; see the covariance set"
         ));
@@ -909,7 +1005,7 @@ fn build_traces(m: &CompiledModel, dec: Decimator, y_max: &[f64], z_max: &[f64])
     let n = m.n_states();
     let bucket_steps = dec.bucket_steps();
     let Decimator { t, mut columns, .. } = dec;
-    let mut take = |i: usize, s: usize| std::mem::take(&mut columns[i * SERIES + s]);
+    let mut take = |i: usize, s: usize| std::mem::take(&mut columns[s * n + i]);
     let plain = |v: Vec<Option<f64>>| {
         v.into_iter()
             .map(|x| x.unwrap_or(0.0))

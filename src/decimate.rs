@@ -3,33 +3,19 @@
 //! its minimum and maximum over the bucket on them, in the order they occurred. So a
 //! spike that lasts one step survives decimation. Memory is O(rows), not O(steps).
 
-/// Extremes of one series inside the current bucket.
-#[derive(Clone, Copy, Debug)]
-struct Extremes {
-    min: f64,
-    min_at: u64,
-    max: f64,
-    max_at: u64,
-    any: bool,
-}
-
-impl Extremes {
-    const EMPTY: Extremes = Extremes {
-        min: f64::INFINITY,
-        min_at: 0,
-        max: f64::NEG_INFINITY,
-        max_at: 0,
-        any: false,
-    };
-}
-
 /// Decimates `series` parallel series sampled at steps 1..=steps.
 #[derive(Clone, Debug)]
 pub struct Decimator {
     bucket: u64,
     steps: u64,
     series: usize,
-    cur: Vec<Extremes>,
+    /// Each series' extremes in the current bucket and the steps they occurred at, as
+    /// parallel arrays so that [`Decimator::put_row`] is one vectorisable loop. A
+    /// series has a value in the bucket exactly when min ≤ max.
+    min: Vec<f64>,
+    min_at: Vec<u64>,
+    max: Vec<f64>,
+    max_at: Vec<u64>,
     in_bucket: u64,
     first_t: f64,
     last_t: f64,
@@ -59,7 +45,10 @@ impl Decimator {
             bucket,
             steps,
             series,
-            cur: vec![Extremes::EMPTY; series],
+            min: vec![f64::INFINITY; series],
+            min_at: vec![0; series],
+            max: vec![f64::NEG_INFINITY; series],
+            max_at: vec![0; series],
             in_bucket: 0,
             first_t: 0.0,
             last_t: 0.0,
@@ -85,21 +74,25 @@ impl Decimator {
         self.last_t = t;
     }
 
-    /// Record series `s` at step `k` (call between `begin` and `end`).
-    #[inline]
-    pub fn put(&mut self, s: usize, k: u64, v: f64) {
+    /// Record step `k`'s value of every series (call between `begin` and `end`);
+    /// NaN: the series has no value at this step.
+    #[inline(always)]
+    pub fn put_row(&mut self, k: u64, row: &[f64]) {
         if !self.enabled {
             return;
         }
-        let e = &mut self.cur[s];
-        e.any = true;
-        if v < e.min {
-            e.min = v;
-            e.min_at = k;
-        }
-        if v > e.max {
-            e.max = v;
-            e.max_at = k;
+        let n = self.series;
+        let (row, min, min_at) = (&row[..n], &mut self.min[..n], &mut self.min_at[..n]);
+        let (max, max_at) = (&mut self.max[..n], &mut self.max_at[..n]);
+        // Branch-free (NaN compares false, so it changes nothing).
+        for s in 0..n {
+            let v = row[s];
+            let lt = v < min[s];
+            min[s] = if lt { v } else { min[s] };
+            min_at[s] = if lt { k } else { min_at[s] };
+            let gt = v > max[s];
+            max[s] = if gt { v } else { max[s] };
+            max_at[s] = if gt { k } else { max_at[s] };
         }
     }
 
@@ -121,23 +114,27 @@ impl Decimator {
         if two {
             self.t.push(self.last_t);
         }
-        for (e, col) in self.cur.iter_mut().zip(self.columns.iter_mut()) {
-            if !e.any {
+        for (s, col) in self.columns.iter_mut().enumerate() {
+            let (min, max) = (self.min[s], self.max[s]);
+            if !(min <= max) {
                 col.push(None);
                 if two {
                     col.push(None);
                 }
             } else if !two {
-                col.push(Some(e.min));
-            } else if e.min_at <= e.max_at {
-                col.push(Some(e.min));
-                col.push(Some(e.max));
+                col.push(Some(min));
+            } else if self.min_at[s] <= self.max_at[s] {
+                col.push(Some(min));
+                col.push(Some(max));
             } else {
-                col.push(Some(e.max));
-                col.push(Some(e.min));
+                col.push(Some(max));
+                col.push(Some(min));
             }
-            *e = Extremes::EMPTY;
         }
+        self.min.fill(f64::INFINITY);
+        self.min_at.fill(0);
+        self.max.fill(f64::NEG_INFINITY);
+        self.max_at.fill(0);
         self.in_bucket = 0;
     }
 
@@ -155,7 +152,7 @@ mod tests {
         for (i, v) in values.iter().enumerate() {
             let k = i as u64 + 1;
             d.begin(k as f64);
-            d.put(0, k, *v);
+            d.put_row(k, &[*v]);
             d.end(k);
         }
         d
@@ -183,6 +180,18 @@ mod tests {
         let col: Vec<f64> = d.columns[0].iter().map(|x| x.unwrap()).collect();
         assert_eq!(col, vec![1.0, 9.0, 8.0, 0.0]);
         assert_eq!(d.t, vec![1.0, 4.0, 5.0, 8.0]);
+    }
+
+    #[test]
+    fn nan_is_no_value() {
+        // buckets of 3: [NaN, NaN, NaN] has no value; [4, NaN, NaN] has 4 alone
+        let nan = f64::NAN;
+        let d = run(&[nan, nan, nan, 4.0, nan, nan, nan, nan, 6.0], 6);
+        assert_eq!(d.bucket_steps(), 3);
+        assert_eq!(
+            d.columns[0],
+            vec![None, None, Some(4.0), Some(4.0), Some(6.0), Some(6.0)]
+        );
     }
 
     #[test]

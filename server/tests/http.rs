@@ -562,3 +562,80 @@ fn bad_request_corpus() {
     assert_eq!(r.status, 405, "{}", r.text);
     assert_eq!(r.content_type, "application/problem+json");
 }
+
+#[test]
+fn cors_answers_only_the_configured_origins() {
+    let dir = tmp();
+    let ui = "https://ui.example";
+    let s = Server::start(dir.path(), &["--cors-origin", ui, "--token", "t0ken"]);
+    // The browser's preflight for an authorised JSON POST: answered before the token
+    // check, for the configured origin only.
+    let preflight = |origin: &str| {
+        s.headers_of(
+            "OPTIONS",
+            "/v1/analyze",
+            &[
+                ("origin", origin),
+                ("access-control-request-method", "POST"),
+                (
+                    "access-control-request-headers",
+                    "authorization,content-type",
+                ),
+            ],
+        )
+    };
+    let (status, h) = preflight(ui);
+    assert_eq!(status, 200, "{h:?}");
+    assert_eq!(
+        h.get("access-control-allow-origin").map(String::as_str),
+        Some(ui)
+    );
+    let methods = h["access-control-allow-methods"].to_lowercase();
+    assert!(
+        methods.contains("post") && methods.contains("delete"),
+        "{methods}"
+    );
+    let allowed = h["access-control-allow-headers"].to_lowercase();
+    assert!(
+        allowed.contains("authorization") && allowed.contains("content-type"),
+        "{allowed}"
+    );
+    assert_eq!(
+        h.get("access-control-max-age").map(String::as_str),
+        Some("3600")
+    );
+    let (_, h) = preflight("https://other.example");
+    assert!(!h.contains_key("access-control-allow-origin"), "{h:?}");
+
+    // An actual request: the origin is allowed, and Location / x-request-id readable.
+    let (status, h) = s.headers_of(
+        "GET",
+        "/v1/presets",
+        &[("origin", ui), ("authorization", "Bearer t0ken")],
+    );
+    assert_eq!(status, 200);
+    assert_eq!(
+        h.get("access-control-allow-origin").map(String::as_str),
+        Some(ui)
+    );
+    let exposed = h["access-control-expose-headers"].to_lowercase();
+    assert!(
+        exposed.contains("location") && exposed.contains("x-request-id"),
+        "{exposed}"
+    );
+    let (_, h) = s.headers_of(
+        "GET",
+        "/v1/presets",
+        &[
+            ("origin", "https://other.example"),
+            ("authorization", "Bearer t0ken"),
+        ],
+    );
+    assert!(!h.contains_key("access-control-allow-origin"), "{h:?}");
+
+    // Without --cors-origin there is no CORS at all.
+    let dir2 = tmp();
+    let plain = Server::start(dir2.path(), &[]);
+    let (_, h) = plain.headers_of("GET", "/v1/presets", &[("origin", ui)]);
+    assert!(!h.keys().any(|k| k.starts_with("access-control-")), "{h:?}");
+}

@@ -210,6 +210,31 @@ impl Server {
         self.finish(req.call())
     }
 
+    /// A GET or OPTIONS with explicit headers; its status and every response header
+    /// (lower-case names), for the CORS tests.
+    pub fn headers_of(
+        &self,
+        method: &str,
+        path: &str,
+        headers: &[(&str, &str)],
+    ) -> (u16, std::collections::BTreeMap<String, String>) {
+        let mut req = match method {
+            "OPTIONS" => self.agent.options(self.url(path)),
+            "GET" => self.agent.get(self.url(path)),
+            other => panic!("headers_of: method {other}"),
+        };
+        for (k, v) in headers {
+            req = req.header(*k, *v);
+        }
+        let res = req.call().expect("HTTP exchange");
+        let h = res
+            .headers()
+            .iter()
+            .map(|(k, v)| (k.as_str().to_string(), v.to_str().unwrap_or("").to_string()))
+            .collect();
+        (res.status().as_u16(), h)
+    }
+
     /// Poll a job until `done(job)` or the timeout.
     pub fn wait_job(&self, id: &str, timeout: Duration, done: impl Fn(&Value) -> bool) -> Value {
         let deadline = Instant::now() + timeout;

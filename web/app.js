@@ -3,6 +3,7 @@
 // deflated and base64url-encoded) so any state can be shared as a link.
 
 import { ModelEditor } from './editor.js';
+import { api } from './api.js';
 import { BrowserRunner, ServerRunner, WasmWorker } from './runner.js';
 import { TraceChart, criteriaTable, finalTable, fmt } from './results.js';
 import { mountTabs } from './tabs.js';
@@ -205,7 +206,7 @@ const chart = new TraceChart($('chart'));
 
 async function serverAvailable() {
   try {
-    const r = await fetch('v1/presets', { headers: { accept: 'application/json' } });
+    const r = await api('v1/presets', { headers: { accept: 'application/json' } });
     return r.ok;
   } catch {
     return false;

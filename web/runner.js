@@ -2,6 +2,8 @@
 // (a job with progress over SSE). Both give the same result JSON, or throw
 // {kind, title, errors:[{path, message}]} with paths relative to the model.
 
+import { api, events } from './api.js';
+
 /** A worker speaking worker.js's protocol: call(op, args, onProgress) → Promise. */
 export class WasmWorker {
   constructor() {
@@ -101,12 +103,10 @@ export class ServerRunner {
   constructor(base = '') {
     this.base = base;
     this.job = null;
-    this.source = null;
-    this.abort = null;
   }
 
   async run(modelJson, onProgress) {
-    const response = await fetch(`${this.base}/v1/jobs`, {
+    const response = await api(`${this.base}/v1/jobs`, {
       method: 'POST',
       headers: { 'content-type': 'application/json' },
       body: `{"kind":"analysis","model":${modelJson}}`,
@@ -120,53 +120,39 @@ export class ServerRunner {
     if (final.status !== 'succeeded') {
       throw modelPaths({ title: final.error?.title ?? `job ${final.status}`, ...(final.error ?? {}) });
     }
-    const result = await fetch(`${this.base}/v1/jobs/${job.id}/result`);
+    const result = await api(`${this.base}/v1/jobs/${job.id}/result`);
     if (!result.ok) throw await problemOf(result);
     return { result: await result.json(), job: job.id };
   }
 
-  /** Follow the job's SSE stream to its final status (the job object). */
-  follow(id, onProgress) {
-    return new Promise((resolve, reject) => {
-      const source = new EventSource(`${this.base}/v1/jobs/${id}/events`);
-      this.source = source;
-      this.reject = reject;
-      const finish = async () => {
-        source.close();
-        this.source = null;
+  /** Follow the job's SSE stream to its final status; resolves to the job object. */
+  async follow(id, onProgress) {
+    const stop = new AbortController();
+    try {
+      for await (const { data } of events(`${this.base}/v1/jobs/${id}/events`, stop.signal)) {
+        let event = {};
         try {
-          const r = await fetch(`${this.base}/v1/jobs/${id}`);
-          if (!r.ok) throw await problemOf(r);
-          resolve(await r.json());
-        } catch (e) {
-          reject(e);
-        }
-      };
-      const onData = (event) => {
-        let data = {};
-        try {
-          data = JSON.parse(event.data);
+          event = JSON.parse(data);
         } catch {
-          return;
+          continue;
         }
-        if (typeof data.progress === 'number') onProgress?.(data.progress);
-        const status = data.status ?? data.state;
-        if (status && !['queued', 'running'].includes(status)) finish();
-      };
-      source.onmessage = onData;
-      for (const name of ['progress', 'status', 'done', 'final', 'succeeded', 'failed', 'cancelled']) {
-        source.addEventListener(name, onData);
+        if (typeof event.progress === 'number') onProgress?.(event.progress);
+        const status = event.status ?? event.state;
+        if (status && !['queued', 'running'].includes(status)) break;
       }
-      source.onerror = () => {
-        // The server closes the stream after the final event: look at the job.
-        if (this.source === source) finish();
-      };
-    });
+    } catch {
+      // The stream failed or was refused: the job itself says where it is.
+    } finally {
+      stop.abort();
+    }
+    const r = await api(`${this.base}/v1/jobs/${id}`);
+    if (!r.ok) throw await problemOf(r);
+    return r.json();
   }
 
   async cancel() {
     const id = this.job;
     if (!id) return;
-    await fetch(`${this.base}/v1/jobs/${id}`, { method: 'DELETE' }).catch(() => {});
+    await api(`${this.base}/v1/jobs/${id}`, { method: 'DELETE' }).catch(() => {});
   }
 }

@@ -3,6 +3,7 @@
 // browser (the wasm worker) or as a server job of the same kind (progress over SSE) —
 // and the run bar (where, Run, Cancel, progress, status).
 
+import { api } from './api.js';
 import { ServerRunner, WasmWorker } from './runner.js';
 import { fmt } from './results.js';
 
@@ -71,7 +72,7 @@ class JobRunner extends ServerRunner {
   }
 
   async run(request, onProgress) {
-    const response = await fetch(`${this.base}/v1/jobs`, {
+    const response = await api(`${this.base}/v1/jobs`, {
       method: 'POST',
       headers: { 'content-type': 'application/json' },
       body: JSON.stringify({ kind: this.kind, ...request }),
@@ -86,7 +87,7 @@ class JobRunner extends ServerRunner {
       const e = final.error ?? {};
       throw { kind: e.type ?? 'server', title: e.title ?? `job ${final.status}`, detail: e.detail, errors: e.errors ?? [] };
     }
-    const result = await fetch(`${this.base}/v1/jobs/${job.id}/result`);
+    const result = await api(`${this.base}/v1/jobs/${job.id}/result`);
     if (!result.ok) throw await problemOf(result);
     return { result: await result.json(), job: job.id };
   }

@@ -18,12 +18,12 @@ export const CHROMIUM = process.env.KEA_CHROMIUM ?? '/usr/bin/chromium';
 export const ARTIFACTS = path.join(here, 'artifacts');
 mkdirSync(ARTIFACTS, { recursive: true });
 
-/** Start `kea serve` on a free port; resolves to {url, stop()} once it listens. */
-export function startServer() {
+/** Start `kea serve` on a free port (with extra `args`); resolves to {url, stop()} once it listens. */
+export function startServer(args = []) {
   const dataDir = mkdtempSync(path.join(tmpdir(), 'kea-e2e-'));
   const child = spawn(
     KEA_BIN,
-    ['serve', '--addr', '127.0.0.1:0', '--data-dir', dataDir, '--web-dir', path.join(ROOT, 'web')],
+    ['serve', '--addr', '127.0.0.1:0', '--data-dir', dataDir, '--web-dir', path.join(ROOT, 'web'), ...args],
     { stdio: ['ignore', 'pipe', 'pipe'], env: { ...process.env, RUST_LOG: process.env.RUST_LOG ?? 'warn' } },
   );
   let log = '';

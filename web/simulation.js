@@ -5,7 +5,7 @@
 // consistency verdicts (NEES, NIS, per state), and the criteria sets side by side.
 
 import uPlot from './vendor/uplot/uPlot.esm.js';
-import { RunBar, checkModel, el, field, fmt, input, markControls, num, routeErrors, runError, select } from './views.js';
+import { RunBar, checkModel, el, field, fmt, input, markControls, num, routeErrors, runError, select, wasmCall } from './views.js';
 
 const SETS = ['bound', 'covariance', 'monte_carlo'];
 const CRITERIA = [
@@ -150,10 +150,17 @@ export class SimulationView {
         'div',
         { class: 'downloads' },
         el('button', { type: 'button', id: 'mc-download', text: 'Download result JSON', onclick: () => this.ctx.download(`${this.ctx.fileStem()}-monte-carlo.json`, 'application/json', JSON.stringify(this.result, null, 2) + '\n') }),
+        el('button', { type: 'button', id: 'mc-download-csv', text: 'Download traces CSV', onclick: () => this.downloadCsv() }),
       ),
     ];
     this.out.replaceChildren(...parts.filter(Boolean));
     this.draw();
+  }
+
+  /** The traces as CSV, the same text as `kea simulate --csv` (the core's, via wasm). */
+  async downloadCsv() {
+    const csv = await wasmCall('simulation_csv', { result: JSON.stringify(this.result) });
+    this.ctx.download(`${this.ctx.fileStem()}-monte-carlo-traces.csv`, 'text/csv', csv);
   }
 
   consistencyTable(c) {

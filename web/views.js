@@ -191,15 +191,20 @@ export class RunBar {
   }
 }
 
-let checker = null;
+let helper = null;
+
+/** A quick op of worker.js (check, simulation_csv, …) on a worker of its own. */
+export function wasmCall(op, args) {
+  helper ??= new WasmWorker();
+  return helper.call(op, args);
+}
 
 /**
- * The core's validation of a model (a worker of its own), as errors at `model.…`
- * paths: a server run of an invalid model is refused here, without a request.
+ * The core's validation of a model, as errors at `model.…` paths: a server run of an
+ * invalid model is refused here, without a request.
  */
 export async function checkModel(model) {
-  checker ??= new WasmWorker();
-  const errors = await checker.call('check', { model: JSON.stringify(model), set: '' });
+  const errors = await wasmCall('check', { model: JSON.stringify(model), set: '' });
   return errors.map((e) => ({ path: e.path ? `model${e.path.startsWith('[') ? '' : '.'}${e.path}` : 'model', message: e.message }));
 }
 

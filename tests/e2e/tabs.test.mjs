@@ -230,7 +230,8 @@ test('a Monte Carlo run is bit-identical in the browser, on the server and in th
   await screenshot(page, '13-monte-carlo-browser');
   const onServer = await runView('mc', 'server');
   const shownServer = await mcCriteria();
-  const cli = JSON.parse(kea('simulate', modelFile, '--runs', '200', '--seed', '7', '--trace-points', '50', '--json'));
+  const cliCsv = path.join(tmp, 'monte-carlo.csv');
+  const cli = JSON.parse(kea('simulate', modelFile, '--runs', '200', '--seed', '7', '--trace-points', '50', '--json', '--csv', cliCsv));
 
   const strip = (r) => ({ ...r, timing: null });
   assert.deepStrictEqual(strip(inBrowser), strip(onServer), 'browser and server: bit-identical');
@@ -238,6 +239,12 @@ test('a Monte Carlo run is bit-identical in the browser, on the server and in th
   assert.equal(inBrowser.steps, STEPS);
   assert.equal(inBrowser.traces.t.length, 50);
   assert.deepEqual(shownBrowser, shownServer);
+  // The traces as CSV: the same text as the CLI's `--csv`.
+  const [csv] = await Promise.all([page.waitForEvent('download'), page.click('#mc-download-csv')]);
+  assert.match(csv.suggestedFilename(), /monte-carlo-traces\.csv$/);
+  const text = readFileSync(await csv.path(), 'utf8');
+  assert.equal(text, readFileSync(cliCsv, 'utf8'));
+  assert.equal(text.trim().split('\n').length, 1 + 50, 'a header and one line per trace row');
 
   // The table shows the three sets of the result.
   for (const set of ['bound', 'covariance', 'monte_carlo']) {

@@ -37,11 +37,23 @@ async function decodeModel(text) {
   return JSON.parse(await new Response(stream).text());
 }
 
+/** The run pane's tab for a link: `&tab=NAME`, nothing for Analysis. */
+function tabParam() {
+  const tab = $('results-pane').dataset.tab ?? 'analysis';
+  return tab === 'analysis' ? '' : `&tab=${tab}`;
+}
+
+/** The link's hash: the preset or the model, and the tab. */
+async function linkHash() {
+  const model = state.preset ? `preset=${encodeURIComponent(state.preset)}` : `model=${await encodeModel(modelJson())}`;
+  return `#${model}${tabParam()}`;
+}
+
 let urlTimer = null;
 function saveToUrl() {
   clearTimeout(urlTimer);
   urlTimer = setTimeout(async () => {
-    const hash = state.preset ? `#preset=${encodeURIComponent(state.preset)}` : `#model=${await encodeModel(modelJson())}`;
+    const hash = await linkHash();
     if (location.hash !== hash) history.replaceState(null, '', hash);
   }, 300);
 }
@@ -244,7 +256,7 @@ async function main() {
     e.target.value = '';
   });
   $('copy-link').addEventListener('click', async () => {
-    const link = `${location.origin}${location.pathname}#model=${await encodeModel(modelJson())}`;
+    const link = `${location.origin}${location.pathname}#model=${await encodeModel(modelJson())}${tabParam()}`;
     try {
       await navigator.clipboard.writeText(link);
       setStatus('Link copied.');
@@ -275,7 +287,7 @@ async function main() {
     server.disabled = true;
     server.parentElement.title = 'No kea server answers here (open the page through `kea serve`).';
   }
-  mountTabs({
+  const tabs = mountTabs({
     model: () => editor.model,
     showModelErrors: (errors) => editor.showErrors(errors),
     download,
@@ -283,6 +295,9 @@ async function main() {
     server: !document.querySelector('input[name=mode][value=server]').disabled,
   });
   await loadFromUrl();
+  // The link's tab (`&tab=synthesis` / `simulation`), kept in the URL as it changes.
+  tabs.show(new URLSearchParams(location.hash.slice(1)).get('tab') ?? 'analysis');
+  document.addEventListener('kea:tab-changed', saveToUrl);
   document.body.dataset.ready = 'true';
 }
 

@@ -22,6 +22,8 @@ export function mountTabs(ctx) {
   const current = () => pane.dataset.tab ?? 'analysis';
 
   function show(name, focus = false) {
+    if (!tabs.some((t) => t.dataset.tab === name)) return;
+    const changed = name !== current();
     pane.dataset.tab = name;
     for (const t of tabs) {
       const on = t.dataset.tab === name;
@@ -33,6 +35,7 @@ export function mountTabs(ctx) {
       v.root.hidden = key !== name;
       if (key === name) v.draw?.();
     }
+    if (changed) document.dispatchEvent(new CustomEvent('kea:tab-changed', { detail: name }));
   }
 
   tabs.forEach((t, i) => {
@@ -61,5 +64,5 @@ export function mountTabs(ctx) {
   });
 
   show(current());
-  return current;
+  return { current, show };
 }

@@ -46,7 +46,7 @@ function assertClose(actual, expected, what) {
 /** The seed example with D = STEPS, as loaded in the editor; also written for the CLI. */
 async function smallSeedExample() {
   await page.selectOption('#preset', 'seed-example');
-  await page.waitForFunction(() => location.hash === '#preset=seed-example');
+  await page.waitForFunction(() => /^#preset=seed-example(&|$)/.test(location.hash));
   await page.fill('input[data-path="time.steps"]', String(STEPS));
   const model = JSON.parse(kea('preset', 'seed-example'));
   model.time.steps = STEPS;
@@ -102,6 +102,21 @@ test('the tabs switch with the mouse and the arrow keys', async () => {
   await page.keyboard.press('Home');
   assert.equal(await page.getAttribute('#tab-analysis', 'aria-selected'), 'true');
   assert.equal(await page.isVisible('#run'), true);
+});
+
+test('the tab is kept in the link', async () => {
+  await page.click('#tab-simulation');
+  await page.waitForFunction(() => /&tab=simulation$/.test(location.hash));
+  // A new page on that link opens on the Monte Carlo tab.
+  const other = await page.context().newPage();
+  await other.goto(page.url());
+  await other.waitForSelector('body[data-ready=true]', { timeout: 30000 });
+  assert.equal(await other.getAttribute('#tab-simulation', 'aria-selected'), 'true');
+  assert.equal(await other.isVisible('#simulation-panel'), true);
+  await other.close();
+  // Back on Analysis, the link has no tab.
+  await page.click('#tab-analysis');
+  await page.waitForFunction(() => !location.hash.includes('tab='));
 });
 
 test('a synthesis grid gives the same table in the browser, on the server and in the CLI', async () => {
@@ -302,7 +317,7 @@ test('an invalid request is marked at its control; a model error at its cell', a
 
 test('a long Monte Carlo run is cancelled, in the browser and on the server', async () => {
   await page.selectOption('#preset', 'seed-example');
-  await page.waitForFunction(() => location.hash === '#preset=seed-example');
+  await page.waitForFunction(() => /^#preset=seed-example(&|$)/.test(location.hash));
   await page.fill('input[data-path="time.steps"]', '100000');
   await page.click('#tab-simulation');
   await page.fill('#mc-runs', '20000'); // 2e9 runs × steps: many seconds on either side; a chunk of 256 steps is quick

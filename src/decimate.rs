@@ -116,7 +116,8 @@ impl Decimator {
         }
         for (s, col) in self.columns.iter_mut().enumerate() {
             let (min, max) = (self.min[s], self.max[s]);
-            if !(min <= max) {
+            // (min and max are never NaN: they start at ±∞ and only take values.)
+            if min > max {
                 col.push(None);
                 if two {
                     col.push(None);

@@ -421,8 +421,8 @@ impl<'m, const N: usize> Engine<'m, N> {
             let bound_ok = bound_diverged.is_none();
             let open_ok = open_diverged.is_none();
 
-            // Criteria (3.23)–(3.24) as ratios; traces. Each series is one loop over
-            // the states (vectorised).
+            // Criteria (3.23)–(3.24) as ratios; traces. Each series is one branch-free
+            // loop over the states.
             if inp.rv_changed || part_for.is_none() {
                 for (i, p) in pair.iter().enumerate() {
                     let j = p.filter(|_| has_meas[i]);

@@ -313,6 +313,32 @@ fn a_job_survives_a_crash_and_finishes_after_restart() {
 }
 
 #[test]
+fn a_cancel_is_not_lost_when_the_process_dies() {
+    let dir = tmp();
+    let mut s = Server::start(dir.path(), &["--workers", "1"]);
+    let id = s
+        .post(
+            "/v1/jobs",
+            &json!({"kind": "analysis", "model": long_model(4_000_000)}),
+        )
+        .json()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    s.wait_job(&id, LONG, |j| {
+        j["status"] == "running" && j["progress"].as_f64().unwrap() > 0.0
+    });
+    let cancel = s.delete(&format!("/v1/jobs/{id}"));
+    assert_eq!(cancel.status, 200, "{}", cancel.text);
+    // Killed at once: the job has (most likely) not yet seen the in-memory flag.
+    s.kill();
+    let s = Server::start(dir.path(), &["--workers", "1"]);
+    let job = s.wait_finished(&id, LONG);
+    assert_eq!(job["status"], "cancelled", "{job}");
+    assert_eq!(s.get(&format!("/v1/jobs/{id}/result")).status, 409);
+}
+
+#[test]
 fn graceful_shutdown_requeues_and_restart_finishes() {
     let dir = tmp();
     let mut s = Server::start(dir.path(), &["--workers", "1", "--shutdown-grace", "0"]);

@@ -107,11 +107,17 @@ impl Pool {
         workers: usize,
         job_time_limit: Duration,
     ) -> Result<Arc<Pool>, super::store::StoreError> {
-        let requeued = store.requeue_all_running()?;
+        let (requeued, cancelled) = store.requeue_all_running()?;
         if requeued > 0 {
             tracing::warn!(
                 requeued,
                 "re-queued jobs that were running when kea stopped"
+            );
+        }
+        if cancelled > 0 {
+            tracing::warn!(
+                cancelled,
+                "cancelled jobs that were asked to cancel while running when kea stopped"
             );
         }
         let pool = Arc::new(Pool {
@@ -169,6 +175,9 @@ impl Pool {
             None => Ok(CancelOutcome::NotFound),
             Some(j) if j.status.is_terminal() => Ok(CancelOutcome::AlreadyFinished(j.status)),
             Some(_) => {
+                // Recorded first: if the process stops before the job sees the flag,
+                // the job is cancelled, not run again.
+                self.store.request_cancel(id)?;
                 if let Some(job) = live.get(id) {
                     job.cancel.store(true, Ordering::SeqCst);
                 }

@@ -150,10 +150,15 @@ pub trait Store: Send + Sync + 'static {
     fn set_progress(&self, id: &str, progress: f64) -> Result<()>;
     /// Record how a running job ended (with its result, if any).
     fn finish_job(&self, id: &str, outcome: &Outcome, finished_at: &str) -> Result<()>;
-    /// Put a running job back in the queue (shutdown, crash recovery of one job).
+    /// Record that a cancel was asked for while the job runs (kept with the job, so a
+    /// process that stops first does not run it again); false if it is not running.
+    fn request_cancel(&self, id: &str) -> Result<bool>;
+    /// Put a running job back in the queue (shutdown, crash recovery of one job), or
+    /// mark it cancelled if a cancel was asked for.
     fn requeue(&self, id: &str) -> Result<()>;
-    /// Put every running job back in the queue (start-up after a crash); returns how many.
-    fn requeue_all_running(&self) -> Result<u64>;
+    /// [`Store::requeue`] for every running job (start-up after a crash); returns how
+    /// many were (re-queued, cancelled).
+    fn requeue_all_running(&self) -> Result<(u64, u64)>;
     /// Cancel a queued job; false if it was not queued.
     fn cancel_queued(&self, id: &str, finished_at: &str) -> Result<bool>;
     /// A finished job's result JSON and traces CSV.

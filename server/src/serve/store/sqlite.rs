@@ -37,6 +37,8 @@ const MIGRATIONS: &[&str] = &[
         result_json TEXT NOT NULL,
         traces_csv TEXT
      );",
+    // 2: a cancel asked for while the job runs, so that it is not lost with the process.
+    "ALTER TABLE jobs ADD COLUMN cancel_requested INTEGER NOT NULL DEFAULT 0;",
 ];
 
 pub struct SqliteStore {
@@ -120,6 +122,27 @@ impl SqliteStore {
             .lock()
             .map_err(|_| StoreError("lock poisoned".into()))?;
         f(&mut conn).map_err(db_err)
+    }
+
+    /// The running job `id` (every running job for None) back to the queue, or to
+    /// cancelled where a cancel was asked for; (re-queued, cancelled).
+    fn requeue_running(&self, id: Option<&str>) -> Result<(u64, u64)> {
+        let finished_at = super::now_rfc3339();
+        self.with(|c| {
+            let tx = c.transaction()?;
+            let cancelled = tx.execute(
+                "UPDATE jobs SET status = 'cancelled', finished_at = ?2
+                 WHERE status = 'running' AND cancel_requested = 1 AND (?1 IS NULL OR id = ?1)",
+                params![id, finished_at],
+            )?;
+            let requeued = tx.execute(
+                "UPDATE jobs SET status = 'queued', started_at = NULL, progress = 0
+                 WHERE status = 'running' AND (?1 IS NULL OR id = ?1)",
+                params![id],
+            )?;
+            tx.commit()?;
+            Ok((requeued as u64, cancelled as u64))
+        })
     }
 
     /// The schema version of the open database.
@@ -311,26 +334,22 @@ impl Store for SqliteStore {
         })
     }
 
-    fn requeue(&self, id: &str) -> Result<()> {
+    fn request_cancel(&self, id: &str) -> Result<bool> {
         self.with(|c| {
             c.execute(
-                "UPDATE jobs SET status = 'queued', started_at = NULL, progress = 0
-                 WHERE id = ?1 AND status = 'running'",
+                "UPDATE jobs SET cancel_requested = 1 WHERE id = ?1 AND status = 'running'",
                 [id],
             )
-            .map(|_| ())
+            .map(|n| n > 0)
         })
     }
 
-    fn requeue_all_running(&self) -> Result<u64> {
-        self.with(|c| {
-            c.execute(
-                "UPDATE jobs SET status = 'queued', started_at = NULL, progress = 0
-                 WHERE status = 'running'",
-                [],
-            )
-            .map(|n| n as u64)
-        })
+    fn requeue(&self, id: &str) -> Result<()> {
+        self.requeue_running(Some(id)).map(|_| ())
+    }
+
+    fn requeue_all_running(&self) -> Result<(u64, u64)> {
+        self.requeue_running(None)
     }
 
     fn cancel_queued(&self, id: &str, finished_at: &str) -> Result<bool> {
@@ -403,7 +422,7 @@ mod tests {
         }
         // Reopen: the running job is re-queued ahead of the other.
         let s = SqliteStore::open(dir.path()).unwrap();
-        assert_eq!(s.requeue_all_running().unwrap(), 1);
+        assert_eq!(s.requeue_all_running().unwrap(), (1, 0));
         assert_eq!(s.count_jobs(JobStatus::Queued).unwrap(), 2);
         let again = s.claim_next(&now_rfc3339()).unwrap().unwrap();
         assert_eq!((again.id.as_str(), again.attempts), (a.as_str(), 2));
@@ -424,6 +443,66 @@ mod tests {
         assert!(s.cancel_queued(&b, &now_rfc3339()).unwrap());
         assert!(!s.cancel_queued(&b, &now_rfc3339()).unwrap());
         assert!(s.claim_next(&now_rfc3339()).unwrap().is_none());
+    }
+
+    #[test]
+    fn a_cancel_asked_for_while_running_survives_the_process() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b, c) = (new_id(), new_id(), new_id());
+        {
+            let s = SqliteStore::open(dir.path()).unwrap();
+            for id in [&a, &b, &c] {
+                s.insert_job(&job(id)).unwrap();
+            }
+            assert!(
+                !s.request_cancel(&a).unwrap(),
+                "a queued job is not running"
+            );
+            for _ in 0..3 {
+                s.claim_next(&now_rfc3339()).unwrap().unwrap();
+            }
+            assert!(s.request_cancel(&a).unwrap());
+            assert!(s.request_cancel(&c).unwrap());
+            // Shutdown interrupts c: cancelled, not re-queued.
+            s.requeue(&c).unwrap();
+            let c_now = s.get_job(&c).unwrap().unwrap();
+            assert_eq!(c_now.status, JobStatus::Cancelled);
+            assert!(c_now.finished_at.is_some());
+        }
+        // The process died with a and b running: a was asked to cancel, b runs again.
+        let s = SqliteStore::open(dir.path()).unwrap();
+        assert_eq!(s.requeue_all_running().unwrap(), (1, 1));
+        assert_eq!(s.get_job(&a).unwrap().unwrap().status, JobStatus::Cancelled);
+        assert_eq!(s.get_job(&b).unwrap().unwrap().status, JobStatus::Queued);
+        assert_eq!(s.claim_next(&now_rfc3339()).unwrap().unwrap().id, b);
+        assert!(s.claim_next(&now_rfc3339()).unwrap().is_none());
+    }
+
+    #[test]
+    fn a_version_1_data_directory_is_migrated() {
+        let dir = tempfile::tempdir().unwrap();
+        let id = new_id();
+        {
+            // What a kea of schema version 1 left: its tables and a running job.
+            let c = Connection::open(dir.path().join("kea.sqlite")).unwrap();
+            c.execute_batch(MIGRATIONS[0]).unwrap();
+            c.pragma_update(None, "user_version", 1).unwrap();
+            c.execute(
+                "INSERT INTO jobs (id, kind, status, request_json, work, created_at, attempts)
+                 VALUES (?1, 'analysis', 'running', '{}', 1, '2026-01-01T00:00:00Z', 1)",
+                [&id],
+            )
+            .unwrap();
+        }
+        let s = SqliteStore::open(dir.path()).unwrap();
+        assert_eq!(s.schema_version().unwrap(), MIGRATIONS.len());
+        assert_eq!(s.get_job(&id).unwrap().unwrap().status, JobStatus::Running);
+        assert!(s.request_cancel(&id).unwrap());
+        assert_eq!(s.requeue_all_running().unwrap(), (0, 1));
+        assert_eq!(
+            s.get_job(&id).unwrap().unwrap().status,
+            JobStatus::Cancelled
+        );
     }
 
     #[test]

@@ -369,7 +369,8 @@ pub const MAX_EXPRESSION_CHARS: usize = 1000;
 /// The most distinct time-dependent expressions one model may have, and their total
 /// length. A parsed expression takes ≈ 20 KB plus ≈ 1.2 KB per character with the
 /// analysis's 16-lane form (≈ 23 KB), so these bound a model's expressions to
-/// ≈ 150 MB. Entries of one matrix with the same text share one parse and count once.
+/// ≈ 150 MB. Entries of one matrix with the same text share one parse and count once;
+/// the measurement schedule's `when` expressions count too.
 pub const MAX_TIME_EXPRESSIONS: usize = 2000;
 pub const MAX_TIME_EXPRESSION_CHARS: usize = 50_000;
 
@@ -383,8 +384,13 @@ pub struct ExprBudget {
 }
 
 impl ExprBudget {
+    /// A limit was exceeded (the model is refused; what follows need not be parsed).
+    pub(crate) fn is_exceeded(&self) -> bool {
+        self.exceeded
+    }
+
     /// Take one expression of `chars` characters, or say which limit it exceeds.
-    fn take(&mut self, chars: usize) -> Result<(), String> {
+    pub(crate) fn take(&mut self, chars: usize) -> Result<(), String> {
         let why = if self.count >= MAX_TIME_EXPRESSIONS {
             format!(
                 "more than {MAX_TIME_EXPRESSIONS} distinct time-dependent expressions in one model (the limit: each costs ≈ 45 KB)"

@@ -4,8 +4,8 @@
 //! the filtered covariance is the predicted one (R_k = r_k, p_k = 0).
 
 use crate::error::FieldError;
-use crate::expr::{Entry, TimeFn, compile_entry};
-use crate::model::Schedule;
+use crate::expr::{Entry, ExprBudget, TimeFn, compile_entry};
+use crate::model::{Schedule, Value};
 use std::collections::BTreeMap;
 
 #[derive(Clone, Debug)]
@@ -60,6 +60,7 @@ pub fn compile(
     nm: usize,
     params: &BTreeMap<String, f64>,
     t0: f64,
+    budget: &mut ExprBudget,
     errs: &mut Vec<FieldError>,
 ) -> Option<Schedules> {
     let base = "measurement.schedule";
@@ -111,13 +112,28 @@ pub fn compile(
             }
         } else if let Some(when) = &s.when {
             let p = format!("{path}.when");
+            if budget.is_exceeded() {
+                // Refused already (reported once): not parsed.
+                items.push(Availability::Always);
+                continue;
+            }
             match compile_entry(when, params, &p, true, t0) {
                 Ok(Entry::Const(v)) => items.push(if v > 0.0 {
                     Availability::Always
                 } else {
                     Availability::Never
                 }),
-                Ok(Entry::Time(f)) => items.push(Availability::When(*f, p)),
+                Ok(Entry::Time(f)) => {
+                    let chars = match when {
+                        Value::Expr(text) => text.chars().count(),
+                        Value::Number(_) => 0,
+                    };
+                    // Counted with the model's other time-dependent expressions.
+                    if let Err(why) = budget.take(chars) {
+                        errs.push(FieldError::new(&p, why));
+                    }
+                    items.push(Availability::When(*f, p));
+                }
                 Err(e) => {
                     errs.push(e);
                     items.push(Availability::Always);

@@ -463,7 +463,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
     let schedule = meas
         .schedule
         .as_ref()
-        .and_then(|s| crate::schedule::compile(s, nm, &params, t0, &mut errs.0));
+        .and_then(|s| crate::schedule::compile(s, nm, &params, t0, &mut exprs, &mut errs.0));
 
     // --- pairs (METHOD §1.1)
     let mut pair_of_state: Vec<Option<usize>> = vec![None; n];

@@ -470,6 +470,31 @@ fn distinct_time_expressions_are_limited_and_reported_once() {
 }
 
 #[test]
+fn schedule_expressions_count_with_the_others() {
+    // 100 measurements, each available `when` a distinct 600-character expression:
+    // 84 × 600 characters is the first total beyond the limit of 50 000.
+    let n = 100;
+    let mut m = chain(n, |i, j| if i == j { "-1".into() } else { "0".into() });
+    let when = |j: usize| format!("sin(t+{j:05}){}", "+0*t".repeat(147));
+    assert_eq!(when(7).len(), 600);
+    m["measurement"]["schedule"] = (0..n).map(|j| json!({"when": when(j)})).collect();
+    let err = analyze(
+        &model_from_value(m).unwrap(),
+        &Overrides::new(),
+        &mut NoProgress,
+    )
+    .unwrap_err();
+    let errors = err.field_errors();
+    assert_eq!(errors.len(), 1, "{errors:#?}");
+    assert_eq!(errors[0].path, "measurement.schedule[83].when");
+    assert!(
+        errors[0].message.contains("exceed 50000 characters"),
+        "{}",
+        errors[0].message
+    );
+}
+
+#[test]
 fn repeated_expressions_are_shared_with_the_same_results() {
     // Every a entry of a 60-state model is time-dependent, with 3 distinct texts:
     // 3600 entries, over the limit if each counted. A 12-state copy whose entries

@@ -470,6 +470,20 @@ fn distinct_time_expressions_are_limited_and_reported_once() {
 }
 
 #[test]
+fn work_estimates_count_every_step_not_only_n_cubed() {
+    // steps × (N³ + 16N² + 200): a one-state step is not free.
+    assert_eq!(kea_core::step_cost(1), 217.0);
+    assert_eq!(kea_core::step_cost(10), 2800.0);
+    let m = model_from_value(chain(
+        10,
+        |i, j| if i == j { "-1".into() } else { "0".into() },
+    ))
+    .unwrap();
+    let w = kea_core::estimate_work(&m, &Overrides::new()).unwrap();
+    assert_eq!((w.steps, w.states, w.work), (50, 10, 50.0 * 2800.0));
+}
+
+#[test]
 fn schedule_expressions_count_with_the_others() {
     // 100 measurements, each available `when` a distinct 600-character expression:
     // 84 × 600 characters is the first total beyond the limit of 50 000.

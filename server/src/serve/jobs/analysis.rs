@@ -33,9 +33,9 @@ impl JobKind for Analysis {
             work: Work {
                 units: estimate.work,
                 explain: format!(
-                    "D = {} steps × N³ = {} (N = {})",
+                    "D = {} steps × (N³ + 16N² + 200) = {} (N = {})",
                     estimate.steps,
-                    estimate.states.pow(3),
+                    kea_core::step_cost(estimate.states),
                     estimate.states
                 ),
                 path: "model.time.steps".into(),

@@ -35,7 +35,7 @@ pub trait PreparedJob: Send {
 #[derive(Clone, Debug)]
 pub struct Work {
     pub units: f64,
-    /// How it was computed, for messages (e.g. "D = 1000 steps × N³ = 8").
+    /// How it was computed, for messages (e.g. "D = 1000 steps × (N³ + 16N² + 200) = 328 (N = 2)").
     pub explain: String,
     /// The request field that drives it (for the error path).
     pub path: String,

@@ -29,9 +29,9 @@ impl JobKind for Synthesis {
             work: Work {
                 units: one.work * analyses as f64,
                 explain: format!(
-                    "at most {analyses} analyses × D = {} steps × N³ = {} (N = {})",
+                    "at most {analyses} analyses × D = {} steps × (N³ + 16N² + 200) = {} (N = {})",
                     one.steps,
-                    one.states.pow(3),
+                    kea_core::step_cost(one.states),
                     one.states
                 ),
                 path: "mode".into(),

@@ -125,29 +125,37 @@ export class ServerRunner {
     return { result: await result.json(), job: job.id };
   }
 
-  /** Follow the job's SSE stream to its final status; resolves to the job object. */
+  /**
+   * Follow the job's SSE stream to its final status; resolves to the job object. A
+   * stream that ends while the job still runs (a proxy's timeout, a network blip) is
+   * followed again.
+   */
   async follow(id, onProgress) {
-    const stop = new AbortController();
-    try {
-      for await (const { data } of events(`${this.base}/v1/jobs/${id}/events`, stop.signal)) {
-        let event = {};
-        try {
-          event = JSON.parse(data);
-        } catch {
-          continue;
+    for (;;) {
+      const stop = new AbortController();
+      try {
+        for await (const { data } of events(`${this.base}/v1/jobs/${id}/events`, stop.signal)) {
+          let event = {};
+          try {
+            event = JSON.parse(data);
+          } catch {
+            continue;
+          }
+          if (typeof event.progress === 'number') onProgress?.(event.progress);
+          const status = event.status ?? event.state;
+          if (status && !['queued', 'running'].includes(status)) break;
         }
-        if (typeof event.progress === 'number') onProgress?.(event.progress);
-        const status = event.status ?? event.state;
-        if (status && !['queued', 'running'].includes(status)) break;
+      } catch {
+        // The stream failed or was refused: the job itself says where it is.
+      } finally {
+        stop.abort();
       }
-    } catch {
-      // The stream failed or was refused: the job itself says where it is.
-    } finally {
-      stop.abort();
+      const r = await api(`${this.base}/v1/jobs/${id}`);
+      if (!r.ok) throw await problemOf(r);
+      const job = await r.json();
+      if (!['queued', 'running'].includes(job.status)) return job;
+      await new Promise((resolve) => setTimeout(resolve, 1000));
     }
-    const r = await api(`${this.base}/v1/jobs/${id}`);
-    if (!r.ok) throw await problemOf(r);
-    return r.json();
   }
 
   async cancel() {

@@ -13,6 +13,24 @@ fn tmp() -> tempfile::TempDir {
     tempfile::tempdir().unwrap()
 }
 
+/// Submit a 4·10⁶-step analysis job and wait until it runs with some progress; its id
+/// and that snapshot of it.
+fn start_long_job(s: &Server) -> (String, Value) {
+    let id = s
+        .post(
+            "/v1/jobs",
+            &json!({"kind": "analysis", "model": long_model(4_000_000)}),
+        )
+        .json()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let running = s.wait_job(&id, LONG, |j| {
+        j["status"] == "running" && j["progress"].as_f64().unwrap() > 0.0
+    });
+    (id, running)
+}
+
 #[test]
 fn health_and_presets() {
     let dir = tmp();
@@ -281,13 +299,8 @@ fn two_hundred_concurrent_jobs_all_complete_correctly() {
 fn a_job_survives_a_crash_and_finishes_after_restart() {
     let dir = tmp();
     let mut s = Server::start(dir.path(), &["--workers", "1"]);
-    let model = long_model(4_000_000);
-    let id = s
-        .post("/v1/jobs", &json!({"kind": "analysis", "model": model}))
-        .json()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
+    let (id, first) = start_long_job(&s);
+    // Behind it on the one worker.
     let queued = s
         .post(
             "/v1/jobs",
@@ -297,9 +310,6 @@ fn a_job_survives_a_crash_and_finishes_after_restart() {
         .as_str()
         .unwrap()
         .to_string();
-    let first = s.wait_job(&id, LONG, |j| {
-        j["status"] == "running" && j["progress"].as_f64().unwrap() > 0.0
-    });
     assert!(first["progress"].as_f64().unwrap() < 1.0, "{first}");
     s.kill();
 
@@ -316,18 +326,7 @@ fn a_job_survives_a_crash_and_finishes_after_restart() {
 fn a_cancel_is_not_lost_when_the_process_dies() {
     let dir = tmp();
     let mut s = Server::start(dir.path(), &["--workers", "1"]);
-    let id = s
-        .post(
-            "/v1/jobs",
-            &json!({"kind": "analysis", "model": long_model(4_000_000)}),
-        )
-        .json()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
-    s.wait_job(&id, LONG, |j| {
-        j["status"] == "running" && j["progress"].as_f64().unwrap() > 0.0
-    });
+    let (id, _) = start_long_job(&s);
     let cancel = s.delete(&format!("/v1/jobs/{id}"));
     assert_eq!(cancel.status, 200, "{}", cancel.text);
     // Killed at once: the job has (most likely) not yet seen the in-memory flag.
@@ -342,18 +341,7 @@ fn a_cancel_is_not_lost_when_the_process_dies() {
 fn graceful_shutdown_requeues_and_restart_finishes() {
     let dir = tmp();
     let mut s = Server::start(dir.path(), &["--workers", "1", "--shutdown-grace", "0"]);
-    let id = s
-        .post(
-            "/v1/jobs",
-            &json!({"kind": "analysis", "model": long_model(4_000_000)}),
-        )
-        .json()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
-    s.wait_job(&id, LONG, |j| {
-        j["status"] == "running" && j["progress"].as_f64().unwrap() > 0.0
-    });
+    let (id, _) = start_long_job(&s);
     assert!(
         s.terminate(Duration::from_secs(30)),
         "kea serve exits on SIGTERM"

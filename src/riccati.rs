@@ -172,6 +172,27 @@ impl Prepared {
         Ok(())
     }
 
+    /// Whether the block gain may be read off the updated covariance, p = R Cᵀ D⁻¹
+    /// (see [`SequentialJoseph::step`]): every row is a unit row coef·e_col with a
+    /// noise variance d > 0 and an innovation variance q ≤ coef² r_col,col + d at
+    /// most [`DIRECT_GAIN_MAX_Q_OVER_D`] times d. R's rounding error, about ε·q
+    /// absolute, is divided by d in p, so q/d bounds how much p's error grows against
+    /// the composed gain's.
+    fn gain_from_covariance(&self, r_pred: &[f64], n: usize) -> bool {
+        !self.idx.is_empty()
+            && self.unit[..self.idx.len()]
+                .iter()
+                .zip(&self.d)
+                .all(|(u, &d)| match *u {
+                    Some((col, coef)) => {
+                        d > 0.0
+                            && coef * coef * r_pred[col * n + col]
+                                <= (DIRECT_GAIN_MAX_Q_OVER_D - 1.0) * d
+                    }
+                    None => false,
+                })
+    }
+
     /// The number of measurements in use.
     pub fn len(&self) -> usize {
         self.idx.len()
@@ -181,6 +202,10 @@ impl Prepared {
         self.idx.is_empty()
     }
 }
+
+/// The largest innovation-to-noise variance ratio q/d for which the block gain is
+/// read off the updated covariance instead of composed from the scalar gains.
+const DIRECT_GAIN_MAX_Q_OVER_D: f64 = 16.0;
 
 /// a = L D Lᵀ in place (strict lower triangle of `a` := L), for a symmetric positive
 /// semi-definite a; a zero pivot zeroes its column of L. Err(()) on a negative pivot.
@@ -274,13 +299,30 @@ impl SequentialJoseph {
         predict_cov::<N, L>(&mut self.r_pred, big_r, e, big_b, &mut self.u, n);
         big_r.copy_from_slice(&self.r_pred[..n * n]);
         let nk = prep.len();
+        let direct = prep.gain_from_covariance(&self.r_pred, n);
         let ok = if N > 0 {
-            update_fixed::<N>(mat_mut(big_r), self.kt.as_chunks_mut::<N>().0, prep)
+            update_fixed::<N>(
+                mat_mut(big_r),
+                self.kt.as_chunks_mut::<N>().0,
+                prep,
+                !direct,
+            )
         } else {
-            update_slices::<L>(n, big_r, &mut self.kt, &mut self.s, prep)
+            update_slices::<L>(n, big_r, &mut self.kt, &mut self.s, prep, !direct)
         };
         if !ok {
             return false;
+        }
+        if direct {
+            // K' column j = R (coef e_col)ᵀ / d = (coef / d) · row col of R (symmetric).
+            for (j, k) in self.kt.chunks_exact_mut(n).take(nk).enumerate() {
+                if let Some((col, coef)) = prep.unit[j] {
+                    let f = coef / prep.d[j];
+                    for (k, r) in k.iter_mut().zip(&big_r[col * n..col * n + n]) {
+                        *k = f * r;
+                    }
+                }
+            }
         }
         // h = I − p C = I − K' (L⁻¹ C).
         let h = &mut self.h[..n * n];
@@ -342,6 +384,7 @@ fn update_fixed<const N: usize>(
     r: &mut [[f64; N]; N],
     kt: &mut [[f64; N]],
     prep: &Prepared,
+    compose: bool,
 ) -> bool {
     for j in 0..prep.len() {
         let row: &[f64; N] = prep.rows[j * N..j * N + N].try_into().expect("row");
@@ -389,6 +432,7 @@ fn update_fixed<const N: usize>(
         }
         // Earlier gains pass through (I − k c): the block gain's columns.
         let (done, rest) = kt.split_at_mut(j);
+        let done = if compose { done } else { &mut [] };
         for km in done.iter_mut() {
             let ck = match unit {
                 Some((col, coef)) => coef * km[col],
@@ -416,6 +460,7 @@ fn update_slices<L: Lanes>(
     kt: &mut [f64],
     s: &mut [f64],
     prep: &Prepared,
+    compose: bool,
 ) -> bool {
     let s = &mut s[..n];
     for j in 0..prep.len() {
@@ -467,6 +512,7 @@ fn update_slices<L: Lanes>(
             );
         }
         // Earlier gains pass through (I − k c): the block gain's columns.
+        let done = if compose { done } else { &mut [] };
         for km in done.chunks_exact_mut(n) {
             let ck = match prep.unit[j] {
                 Some((col, coef)) => coef * km[col],
@@ -481,4 +527,88 @@ fn update_slices<L: Lanes>(
         }
     }
     true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lanes::Scalar;
+    use nalgebra::DMatrix;
+
+    /// One step with A = I and B = 0 (so r = R_prev), unit measurement rows
+    /// coef·e_col, diagonal noise; returns R, the gain (N × nm) and whether the
+    /// gain was read off R.
+    fn one_step<const N: usize>(
+        r_prev: &DMatrix<f64>,
+        rows: &[(usize, f64)],
+        noise: &[f64],
+    ) -> (DMatrix<f64>, DMatrix<f64>, bool) {
+        let (n, nm) = (r_prev.nrows(), rows.len());
+        let mut c = vec![0.0; nm * n];
+        let mut rv = vec![0.0; nm * nm];
+        for (j, &(col, coef)) in rows.iter().enumerate() {
+            c[j * n + col] = coef;
+            rv[j * nm + j] = noise[j];
+        }
+        let mut prep = Prepared::new(n, nm);
+        prep.prepare(&c, &rv, None, n, nm).unwrap();
+        let mut big_r: Vec<f64> = r_prev.transpose().iter().copied().collect();
+        let direct = prep.gain_from_covariance(&big_r, n);
+        let mut j = SequentialJoseph::new(n, nm);
+        let e = SparseRows::with_pattern(n, vec![]);
+        assert!(j.step::<N, Scalar>(n, &mut big_r, &e, &vec![0.0; n * n], &prep));
+        let r = DMatrix::from_row_slice(n, n, &big_r);
+        let gain = DMatrix::from_fn(n, nm, |i, m| j.gain_t[m * n + i]);
+        (r, gain, direct)
+    }
+
+    /// The block form (2.3)–(2.7), written plainly.
+    fn block(
+        r: &DMatrix<f64>,
+        rows: &[(usize, f64)],
+        noise: &[f64],
+    ) -> (DMatrix<f64>, DMatrix<f64>) {
+        let (n, nm) = (r.nrows(), rows.len());
+        let c = DMatrix::from_fn(nm, n, |j, i| if rows[j].0 == i { rows[j].1 } else { 0.0 });
+        let rv = DMatrix::from_fn(nm, nm, |a, b| if a == b { noise[a] } else { 0.0 });
+        let q = &c * r * c.transpose() + &rv;
+        let p = r * c.transpose() * q.try_inverse().unwrap();
+        let h = DMatrix::identity(n, n) - &p * &c;
+        (&h * r * h.transpose() + &p * &rv * p.transpose(), p)
+    }
+
+    fn check<const N: usize>(scale: f64, want_direct: bool) {
+        let n = if N > 0 { N } else { 14 };
+        // A well-conditioned correlated r: 1 on the diagonal, 0.3^|a−b| off it.
+        let r = DMatrix::from_fn(n, n, |a, b| {
+            scale * 0.3f64.powi((a as i32 - b as i32).abs())
+        });
+        // Measure every second state, in reverse order, with coefficients ≠ 1.
+        let rows: Vec<(usize, f64)> = (0..n)
+            .rev()
+            .step_by(2)
+            .map(|i| (i, 0.5 + 0.1 * i as f64))
+            .collect();
+        let noise: Vec<f64> = (0..rows.len()).map(|j| 0.2 + 0.05 * j as f64).collect();
+        let (big_r, gain, direct) = one_step::<N>(&r, &rows, &noise);
+        assert_eq!(direct, want_direct, "N = {n}, scale {scale}");
+        let (r_ref, p_ref) = block(&r, &rows, &noise);
+        let rel = |a: &DMatrix<f64>, b: &DMatrix<f64>| (a - b).amax() / b.amax();
+        assert!(rel(&big_r, &r_ref) < 1e-13, "R: {:e}", rel(&big_r, &r_ref));
+        assert!(rel(&gain, &p_ref) < 1e-13, "gain: {:e}", rel(&gain, &p_ref));
+    }
+
+    #[test]
+    fn gain_read_off_the_covariance_equals_the_block_gain() {
+        // q/d ≤ 16: p = R Cᵀ D⁻¹; fixed-size and runtime-dimension kernels.
+        check::<6>(0.1, true);
+        check::<0>(0.1, true);
+    }
+
+    #[test]
+    fn gain_composed_from_scalar_gains_equals_the_block_gain() {
+        // r ≫ d: the gains are composed through (I − k c).
+        check::<6>(100.0, false);
+        check::<0>(100.0, false);
+    }
 }

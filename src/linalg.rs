@@ -170,19 +170,21 @@ fn predict_fixed<const N: usize>(
             u[j][i] = x;
         }
     }
+    // Whole rows (fixed length, so unrolled): the entries right of the diagonal are
+    // overwritten by the mirror below.
     for bb in 0..N {
-        let w = &mut out[bb][..=bb];
-        w.copy_from_slice(&u[bb][..=bb]);
+        let mut w = u[bb];
         for &(_, c, v) in e.row(bb) {
-            let uc = &u[c][..=bb];
-            for a in 0..=bb {
+            let uc = &u[c];
+            for a in 0..N {
                 w[a] += v * uc[a];
             }
         }
-        let bb_row = &b[bb][..=bb];
-        for a in 0..=bb {
+        let bb_row = &b[bb];
+        for a in 0..N {
             w[a] += bb_row[a];
         }
+        out[bb] = w;
     }
     for a in 1..N {
         for bb in 0..a {

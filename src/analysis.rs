@@ -277,7 +277,7 @@ impl<'m, const N: usize> Engine<'m, N> {
         let mut schedule = m.schedule.clone();
         let mut avail = vec![true; nm];
         let mut avail_prev = vec![true; nm]; // the mask `prep` was prepared for
-        let mut abs_h = vec![0.0; n * n]; // |I − pC|
+        let mut abs_ht = vec![0.0; n * n]; // |I − pC|ᵀ
         let mut pz = vec![0.0; n]; // |p| ζ (3.19)
         let mut pot = vec![0.0; n]; // sqrt(diag R_k)
         let mut inv_pot = vec![0.0; n];
@@ -371,7 +371,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                     inv_pot[i] = 1.0 / pot[i];
                 }
                 // |I − pC| and |p| ζ for the bound (3.19)
-                for (h, x) in abs_h.iter_mut().zip(&joseph.h) {
+                for (h, x) in abs_ht.iter_mut().zip(&joseph.ht) {
                     *h = x.abs();
                 }
                 pz.fill(0.0);
@@ -411,8 +411,15 @@ impl<'m, const N: usize> Engine<'m, N> {
                     eta[i] = xi[i] + inp.b_phi[i];
                 }
                 sparse_mul_vec(&mut xi, &inp.abs_a.nz, &chi, n);
-                for (c, (h, p)) in chi.iter_mut().zip(abs_h.chunks_exact(n).zip(&pz)) {
-                    *c = h.iter().zip(&xi).map(|(a, b)| a * b).sum::<f64>() + p;
+                // χ_c = (Σ_b |h_cb| ξ_b, b in order) + (|p| ζ)_c, as row operations on |h|ᵀ
+                chi.fill(0.0);
+                for (h, &x) in abs_ht.chunks_exact(n).zip(&xi) {
+                    for (c, h) in chi.iter_mut().zip(h) {
+                        *c += h * x;
+                    }
+                }
+                for (c, p) in chi.iter_mut().zip(&pz) {
+                    *c += p;
                 }
                 if !eta.iter().chain(chi.iter()).all(|v| v.is_finite()) {
                     bound_diverged = Some((k, t_k));

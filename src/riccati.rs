@@ -253,8 +253,9 @@ pub struct SequentialJoseph {
     /// p_kᵀ (nm × N): row j is the gain column of measurement j (zero when it is not
     /// available at this step).
     pub gain_t: Vec<f64>,
-    /// h_k = I − p_k C (N × N).
-    pub h: Vec<f64>,
+    /// h_kᵀ, the transpose of h_k = I − p_k C (N × N): row c is column c of h_k,
+    /// so that building it and the bound's product |h| x (3.19) are row operations.
+    pub ht: Vec<f64>,
 }
 
 impl SequentialJoseph {
@@ -265,7 +266,7 @@ impl SequentialJoseph {
             kt: vec![0.0; nm * n],
             r_pred: vec![0.0; n * n],
             gain_t: vec![0.0; nm * n],
-            h: vec![0.0; n * n],
+            ht: vec![0.0; n * n],
         }
     }
 
@@ -324,24 +325,26 @@ impl SequentialJoseph {
                 }
             }
         }
-        // h = I − p C = I − K' (L⁻¹ C).
-        let h = &mut self.h[..n * n];
-        h.fill(0.0);
+        // hᵀ = I − (L⁻¹ C)ᵀ K'ᵀ: row c of hᵀ loses (L⁻¹ C)_jc times gain j, for each
+        // measurement j in turn (each entry sees the same subtractions, in the same
+        // order, as h = I − K' (L⁻¹ C) built entry by entry).
+        let ht = &mut self.ht[..n * n];
+        ht.fill(0.0);
         for i in 0..n {
-            h[i * n + i] = 1.0;
+            ht[i * n + i] = 1.0;
         }
         for j in 0..nk {
             let k = &self.kt[j * n..j * n + n];
             match prep.unit[j] {
                 Some((col, coef)) => {
-                    for (hi, &ka) in h.chunks_exact_mut(n).zip(k) {
-                        hi[col] -= ka * coef;
+                    for (x, &ka) in ht[col * n..col * n + n].iter_mut().zip(k) {
+                        *x -= ka * coef;
                     }
                 }
                 None => {
                     let row = &prep.rows[j * n..j * n + n];
-                    for (hi, &ka) in h.chunks_exact_mut(n).zip(k) {
-                        for (x, c) in hi.iter_mut().zip(row) {
+                    for (hc, &c) in ht.chunks_exact_mut(n).zip(row) {
+                        for (x, &ka) in hc.iter_mut().zip(k) {
                             *x -= ka * c;
                         }
                     }

@@ -241,7 +241,8 @@ fn ldl(a: &mut [f64], d: &mut [f64], m: usize) -> Result<(), ()> {
 /// The measurements are processed one (whitened) scalar at a time, each in Joseph
 /// form; for independent measurement noises this is the same update as the block
 /// form (2.3)–(2.7), at O(n·N²) instead of O(n·N² + n²·N + n³) and without a matrix
-/// solve. The block gain p_k of (2.5) is composed from the scalar gains.
+/// solve. The block gain p_k of (2.5) is read off R_k or composed from the scalar
+/// gains (see [`SequentialJoseph::step`]).
 #[derive(Clone, Debug)]
 pub struct SequentialJoseph {
     u: Vec<f64>,
@@ -283,6 +284,9 @@ impl SequentialJoseph {
     ///      = r − (k sᵀ + s kᵀ) + q k kᵀ                 upper triangle only;
     ///        row a: r_a· − k_a s + (q k_a − s_a) k      (the same sum, regrouped)
     /// R = r, its lower triangle mirrored from the upper: exactly symmetric
+    /// p = R Cᵀ D⁻¹ (whitened C and D)                   (2.5), when every row is a unit
+    ///                                                   row and q/d ≤ 16 (N·n work);
+    /// else p_j = (I − k_n c_n)⋯(I − k_{j+1} c_{j+1}) k_j  (N·n²/2)
     /// ```
     /// The expansion holds for any k, so like the Joseph form it does not rely on k
     /// being the optimal gain. `n` is the state dimension (a compile-time constant

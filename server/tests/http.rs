@@ -16,15 +16,7 @@ fn tmp() -> tempfile::TempDir {
 /// Submit a 4·10⁶-step analysis job and wait until it runs with some progress; its id
 /// and that snapshot of it.
 fn start_long_job(s: &Server) -> (String, Value) {
-    let id = s
-        .post(
-            "/v1/jobs",
-            &json!({"kind": "analysis", "model": long_model(4_000_000)}),
-        )
-        .json()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
+    let id = s.submit_analysis(long_model(4_000_000));
     let running = s.wait_job(&id, LONG, |j| {
         j["status"] == "running" && j["progress"].as_f64().unwrap() > 0.0
     });
@@ -179,15 +171,7 @@ fn analyze_sync_and_job_equal_the_cli() {
 fn jobs_list_events_and_status_filter() {
     let dir = tmp();
     let s = Server::start(dir.path(), &[]);
-    let id = s
-        .post(
-            "/v1/jobs",
-            &json!({"kind": "analysis", "model": preset("cv-tracker")}),
-        )
-        .json()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
+    let id = s.submit_analysis(preset("cv-tracker"));
     let events = s.events(&format!("/v1/jobs/{id}/events"));
     let (last_event, last) = events.last().unwrap();
     assert_eq!(last_event, "status");
@@ -301,15 +285,7 @@ fn a_job_survives_a_crash_and_finishes_after_restart() {
     let mut s = Server::start(dir.path(), &["--workers", "1"]);
     let (id, first) = start_long_job(&s);
     // Behind it on the one worker.
-    let queued = s
-        .post(
-            "/v1/jobs",
-            &json!({"kind": "analysis", "model": preset("cv-tracker")}),
-        )
-        .json()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
+    let queued = s.submit_analysis(preset("cv-tracker"));
     assert!(first["progress"].as_f64().unwrap() < 1.0, "{first}");
     s.kill();
 
@@ -408,15 +384,7 @@ fn limits_sync_work_and_absurd_work() {
 fn time_limit_fails_a_job() {
     let dir = tmp();
     let s = Server::start(dir.path(), &["--job-time-limit", "0"]);
-    let id = s
-        .post(
-            "/v1/jobs",
-            &json!({"kind": "analysis", "model": long_model(2_000_000)}),
-        )
-        .json()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
+    let id = s.submit_analysis(long_model(2_000_000));
     let done = s.wait_finished(&id, LONG);
     assert_eq!(done["status"], "failed");
     assert_eq!(done["error"]["type"], "urn:kea:problem:too-much-work");

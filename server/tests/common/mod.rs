@@ -235,6 +235,18 @@ impl Server {
         (res.status().as_u16(), h)
     }
 
+    /// Submit an analysis job of `model`; its id.
+    pub fn submit_analysis(&self, model: Value) -> String {
+        self.post(
+            "/v1/jobs",
+            &serde_json::json!({"kind": "analysis", "model": model}),
+        )
+        .json()["id"]
+            .as_str()
+            .unwrap()
+            .to_string()
+    }
+
     /// Poll a job until `done(job)` or the timeout.
     pub fn wait_job(&self, id: &str, timeout: Duration, done: impl Fn(&Value) -> bool) -> Value {
         let deadline = Instant::now() + timeout;

@@ -1,6 +1,7 @@
 //! The engine's performance workloads (BENCHMARKS.md): the seed's Table 1 (D = 10⁶,
 //! P states, n = P measurements, time-varying a(t)), N = 30, the steady-state
-//! shortcut, and the cost of expression evaluation.
+//! shortcut, the Python peer's model (the whole analysis, and the filter's covariance
+//! recursion alone), and the cost of expression evaluation.
 //!
 //!     cargo bench -p kea-core --bench engine            # everything (~2 min)
 //!     cargo bench -p kea-core --bench engine -- table1  # a filter on the names
@@ -11,7 +12,7 @@
 //! `KEA_BENCH_STEPS=20000 KEA_BENCH_RUNS=1` shrink every workload, for counting
 //! instructions under `valgrind --tool=callgrind` (load-independent figures).
 
-use kea_core::{Model, NoProgress, analyze, model_from_value};
+use kea_core::{Model, NoProgress, analyze, covariance_recursion, model_from_value};
 use serde_json::json;
 use std::time::Instant;
 
@@ -64,15 +65,23 @@ fn chain_measured(p: usize, nm: usize, steps: u64, varying: usize, shortcut: boo
     .expect("bench model is valid")
 }
 
+/// The analysis of `model`, timed.
 fn time(name: &str, model: &Model, runs: usize) -> f64 {
+    time_with(name, model, runs, || {
+        let r = analyze(model, &Default::default(), &mut NoProgress).expect("bench runs");
+        std::hint::black_box(&r);
+    })
+}
+
+/// `run` (one pass over `model`'s steps), timed.
+fn time_with(name: &str, model: &Model, runs: usize, run: impl Fn()) -> f64 {
     let steps = match model.time.steps {
         kea_core::model::Steps::Fixed(d) => d,
         _ => unreachable!(),
     };
     let once = || {
         let t = Instant::now();
-        let r = analyze(model, &Default::default(), &mut NoProgress).expect("bench runs");
-        std::hint::black_box(&r);
+        run();
         t.elapsed().as_secs_f64()
     };
     once();
@@ -112,6 +121,16 @@ fn main() {
             &chain_measured(10, 5, d / 5, 0, false),
             runs(5),
         );
+    }
+    if want("peer N=10 n=5 recursion only") {
+        // The same model, the filter's covariance recursion and mean alone: what the
+        // peer computes, so the like-for-like per-step comparison.
+        let model = chain_measured(10, 5, d / 5, 0, false);
+        time_with("peer N=10 n=5 recursion only", &model, runs(5), || {
+            let r = covariance_recursion(&model, &Default::default(), &mut NoProgress)
+                .expect("bench runs");
+            std::hint::black_box(&r);
+        });
     }
     if want("n30 time-varying a(t)") {
         time("n30 time-varying a(t)", &chain(30, d, 30, true), runs(1));

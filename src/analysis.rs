@@ -38,23 +38,56 @@ pub fn run(model: &CompiledModel, progress: &mut dyn Progress) -> Result<Analysi
             (s.chosen, Some(s.selection))
         }
     };
-    let mut result = match model.n_states() {
-        1 => Engine::<1>::new(model, steps).run(progress),
-        2 => Engine::<2>::new(model, steps).run(progress),
-        3 => Engine::<3>::new(model, steps).run(progress),
-        4 => Engine::<4>::new(model, steps).run(progress),
-        5 => Engine::<5>::new(model, steps).run(progress),
-        6 => Engine::<6>::new(model, steps).run(progress),
-        7 => Engine::<7>::new(model, steps).run(progress),
-        8 => Engine::<8>::new(model, steps).run(progress),
-        9 => Engine::<9>::new(model, steps).run(progress),
-        10 => Engine::<10>::new(model, steps).run(progress),
-        11 => Engine::<11>::new(model, steps).run(progress),
-        12 => Engine::<12>::new(model, steps).run(progress),
-        _ => Engine::<0>::new(model, steps).run(progress),
-    }?;
+    let mut result = dispatch(model, steps, false, progress)?;
     result.step_selection = selection;
     Ok(result)
+}
+
+/// The filter's covariance recursion alone — (2.1)–(2.7) and the mean (3.3) at every
+/// step, with none of the analysis around it (no open-loop covariance, bound,
+/// criteria or traces): what a Kalman filter library's covariance pass computes, for
+/// timing kea against one on the same recursion (BENCHMARKS.md). Returns R_D and p_D,
+/// the analysis's `final.covariance` and `final.gain` bit for bit. Needs a fixed
+/// number of steps.
+pub fn covariance_recursion(
+    model: &CompiledModel,
+    progress: &mut dyn Progress,
+) -> Result<FinalCovariance, Error> {
+    let StepPlan::Fixed(steps) = model.steps else {
+        return Err(Error::invalid(
+            "time.steps",
+            "the covariance recursion alone runs a fixed number of steps, not \"auto\"",
+        ));
+    };
+    let r = dispatch(model, steps, true, progress)?;
+    Ok(FinalCovariance {
+        covariance: r.final_.covariance,
+        gain: r.final_.gain,
+    })
+}
+
+/// The engine compiled for the model's state dimension (1..=12, else runtime-sized).
+fn dispatch(
+    model: &CompiledModel,
+    steps: u64,
+    covariance_only: bool,
+    progress: &mut dyn Progress,
+) -> Result<AnalysisResult, Error> {
+    match model.n_states() {
+        1 => Engine::<1>::new(model, steps, covariance_only).run(progress),
+        2 => Engine::<2>::new(model, steps, covariance_only).run(progress),
+        3 => Engine::<3>::new(model, steps, covariance_only).run(progress),
+        4 => Engine::<4>::new(model, steps, covariance_only).run(progress),
+        5 => Engine::<5>::new(model, steps, covariance_only).run(progress),
+        6 => Engine::<6>::new(model, steps, covariance_only).run(progress),
+        7 => Engine::<7>::new(model, steps, covariance_only).run(progress),
+        8 => Engine::<8>::new(model, steps, covariance_only).run(progress),
+        9 => Engine::<9>::new(model, steps, covariance_only).run(progress),
+        10 => Engine::<10>::new(model, steps, covariance_only).run(progress),
+        11 => Engine::<11>::new(model, steps, covariance_only).run(progress),
+        12 => Engine::<12>::new(model, steps, covariance_only).run(progress),
+        _ => Engine::<0>::new(model, steps, covariance_only).run(progress),
+    }
 }
 
 /// Whether the engine runs its AVX2 + FMA build: the CPU has both and
@@ -193,10 +226,12 @@ struct Engine<'m, const N: usize> {
     nn: usize,
     nm: usize,
     dt: f64,
+    /// Only the filter's covariance recursion and the mean ([`covariance_recursion`]).
+    covariance_only: bool,
 }
 
 impl<'m, const N: usize> Engine<'m, N> {
-    fn new(m: &'m CompiledModel, steps: u64) -> Self {
+    fn new(m: &'m CompiledModel, steps: u64, covariance_only: bool) -> Self {
         let nn = if N == 0 { m.n_states() } else { N };
         debug_assert_eq!(nn, m.n_states());
         Engine {
@@ -205,6 +240,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             nn,
             nm: m.n_measurements(),
             dt: (m.t_end - m.t0) / steps as f64,
+            covariance_only,
         }
     }
 
@@ -371,14 +407,16 @@ impl<'m, const N: usize> Engine<'m, N> {
                     inv_pot[i] = 1.0 / pot[i];
                 }
                 // |I − pC| and |p| ζ for the bound (3.19)
-                for (h, x) in abs_ht.iter_mut().zip(&joseph.ht) {
-                    *h = x.abs();
-                }
-                pz.fill(0.0);
-                for (j, g) in joseph.gain_t.chunks_exact(n).enumerate() {
-                    let z = inp.zeta[j];
-                    for (p, g) in pz.iter_mut().zip(g) {
-                        *p += g.abs() * z;
+                if !self.covariance_only {
+                    for (h, x) in abs_ht.iter_mut().zip(&joseph.ht) {
+                        *h = x.abs();
+                    }
+                    pz.fill(0.0);
+                    for (j, g) in joseph.gain_t.chunks_exact(n).enumerate() {
+                        let z = inp.zeta[j];
+                        for (p, g) in pz.iter_mut().zip(g) {
+                            *p += g.abs() * z;
+                        }
                     }
                 }
                 // Steady state: r_k within STEADY_TOL of r∞ (then R, p are stationary too).
@@ -393,6 +431,15 @@ impl<'m, const N: usize> Engine<'m, N> {
                         frozen_at = Some(k);
                     }
                 }
+            }
+
+            if self.covariance_only {
+                if k % PROGRESS_EVERY == 0
+                    && let ControlFlow::Break(()) = progress.report(k as f64 / self.steps as f64)
+                {
+                    return Err(Error::Cancelled);
+                }
+                continue;
             }
 
             // Open-loop covariance P^Y = A P Aᵀ + B (§1.5, exact second moments)

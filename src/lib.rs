@@ -65,6 +65,19 @@ pub fn analyze(
     analysis::run(&compiled, progress)
 }
 
+/// The filter's covariance recursion alone, (2.1)–(2.7) and the mean, with the
+/// model's parameter overrides: R_D and p_D, equal bit for bit to the analysis's
+/// `final.covariance` and `final.gain`. For timing kea against other filters on the
+/// same recursion ([`analysis::covariance_recursion`]).
+pub fn covariance_recursion(
+    model: &Model,
+    set: &Overrides,
+    progress: &mut dyn Progress,
+) -> Result<result::FinalCovariance, Error> {
+    let compiled = validate::compile(model, set)?;
+    analysis::covariance_recursion(&compiled, progress)
+}
+
 /// Validate a model without running it; every problem found is returned.
 pub fn check(model: &Model, set: &Overrides) -> Result<(), Error> {
     validate::compile(model, set).map(|_| ())

@@ -192,3 +192,14 @@ pub struct Timing {
     /// Filled by the caller (the core has no clock: it also runs in wasm).
     pub wall_ms: f64,
 }
+
+/// R_D and p_D of the filter's covariance recursion run alone
+/// ([`crate::covariance_recursion`]): the analysis's `final.covariance` and
+/// `final.gain`, bit for bit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FinalCovariance {
+    /// R_D, the filtered covariance (2.7), N×N.
+    pub covariance: Vec<Vec<f64>>,
+    /// p_D, the gain (2.5), N×n.
+    pub gain: Vec<Vec<f64>>,
+}

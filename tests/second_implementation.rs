@@ -2,7 +2,7 @@
 //! (nalgebra, explicit formulas, whole histories kept in memory) on random
 //! time-varying models.
 
-use kea_core::{AnalysisResult, NoProgress, analyze, model_from_value};
+use kea_core::{AnalysisResult, NoProgress, analyze, covariance_recursion, model_from_value};
 use nalgebra::{DMatrix, DVector};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -210,6 +210,16 @@ fn engine_matches_plain_implementation_on_random_time_varying_models() {
         let model = model_from_value(to_json(&spec)).unwrap();
         let r: AnalysisResult = analyze(&model, &Default::default(), &mut NoProgress).unwrap();
         let p = plain(&spec);
+        // The recursion alone (the like-for-like benchmark against other filters)
+        // gives the analysis's R_D and p_D bit for bit, so the plain comparison below
+        // covers it too.
+        let alone = covariance_recursion(&model, &Default::default(), &mut NoProgress)
+            .expect("the recursion alone runs");
+        assert_eq!(
+            alone.covariance, r.final_.covariance,
+            "case {case}: R_D alone"
+        );
+        assert_eq!(alone.gain, r.final_.gain, "case {case}: p_D alone");
         // The bound may overflow (|I − pC||A| can grow where the filter does not); kea
         // then reports it and nulls the bound criteria. The plain recursion must agree.
         let bound_diverged = r
@@ -309,12 +319,8 @@ fn schedule_every_second_step_skips_updates_exactly() {
                         "schedule": [{"every": 2}]},
         "options": {"trace_points": 100}
     });
-    let r = analyze(
-        &model_from_value(m).unwrap(),
-        &Default::default(),
-        &mut NoProgress,
-    )
-    .unwrap();
+    let model = model_from_value(m).unwrap();
+    let r = analyze(&model, &Default::default(), &mut NoProgress).unwrap();
     // hand recursion
     let (a, bb, rv) = (1.0 - 0.1, (0.1f64 * 2.0).powi(2), 0.25);
     let mut big_r: f64 = 1.0;
@@ -334,6 +340,9 @@ fn schedule_every_second_step_skips_updates_exactly() {
     }
     // YZ/ZX are averaged over the 5 steps with a measurement only
     assert_eq!(r.criteria.bound.per_state[0].excluded_steps.yz, 5);
+    // The recursion alone follows the schedule too.
+    let alone = covariance_recursion(&model, &Default::default(), &mut NoProgress).unwrap();
+    assert_eq!(alone.covariance, r.final_.covariance);
 }
 
 /// A schedule makes the model time-varying for the filter: the steady-state shortcut

@@ -127,3 +127,19 @@ fn time_varying_model_matches_a_second_implementation_and_respects_the_cap() {
         assert!(got.unwrap() > 1e-12);
     }
 }
+
+/// The covariance recursion alone (the benchmarks' like-for-like run) runs a fixed
+/// number of steps; "auto" is refused with the field named.
+#[test]
+fn covariance_recursion_alone_refuses_auto_steps() {
+    let m = model_from_value(scalar(json!(-1.0), json!(0.0), json!({"tolerance": 1e-3}))).unwrap();
+    let err = kea_core::covariance_recursion(&m, &Overrides::new(), &mut NoProgress)
+        .expect_err("auto steps are refused");
+    let errors = err.field_errors();
+    assert!(
+        errors
+            .iter()
+            .any(|e| e.path == "time.steps" && e.message.contains("fixed number of steps")),
+        "{errors:#?}"
+    );
+}

@@ -4,8 +4,9 @@ covariance recursion only (no smoothing, memory conserved). Prints ns per step.
 
     pip install statsmodels && python3 benches/python_peer.py [steps]
 
-Compare with `cargo bench -p kea-core --bench engine -- peer`, the same model in kea
-(which also propagates the bound, the open-loop covariance and the criteria).
+Compare with `cargo bench -p kea-core --bench engine -- peer`, the same model in kea:
+`recursion only` is the covariance recursion and the mean alone (like for like); the
+whole analysis also propagates the bound, the open-loop covariance and the criteria.
 """
 import sys
 import time

@@ -9,7 +9,9 @@ use crate::decimate::Decimator;
 use crate::error::Error;
 use crate::expr::TimeMatrix;
 use crate::lanes::{Lanes, Scalar};
-use crate::linalg::{SparseRows, cov_rel_diff, mul, mul_abt_sym, predict_cov, sparse_mul_vec};
+use crate::linalg::{
+    MAX_DIAGONALS, SparseRows, cov_rel_diff, mul, mul_abt_sym, predict_cov, sparse_mul_vec,
+};
 use crate::result::*;
 use crate::riccati::{Prepared, SequentialJoseph};
 use crate::steps::select_steps;
@@ -304,7 +306,7 @@ impl<'m, const N: usize> Engine<'m, N> {
         }
         let mut p_y = big_r.clone(); // open-loop covariance P^Y
         let mut p_next = vec![0.0; n * n];
-        let mut work = vec![0.0; n * n];
+        let mut work = vec![0.0; n * (n + MAX_DIAGONALS)];
         let mut eta = m.eta0.clone();
         let mut chi = vec![0.0; n]; // χ(t0) = 0 (3.18)
         let mut xi = vec![0.0; n];

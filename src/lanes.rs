@@ -16,6 +16,8 @@ pub(crate) trait Lanes: Copy {
     fn sub_add(d: &mut [f64], x: &[f64], a: f64, y: &[f64], b: f64);
     /// d ← d + a·x.
     fn add_scaled(d: &mut [f64], x: &[f64], a: f64);
+    /// d ← d + x·y, element-wise (a diagonal of E times a shifted row of R, `linalg`).
+    fn add_prod(d: &mut [f64], x: &[f64], y: &[f64]);
     /// d ← s + a·x (a copy of s fused with the first `add_scaled`).
     fn set_scaled(d: &mut [f64], s: &[f64], x: &[f64], a: f64);
     /// d ← d − a·x.
@@ -39,6 +41,13 @@ impl Lanes for Scalar {
         let x = &x[..d.len()];
         for (d, x) in d.iter_mut().zip(x) {
             *d += a * x;
+        }
+    }
+    #[inline(always)]
+    fn add_prod(d: &mut [f64], x: &[f64], y: &[f64]) {
+        let (x, y) = (&x[..d.len()], &y[..d.len()]);
+        for i in 0..d.len() {
+            d[i] += x[i] * y[i];
         }
     }
     #[inline(always)]
@@ -79,6 +88,13 @@ impl Lanes for Avx2 {
         let x = &x[..n];
         // SAFETY: as in `sub_add`.
         unsafe { avx2::axpy::<false>(d.as_mut_ptr(), d.as_ptr(), x.as_ptr(), a, n) }
+    }
+    #[inline(always)]
+    fn add_prod(d: &mut [f64], x: &[f64], y: &[f64]) {
+        let n = d.len();
+        let (x, y) = (&x[..n], &y[..n]);
+        // SAFETY: as in `sub_add`.
+        unsafe { avx2::add_prod(d.as_mut_ptr(), x.as_ptr(), y.as_ptr(), n) }
     }
     #[inline(always)]
     fn set_scaled(d: &mut [f64], s: &[f64], x: &[f64], a: f64) {
@@ -159,6 +175,33 @@ mod avx2 {
         }
     }
 
+    /// d[i] = d[i] + x[i]·y[i] for i < n.
+    ///
+    /// # Safety
+    /// As [`sub_add`].
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn add_prod(d: *mut f64, x: *const f64, y: *const f64, n: usize) {
+        let mut i = 0;
+        // SAFETY: every access is below n (whole chunks, then the masked rest).
+        unsafe {
+            while i + 4 <= n {
+                let p = _mm256_mul_pd(_mm256_loadu_pd(x.add(i)), _mm256_loadu_pd(y.add(i)));
+                _mm256_storeu_pd(d.add(i), _mm256_add_pd(_mm256_loadu_pd(d.add(i)), p));
+                i += 4;
+            }
+            if i < n {
+                let m = tail_mask(n - i);
+                let p = _mm256_mul_pd(
+                    _mm256_maskload_pd(x.add(i), m),
+                    _mm256_maskload_pd(y.add(i), m),
+                );
+                let r = _mm256_add_pd(_mm256_maskload_pd(d.add(i), m), p);
+                _mm256_maskstore_pd(d.add(i), m, r);
+            }
+        }
+    }
+
     /// d[i] = s[i] ± a·x[i] for i < n (− when `SUB`); s may be d.
     ///
     /// # Safety
@@ -217,6 +260,8 @@ mod tests {
             Avx2::sub_add(&mut b, &x, 0.37, &y, -1.9);
             Scalar::add_scaled(&mut a, &x, 1.3);
             Avx2::add_scaled(&mut b, &x, 1.3);
+            Scalar::add_prod(&mut a, &x, &y);
+            Avx2::add_prod(&mut b, &x, &y);
             Scalar::sub_scaled(&mut a, &y, 0.11);
             Avx2::sub_scaled(&mut b, &y, 0.11);
             let (mut c, mut e) = (vec![0.0; n], vec![0.0; n]);

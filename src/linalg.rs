@@ -48,6 +48,20 @@ pub fn mul_abt_sym(c: &mut [f64], a: &[f64], b: &[f64], add: Option<&[f64]>, r: 
 pub struct SparseRows {
     pub nz: Vec<(usize, usize, f64)>,
     start: Vec<usize>,
+    /// The pattern's diagonals when there are at most [`MAX_DIAGONALS`].
+    diagonals: Option<Diagonals>,
+}
+
+/// At most this many diagonals: [`predict_cov`] forms R Aᵀ by shifted row operations
+/// (one per diagonal) instead of transposing A R.
+pub const MAX_DIAGONALS: usize = 8;
+
+/// A sparse pattern by diagonals: the offsets col − row present, ascending, and for
+/// each non-zero its slot (diagonal · N + row) in a diagonals × N array.
+#[derive(Clone, Debug, Default)]
+struct Diagonals {
+    offsets: Vec<isize>,
+    slot: Vec<usize>,
 }
 
 impl SparseRows {
@@ -61,9 +75,28 @@ impl SparseRows {
         for i in 0..n {
             start[i + 1] += start[i];
         }
+        let mut offsets: Vec<isize> = pattern
+            .iter()
+            .map(|&(i, j)| j as isize - i as isize)
+            .collect();
+        offsets.sort_unstable();
+        offsets.dedup();
+        let diagonals = (offsets.len() <= MAX_DIAGONALS).then(|| Diagonals {
+            slot: pattern
+                .iter()
+                .map(|&(i, j)| {
+                    let d = offsets
+                        .binary_search(&(j as isize - i as isize))
+                        .expect("offset");
+                    d * n + i
+                })
+                .collect(),
+            offsets,
+        });
         SparseRows {
             nz: pattern.into_iter().map(|(i, j)| (i, j, 0.0)).collect(),
             start,
+            diagonals,
         }
     }
 
@@ -77,7 +110,8 @@ impl SparseRows {
 /// out = A R Aᵀ + B for A = I + E with E sparse and R, B symmetric: the prediction
 /// (2.1) in O(nnz(E)·N + N²) instead of O(N³). U = A R = R + E R by row operations,
 /// then the upper triangle of U Aᵀ, (U Aᵀ)_ab = U_ab + Σ_c E_bc U_ac, mirrored — so
-/// the result is exactly symmetric. `u` is an N×N work buffer. `N > 0`: the compile-time dimension (n = N).
+/// the result is exactly symmetric. `u` is a work buffer of N·(N + [`MAX_DIAGONALS`]).
+/// `N > 0`: the compile-time dimension (n = N).
 #[inline(always)]
 pub(crate) fn predict_cov<const N: usize, L: Lanes>(
     out: &mut [f64],
@@ -94,7 +128,40 @@ pub(crate) fn predict_cov<const N: usize, L: Lanes>(
     // V = Uᵀ (transposed in place); W = A V = V + E V row by row, of which row b's
     // first b + 1 entries are needed: W_ba = U_ab + Σ_c E_bc U_ac = (U Aᵀ)_ab with
     // the same terms in the same order; then + B (exactly symmetric) and mirrored.
-    let (r, b, u, out) = (&r[..n * n], &b[..n * n], &mut u[..n * n], &mut out[..n * n]);
+    let (r, b, out) = (&r[..n * n], &b[..n * n], &mut out[..n * n]);
+    let (u, e_diag) = u.split_at_mut(n * n);
+    if let Some(dia) = &e.diagonals {
+        // V = Uᵀ = R Aᵀ directly, no transpose: row c, V_ca = R_ca + Σ_d E_a,a+d R_c,a+d
+        // over the diagonals d ascending, one shifted row operation each. These are
+        // U_ac = R_ac + Σ_k E_ak R_kc's terms in the same order (R is exactly
+        // symmetric); an entry off E's pattern adds 0·R_c,a+d, which leaves the sum.
+        let e_diag = &mut e_diag[..dia.offsets.len() * n];
+        e_diag.fill(0.0);
+        for (&(_, _, v), &slot) in e.nz.iter().zip(&dia.slot) {
+            e_diag[slot] = v;
+        }
+        for c in 0..n {
+            let (vc, rc) = (&mut u[c * n..c * n + n], &r[c * n..c * n + n]);
+            vc.copy_from_slice(rc);
+            for (&d, ed) in dia.offsets.iter().zip(e_diag.chunks_exact(n)) {
+                // a in lo..hi keeps a + d inside the row
+                let lo = d.min(0).unsigned_abs();
+                let hi = n - d.max(0).unsigned_abs().min(n);
+                if lo < hi {
+                    let shift = (lo as isize + d) as usize;
+                    L::add_prod(&mut vc[lo..hi], &ed[lo..hi], &rc[shift..shift + hi - lo]);
+                }
+            }
+        }
+    } else {
+        mul_transpose_into::<L>(u, r, e, n);
+    }
+    second_half::<L>(out, u, e, b, n);
+}
+
+/// V = (A R)ᵀ for A = I + E: U = R + E R by row operations, transposed in place.
+#[inline(always)]
+fn mul_transpose_into<L: Lanes>(u: &mut [f64], r: &[f64], e: &SparseRows, n: usize) {
     // (Each row's first term is fused with the copy it adds to: the same sums.)
     for i in 0..n {
         let (ui, ri) = (&mut u[i * n..i * n + n], &r[i * n..i * n + n]);
@@ -113,6 +180,11 @@ pub(crate) fn predict_cov<const N: usize, L: Lanes>(
             u.swap(i * n + j, j * n + i);
         }
     }
+}
+
+/// out = A V + B with V = (A R)ᵀ in `u`: row b's first b + 1 entries, mirrored.
+#[inline(always)]
+fn second_half<L: Lanes>(out: &mut [f64], u: &[f64], e: &SparseRows, b: &[f64], n: usize) {
     for bb in 0..n {
         let w = &mut out[bb * n..bb * n + bb + 1];
         let (ub, b_row) = (&u[bb * n..bb * n + bb + 1], &b[bb * n..bb * n + bb + 1]);
@@ -342,6 +414,74 @@ mod tests {
         for (a, b) in s.iter().zip([2.0, 8.0, 1.0, 7.0]) {
             assert!((a - b).abs() < 1e-14, "{s:?}");
         }
+    }
+
+    /// The runtime-dimension prediction by diagonals gives the transposing path's
+    /// bits, and both equal A R Aᵀ + B written plainly.
+    #[test]
+    fn prediction_by_diagonals_equals_the_transposing_path_and_the_plain_product() {
+        use crate::lanes::Scalar;
+        use nalgebra::DMatrix;
+        let n = 14;
+        let f = |i: usize, j: usize, s: f64| ((i * 31 + j * 17) as f64 * 0.37 + s).sin();
+        // R symmetric positive definite-ish, B symmetric: exactly symmetric entries.
+        let r: Vec<f64> = (0..n * n)
+            .map(|x| {
+                let (i, j) = (x / n, x % n);
+                let (a, b) = (i.min(j), i.max(j));
+                f(a, b, 0.1) + if i == j { 3.0 } else { 0.0 }
+            })
+            .collect();
+        let b: Vec<f64> = (0..n * n)
+            .map(|x| f((x / n).min(x % n), (x / n).max(x % n), 0.7) * 1e-3)
+            .collect();
+        // Offsets −2, 0 and 1, with holes in the pattern.
+        let pattern: Vec<(usize, usize)> = (0..n)
+            .flat_map(|i| {
+                let mut v = vec![(i, i)];
+                if i + 1 < n && i % 3 != 1 {
+                    v.push((i, i + 1));
+                }
+                if i >= 2 && i % 4 != 0 {
+                    v.push((i, i - 2));
+                }
+                v
+            })
+            .collect();
+        let mut e = SparseRows::with_pattern(n, pattern);
+        assert_eq!(
+            e.diagonals.as_ref().map(|d| d.offsets.clone()),
+            Some(vec![-2, 0, 1])
+        );
+        for x in e.nz.iter_mut() {
+            x.2 = f(x.0, x.1, 2.3) * 0.01;
+        }
+        let mut by_diag = vec![0.0; n * n];
+        let mut work = vec![0.0; n * (n + MAX_DIAGONALS)];
+        predict_cov::<0, Scalar>(&mut by_diag, &r, &e, &b, &mut work, n);
+        let mut transposing = vec![0.0; n * n];
+        mul_transpose_into::<Scalar>(&mut work[..n * n], &r, &e, n);
+        second_half::<Scalar>(&mut transposing, &work[..n * n], &e, &b, n);
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&by_diag), bits(&transposing));
+        let mut a = DMatrix::<f64>::identity(n, n);
+        for &(i, j, v) in &e.nz {
+            a[(i, j)] += v;
+        }
+        let rr = DMatrix::from_row_slice(n, n, &r);
+        let plain = &a * rr * a.transpose() + DMatrix::from_row_slice(n, n, &b);
+        let got = DMatrix::from_row_slice(n, n, &by_diag);
+        assert!(
+            (&got - &plain).amax() < 1e-14 * plain.amax(),
+            "{:e}",
+            (got - plain).amax()
+        );
+        // A pattern with more than MAX_DIAGONALS diagonals takes the transposing path.
+        let dense = SparseRows::with_pattern(
+            n,
+            (0..n).flat_map(|i| (0..n).map(move |j| (i, j))).collect(),
+        );
+        assert!(dense.diagonals.is_none());
     }
 
     #[test]

@@ -10,7 +10,7 @@ use crate::error::Error;
 use crate::expr::TimeMatrix;
 use crate::lanes::{Lanes, Scalar};
 use crate::linalg::{
-    MAX_DIAGONALS, SparseRows, cov_rel_diff, mul, mul_abt_sym, predict_cov, sparse_mul_vec,
+    SparseRows, cov_rel_diff, mul, mul_abt_sym, predict_cov, predict_work, sparse_mul_vec,
 };
 use crate::result::*;
 use crate::riccati::{Prepared, SequentialJoseph};
@@ -22,6 +22,22 @@ use std::ops::ControlFlow;
 
 /// Steps between progress reports / cancellation checks.
 pub const PROGRESS_EVERY: u64 = 1 << 14;
+
+/// At every [`PROGRESS_EVERY`]-th step k, reports `fraction()` done; Err(Cancelled)
+/// when the caller cancels.
+#[inline(always)]
+pub(crate) fn checkpoint(
+    progress: &mut dyn Progress,
+    k: u64,
+    fraction: impl FnOnce() -> f64,
+) -> Result<(), Error> {
+    if k.is_multiple_of(PROGRESS_EVERY)
+        && let ControlFlow::Break(()) = progress.report(fraction())
+    {
+        return Err(Error::Cancelled);
+    }
+    Ok(())
+}
 /// The shortcut freezes the Riccati recursion once r_k is this close (relative) to
 /// the stationary solution r∞ of the DARE (rounding keeps a slowly contracting
 /// recursion from getting much closer).
@@ -306,7 +322,7 @@ impl<'m, const N: usize> Engine<'m, N> {
         }
         let mut p_y = big_r.clone(); // open-loop covariance P^Y
         let mut p_next = vec![0.0; n * n];
-        let mut work = vec![0.0; n * (n + MAX_DIAGONALS)];
+        let mut work = predict_work(n);
         let mut eta = m.eta0.clone();
         let mut chi = vec![0.0; n]; // χ(t0) = 0 (3.18)
         let mut xi = vec![0.0; n];
@@ -436,11 +452,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             }
 
             if self.covariance_only {
-                if k % PROGRESS_EVERY == 0
-                    && let ControlFlow::Break(()) = progress.report(k as f64 / self.steps as f64)
-                {
-                    return Err(Error::Cancelled);
-                }
+                checkpoint(progress, k, || k as f64 / self.steps as f64)?;
                 continue;
             }
 
@@ -559,11 +571,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             dec.put_row(k, &row[..SERIES * n]);
             dec.end(k);
 
-            if k % PROGRESS_EVERY == 0
-                && let ControlFlow::Break(()) = progress.report(k as f64 / self.steps as f64)
-            {
-                return Err(Error::Cancelled);
-            }
+            checkpoint(progress, k, || k as f64 / self.steps as f64)?;
         }
         let _ = progress.report(1.0);
 

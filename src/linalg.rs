@@ -54,7 +54,7 @@ pub struct SparseRows {
 
 /// At most this many diagonals: [`predict_cov`] forms R Aᵀ by shifted row operations
 /// (one per diagonal) instead of transposing A R.
-pub const MAX_DIAGONALS: usize = 8;
+const MAX_DIAGONALS: usize = 8;
 
 /// A sparse pattern by diagonals: the offsets col − row present, ascending, and for
 /// each non-zero its slot (diagonal · N + row) in a diagonals × N array.
@@ -107,10 +107,15 @@ impl SparseRows {
     }
 }
 
+/// A work buffer for [`predict_cov`] of an n-state model.
+pub(crate) fn predict_work(n: usize) -> Vec<f64> {
+    vec![0.0; n * (n + MAX_DIAGONALS)]
+}
+
 /// out = A R Aᵀ + B for A = I + E with E sparse and R, B symmetric: the prediction
 /// (2.1) in O(nnz(E)·N + N²) instead of O(N³). U = A R = R + E R by row operations,
 /// then the upper triangle of U Aᵀ, (U Aᵀ)_ab = U_ab + Σ_c E_bc U_ac, mirrored — so
-/// the result is exactly symmetric. `u` is a work buffer of N·(N + [`MAX_DIAGONALS`]).
+/// the result is exactly symmetric. `u` is a [`predict_work`] buffer.
 /// `N > 0`: the compile-time dimension (n = N).
 #[inline(always)]
 pub(crate) fn predict_cov<const N: usize, L: Lanes>(
@@ -457,7 +462,7 @@ mod tests {
             x.2 = f(x.0, x.1, 2.3) * 0.01;
         }
         let mut by_diag = vec![0.0; n * n];
-        let mut work = vec![0.0; n * (n + MAX_DIAGONALS)];
+        let mut work = predict_work(n);
         predict_cov::<0, Scalar>(&mut by_diag, &r, &e, &b, &mut work, n);
         let mut transposing = vec![0.0; n * n];
         mul_transpose_into::<Scalar>(&mut work[..n * n], &r, &e, n);

@@ -66,7 +66,7 @@ pub fn dare_doubling(
 }
 
 use crate::lanes::Lanes;
-use crate::linalg::{MAX_DIAGONALS, SparseRows, mat_mut, predict_cov};
+use crate::linalg::{SparseRows, mat_mut, predict_cov, predict_work};
 
 /// The measurements used at one step, prepared for sequential (scalar) processing:
 /// Rv = L D Lᵀ (L unit lower triangular, D ≥ 0 diagonal), so the whitened
@@ -262,7 +262,7 @@ pub struct SequentialJoseph {
 impl SequentialJoseph {
     pub fn new(n: usize, nm: usize) -> Self {
         SequentialJoseph {
-            u: vec![0.0; n * (n + MAX_DIAGONALS)],
+            u: predict_work(n),
             s: vec![0.0; n],
             kt: vec![0.0; nm * n],
             r_pred: vec![0.0; n * n],

@@ -9,7 +9,6 @@ use crate::error::Error;
 use crate::expr::TimeMatrix;
 use crate::result::{StepSelection, StepTrial};
 use crate::validate::CompiledModel;
-use std::ops::ControlFlow;
 
 pub struct Selected {
     pub chosen: u64,
@@ -105,11 +104,7 @@ pub fn select_steps(
                     message: "the mean state overflowed during step-size selection".into(),
                 });
             }
-            if k % crate::analysis::PROGRESS_EVERY == 0
-                && let ControlFlow::Break(()) = progress.report(0.0)
-            {
-                return Err(Error::Cancelled);
-            }
+            crate::analysis::checkpoint(progress, k, || 0.0)?;
         }
         let diff = if ymax > 0.0 {
             sum / d as f64 / ymax

@@ -9,9 +9,7 @@ use crate::decimate::Decimator;
 use crate::error::Error;
 use crate::expr::TimeMatrix;
 use crate::lanes::{Lanes, Scalar};
-use crate::linalg::{
-    SparseRows, cov_rel_diff, mul, mul_abt_sym, predict_cov, predict_work, sparse_mul_vec,
-};
+use crate::linalg::{SparseRows, cov_rel_diff, mul, mul_abt_sym, predict_cov, predict_work};
 use crate::result::*;
 use crate::riccati::{Prepared, SequentialJoseph};
 use crate::steps::select_steps;
@@ -366,7 +364,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             }
 
             // y_k = A y_{k−1} + uΔt (3.3), A = I + E; ẏ(t_{k−1}) = a y + u (1.4)
-            sparse_mul_vec(&mut ey, &inp.e.nz, &y, n);
+            inp.e.mul_vec::<L>(&mut ey, &y, n);
             for i in 0..n {
                 let d = (ey[i] / dt + inp.u[i]).abs();
                 if d > ydot_max[i] {
@@ -378,7 +376,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                     y_max[i] = ya;
                 }
             }
-            if !y.iter().all(|v| v.is_finite()) {
+            if !all_finite(&y[..n]) {
                 return Err(Error::Numerical {
                     step: k,
                     t: t_k,
@@ -460,18 +458,18 @@ impl<'m, const N: usize> Engine<'m, N> {
             if open_diverged.is_none() {
                 predict_cov::<N, L>(&mut p_next, &p_y, &inp.e, &inp.big_b, &mut work, n);
                 std::mem::swap(&mut p_y, &mut p_next);
-                if !(0..n).all(|i| p_y[i * n + i].is_finite()) {
+                if !(0..n).fold(true, |ok, i| ok & p_y[i * n + i].is_finite()) {
                     open_diverged = Some((k, t_k));
                 }
             }
 
             // Bound propagation (3.16)–(3.19): η = |A| η + |bΔt| φ, χ = |h| |A| χ + |p| ζ
             if bound_diverged.is_none() {
-                sparse_mul_vec(&mut xi, &inp.abs_a.nz, &eta, n);
+                inp.abs_a.mul_vec::<L>(&mut xi, &eta, n);
                 for i in 0..n {
                     eta[i] = xi[i] + inp.b_phi[i];
                 }
-                sparse_mul_vec(&mut xi, &inp.abs_a.nz, &chi, n);
+                inp.abs_a.mul_vec::<L>(&mut xi, &chi, n);
                 // χ_c = (Σ_b |h_cb| ξ_b, b in order) + (|p| ζ)_c, as row operations on |h|ᵀ
                 chi.fill(0.0);
                 for (h, &x) in abs_ht.chunks_exact(n).zip(&xi) {
@@ -482,7 +480,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                 for (c, p) in chi.iter_mut().zip(&pz) {
                     *c += p;
                 }
-                if !eta.iter().chain(chi.iter()).all(|v| v.is_finite()) {
+                if !(all_finite(&eta[..n]) & all_finite(&chi[..n])) {
                     bound_diverged = Some((k, t_k));
                 }
             }
@@ -534,10 +532,15 @@ impl<'m, const N: usize> Engine<'m, N> {
                 let (eta, chi, pot, inv_pot) = (&eta[..n], &chi[..n], &pot[..n], &inv_pot[..n]);
                 let (zeta_s, meas_s) = (&zeta_s[..n], &meas_s[..n]);
                 let (inv_zeta_s, inv_meas_s) = (&inv_zeta_s[..n], &inv_meas_s[..n]);
-                r_y.copy_from_slice(&y[..n]);
-                r_pot.copy_from_slice(pot);
-                r_zeta.copy_from_slice(zeta_s);
-                r_meas.copy_from_slice(meas_s);
+                // (One loop rather than four copy_from_slice: each of those is a call
+                // to memcpy, dearer than the copy of N values.)
+                #[allow(clippy::manual_memcpy)]
+                for i in 0..n {
+                    r_y[i] = y[i];
+                    r_pot[i] = pot[i];
+                    r_zeta[i] = zeta_s[i];
+                    r_meas[i] = meas_s[i];
+                }
                 for i in 0..n {
                     r_open[i] = p_y[i * n + i].max(0.0).sqrt();
                 }
@@ -771,13 +774,9 @@ impl Inputs {
                 .update_grid(m.t0, dt, k - 1)
                 .map_err(|(p, t)| time_err(p, k, t))?;
             let a = &self.a_fn.values;
-            for e in self.e.nz.iter_mut() {
-                e.2 = a[e.0 * n + e.1] * dt;
-            }
-            for e in self.abs_a.nz.iter_mut() {
-                let v = a[e.0 * n + e.1] * dt + if e.0 == e.1 { 1.0 } else { 0.0 };
-                e.2 = v.abs();
-            }
+            self.e.set_values(|i, j| a[i * n + j] * dt);
+            self.abs_a
+                .set_values(|i, j| (a[i * n + j] * dt + if i == j { 1.0 } else { 0.0 }).abs());
         }
         if first || !self.b_fn.is_constant() {
             self.b_fn
@@ -866,6 +865,12 @@ fn gain_rows(gain_t: &[f64], n: usize, nm: usize) -> Vec<f64> {
         }
     }
     g
+}
+
+/// Whether every entry is finite (no early exit, so the loop vectorises).
+#[inline(always)]
+fn all_finite(v: &[f64]) -> bool {
+    v.iter().fold(true, |ok, x| ok & x.is_finite())
 }
 
 /// The cheap first test of the steady state: every diagonal entry within `tol`.

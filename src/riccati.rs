@@ -66,7 +66,7 @@ pub fn dare_doubling(
 }
 
 use crate::lanes::Lanes;
-use crate::linalg::{SparseRows, mat_mut, predict_cov, predict_work};
+use crate::linalg::{SparseRows, mat_mut, mirror, predict_cov, predict_work};
 
 /// The measurements used at one step, prepared for sequential (scalar) processing:
 /// Rv = L D Lᵀ (L unit lower triangular, D ≥ 0 diagonal), so the whitened
@@ -451,11 +451,7 @@ fn update_fixed<const N: usize>(
         }
         rest[0] = k;
     }
-    for a in 1..N {
-        for b in 0..a {
-            r[a][b] = r[b][a];
-        }
-    }
+    mirror(r, true);
     true
 }
 

@@ -579,6 +579,10 @@ impl<'m, const N: usize> Engine<'m, N> {
         let _ = progress.report(1.0);
 
         // --- assemble (3.20)–(3.26)
+        // (Fresh copies for the closures below: a closure that borrows the loop's n
+        // takes its address, and LLVM then reloads n from memory after every call in
+        // the loop instead of folding the constant N into the loops' trip counts.)
+        let (n, nm) = (n, nm);
         let z_max: Vec<f64> = (0..nm)
             .map(|j| (0..n).map(|i| m.c[j * n + i].abs() * y_max[i]).sum())
             .collect();

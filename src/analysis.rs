@@ -835,7 +835,7 @@ impl Inputs {
         for i in 0..n {
             a[i * n + i] = 1.0;
         }
-        for &(i, j, v) in &self.e.nz {
+        for &(i, j, v) in self.e.nonzeros() {
             a[i * n + j] += v;
         }
         a

@@ -46,7 +46,9 @@ pub fn mul_abt_sym(c: &mut [f64], a: &[f64], b: &[f64], add: Option<&[f64]>, r: 
 /// start of each row's run.
 #[derive(Clone, Debug, Default)]
 pub struct SparseRows {
-    pub nz: Vec<(usize, usize, f64)>,
+    /// Written only through [`SparseRows::set_values`], which keeps the diagonals'
+    /// copy equal to it.
+    nz: Vec<(usize, usize, f64)>,
     start: Vec<usize>,
     /// The pattern's diagonals when there are at most [`MAX_DIAGONALS`].
     diagonals: Option<Diagonals>,
@@ -117,6 +119,11 @@ impl SparseRows {
             start,
             diagonals,
         }
+    }
+
+    /// The non-zeros (row, col, value), sorted by row and column.
+    pub fn nonzeros(&self) -> &[(usize, usize, f64)] {
+        &self.nz
     }
 
     /// The non-zeros of row i.

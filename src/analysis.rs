@@ -778,9 +778,9 @@ impl Inputs {
                 .update_grid(m.t0, dt, k - 1)
                 .map_err(|(p, t)| time_err(p, k, t))?;
             let a = &self.a_fn.values;
-            self.e.set_values(|i, j| a[i * n + j] * dt);
+            self.e.set_values(a, |a, _| a * dt);
             self.abs_a
-                .set_values(|i, j| (a[i * n + j] * dt + if i == j { 1.0 } else { 0.0 }).abs());
+                .set_values(a, |a, diag| (a * dt + if diag { 1.0 } else { 0.0 }).abs());
         }
         if first || !self.b_fn.is_constant() {
             self.b_fn

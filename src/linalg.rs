@@ -49,6 +49,8 @@ pub struct SparseRows {
     /// Written only through [`SparseRows::set_values`], which keeps the diagonals'
     /// copy equal to it.
     nz: Vec<(usize, usize, f64)>,
+    /// Each non-zero's index i·N + j in a dense row-major N×N matrix.
+    flat: Vec<usize>,
     start: Vec<usize>,
     /// The pattern's diagonals when there are at most [`MAX_DIAGONALS`].
     diagonals: Option<Diagonals>,
@@ -115,6 +117,7 @@ impl SparseRows {
             offsets,
         });
         SparseRows {
+            flat: pattern.iter().map(|&(i, j)| i * n + j).collect(),
             nz: pattern.into_iter().map(|(i, j)| (i, j, 0.0)).collect(),
             start,
             diagonals,
@@ -132,19 +135,21 @@ impl SparseRows {
         &self.nz[self.start[i]..self.start[i + 1]]
     }
 
-    /// Sets every non-zero (i, j) to f(i, j).
+    /// Sets every non-zero (i, j) to f(m_ij, i = j), for a dense row-major N×N m
+    /// (entries off the pattern are not read). Each non-zero's index into m is
+    /// computed once, at construction: a time-varying a(t) sets E and |A| every step.
     #[inline(always)]
-    pub fn set_values(&mut self, mut f: impl FnMut(usize, usize) -> f64) {
+    pub fn set_values(&mut self, m: &[f64], mut f: impl FnMut(f64, bool) -> f64) {
         match &mut self.diagonals {
             Some(dia) => {
-                for (e, &slot) in self.nz.iter_mut().zip(&dia.slot) {
-                    e.2 = f(e.0, e.1);
+                for ((e, &slot), &at) in self.nz.iter_mut().zip(&dia.slot).zip(&self.flat) {
+                    e.2 = f(m[at], e.0 == e.1);
                     dia.values[slot] = e.2;
                 }
             }
             None => {
-                for e in &mut self.nz {
-                    e.2 = f(e.0, e.1);
+                for (e, &at) in self.nz.iter_mut().zip(&self.flat) {
+                    e.2 = f(m[at], e.0 == e.1);
                 }
             }
         }
@@ -495,6 +500,11 @@ pub fn cov_rel_diff(a: &[f64], b: &[f64], n: usize) -> f64 {
 mod tests {
     use super::*;
 
+    /// A dense row-major n×n matrix with entries f(i, j).
+    fn dense_of(n: usize, f: impl Fn(usize, usize) -> f64) -> Vec<f64> {
+        (0..n * n).map(|x| f(x / n, x % n)).collect()
+    }
+
     #[test]
     fn cholesky_solves_a_known_system() {
         // q = [[4, 2], [2, 3]]; q x = s for s = [[2, 8], [1, 7]] (columns are RHS)
@@ -548,7 +558,7 @@ mod tests {
             e.diagonals.as_ref().map(|d| d.offsets.clone()),
             Some(vec![-2, 0, 1])
         );
-        e.set_values(|i, j| f(i, j, 2.3) * 0.01);
+        e.set_values(&dense_of(n, |i, j| f(i, j, 2.3) * 0.01), |v, _| v);
         let mut by_diag = vec![0.0; n * n];
         let mut work = predict_work(n);
         predict_cov::<0, Scalar>(&mut by_diag, &r, &e, &b, &mut work, n);
@@ -586,7 +596,7 @@ mod tests {
                 .map(|&(i, j, _)| (i, j))
                 .collect(),
         );
-        e.set_values(|i, j| f(i, j, 2.3) * 0.01);
+        e.set_values(&dense_of(n, |i, j| f(i, j, 2.3) * 0.01), |v, _| v);
         let mut transposing_e = e.clone();
         transposing_e.diagonals = None;
         let (mut by_diag, mut transposing) = (vec![0.0; M * M], vec![0.0; M * M]);
@@ -619,11 +629,12 @@ mod tests {
             m.diagonals.as_ref().map(|d| d.offsets.clone()),
             Some(vec![-1, 0, 3])
         );
-        m.set_values(|i, j| match (i + j) % 5 {
+        let values = dense_of(n, |i, j| match (i + j) % 5 {
             0 => -0.0,
             1 => 0.0,
             _ => ((i * 7 + j * 3) as f64 * 0.41).cos(),
         });
+        m.set_values(&values, |v, _| v);
         let x: Vec<f64> = (0..n)
             .map(|i| {
                 if i % 4 == 0 {

@@ -300,6 +300,8 @@ impl SequentialJoseph {
         big_b: &[f64],
         prep: &Prepared,
     ) -> bool {
+        // A constant when N > 0, so that the loops below have fixed trip counts.
+        let n = if N > 0 { N } else { n };
         let big_r = &mut big_r[..n * n];
         predict_cov::<N, L>(&mut self.r_pred, big_r, e, big_b, &mut self.u, n);
         big_r.copy_from_slice(&self.r_pred[..n * n]);
@@ -323,8 +325,17 @@ impl SequentialJoseph {
             for (j, k) in self.kt.chunks_exact_mut(n).take(nk).enumerate() {
                 if let Some((col, coef)) = prep.unit[j] {
                     let f = coef / prep.d[j];
-                    for (k, r) in k.iter_mut().zip(&big_r[col * n..col * n + n]) {
-                        *k = f * r;
+                    let r = &big_r[col * n..col * n + n];
+                    if N > 0 {
+                        // Through a local array: LLVM cannot tell kt and R apart, and
+                        // would otherwise leave this copy scalar.
+                        let r: &[f64; N] = r.try_into().expect("N");
+                        let k: &mut [f64; N] = k.try_into().expect("N");
+                        *k = r.map(|r| f * r);
+                    } else {
+                        for (k, r) in k.iter_mut().zip(r) {
+                            *k = f * r;
+                        }
                     }
                 }
             }
@@ -340,11 +351,7 @@ impl SequentialJoseph {
         for j in 0..nk {
             let k = &self.kt[j * n..j * n + n];
             match prep.unit[j] {
-                Some((col, coef)) => {
-                    for (x, &ka) in ht[col * n..col * n + n].iter_mut().zip(k) {
-                        *x -= ka * coef;
-                    }
-                }
+                Some((col, coef)) => L::sub_scaled(&mut ht[col * n..col * n + n], k, coef),
                 None => {
                     let row = &prep.rows[j * n..j * n + n];
                     for (hc, &c) in ht.chunks_exact_mut(n).zip(row) {
@@ -425,13 +432,16 @@ fn update_fixed<const N: usize>(
             Some((col, coef)) => coef * s[col],
             None => (0..N).map(|b| s[b] * row[b]).sum::<f64>(),
         } + prep.d[j];
-        if !(q > 0.0 && q.is_finite()) {
+        // (Two comparisons, which NaN fails too: `is_finite` compiles to ≈ 20
+        // integer instructions here.)
+        if !(q > 0.0 && q < f64::INFINITY) {
             return false;
         }
         let k: [f64; N] = s.map(|x| x / q);
+        let beta: [f64; N] = std::array::from_fn(|a| q * k[a] - s[a]);
         for a in 0..N {
             // r_a· − k_a s − s_a k + q k_a k, grouped as r_a· − k_a s + (q k_a − s_a) k
-            let (ka, beta) = (k[a], q * k[a] - s[a]);
+            let (ka, beta) = (k[a], beta[a]);
             let ra = &mut r[a];
             for b in a..N {
                 ra[b] = ra[b] - ka * s[b] + beta * k[b];
@@ -495,7 +505,7 @@ fn update_slices<L: Lanes>(
                 s.iter().zip(row).map(|(a, b)| a * b).sum::<f64>() + prep.d[j]
             }
         };
-        if !(q > 0.0 && q.is_finite()) {
+        if !(q > 0.0 && q < f64::INFINITY) {
             return false;
         }
         let (done, rest) = kt.split_at_mut(j * n);

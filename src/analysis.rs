@@ -365,17 +365,17 @@ impl<'m, const N: usize> Engine<'m, N> {
 
             // y_k = A y_{k−1} + uΔt (3.3), A = I + E; ẏ(t_{k−1}) = a y + u (1.4)
             inp.e.mul_vec::<L>(&mut ey, &y, n);
-            for i in 0..n {
-                let d = (ey[i] / dt + inp.u[i]).abs();
-                if d > ydot_max[i] {
-                    ydot_max[i] = d;
-                }
-                y[i] += ey[i] + inp.u_dt[i];
-                let ya = y[i].abs();
-                if ya > y_max[i] {
-                    y_max[i] = ya;
-                }
-            }
+            let ydot = &mut xi[..n]; // (xi as scratch: it is set again below)
+            zip_into(ydot, &ey, &inp.u, |e, u| (e / dt + u).abs());
+            zip_update(&mut ydot_max[..n], ydot, |m, d| if d > m { d } else { m });
+            let step = &mut xi[..n];
+            zip_into(step, &ey, &inp.u_dt, |e, u| e + u);
+            zip_update(&mut y[..n], step, |y, s| y + s);
+            zip_update(
+                &mut y_max[..n],
+                &y,
+                |m, y| if y.abs() > m { y.abs() } else { m },
+            );
             if !all_finite(&y[..n]) {
                 return Err(Error::Numerical {
                     step: k,
@@ -410,29 +410,27 @@ impl<'m, const N: usize> Engine<'m, N> {
                     return Err(singular(k, t_k));
                 }
                 for i in 0..n {
-                    let d = big_r[i * n + i];
-                    if !d.is_finite() {
-                        return Err(Error::Numerical {
-                            step: k,
-                            t: t_k,
-                            path: "system".into(),
-                            message: "the filtered covariance overflowed: the model diverges faster than f64 can follow on this interval".into(),
-                        });
-                    }
-                    pot[i] = d.max(0.0).sqrt();
-                    inv_pot[i] = 1.0 / pot[i];
+                    pot[i] = big_r[i * n + i];
                 }
+                if !all_finite(&pot[..n]) {
+                    return Err(Error::Numerical {
+                        step: k,
+                        t: t_k,
+                        path: "system".into(),
+                        message: "the filtered covariance overflowed: the model diverges faster than f64 can follow on this interval".into(),
+                    });
+                }
+                for p in &mut pot[..n] {
+                    *p = p.max(0.0).sqrt();
+                }
+                zip_update(&mut inv_pot[..n], &pot, |_, p| 1.0 / p);
                 // |I − pC| and |p| ζ for the bound (3.19)
                 if !self.covariance_only {
-                    for (h, x) in abs_ht.iter_mut().zip(&joseph.ht) {
-                        *h = x.abs();
-                    }
+                    zip_update(&mut abs_ht, &joseph.ht, |_, x| x.abs());
                     pz.fill(0.0);
                     for (j, g) in joseph.gain_t.chunks_exact(n).enumerate() {
                         let z = inp.zeta[j];
-                        for (p, g) in pz.iter_mut().zip(g) {
-                            *p += g.abs() * z;
-                        }
+                        zip_update(&mut pz[..n], g, |p, g| p + g.abs() * z);
                     }
                 }
                 // Steady state: r_k within STEADY_TOL of r∞ (then R, p are stationary too).
@@ -466,9 +464,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             // Bound propagation (3.16)–(3.19): η = |A| η + |bΔt| φ, χ = |h| |A| χ + |p| ζ
             if bound_diverged.is_none() {
                 inp.abs_a.mul_vec::<L>(&mut xi, &eta, n);
-                for i in 0..n {
-                    eta[i] = xi[i] + inp.b_phi[i];
-                }
+                zip_into(&mut eta[..n], &xi, &inp.b_phi, |x, b| x + b);
                 inp.abs_a.mul_vec::<L>(&mut xi, &chi, n);
                 // χ_c = (Σ_b |h_cb| ξ_b, b in order) + (|p| ζ)_c, as row operations on |h|ᵀ
                 chi.fill(0.0);
@@ -477,9 +473,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                         *c += h * x;
                     }
                 }
-                for (c, p) in chi.iter_mut().zip(&pz) {
-                    *c += p;
-                }
+                zip_update(&mut chi[..n], &pz, |c, p| c + p);
                 if !(all_finite(&eta[..n]) & all_finite(&chi[..n])) {
                     bound_diverged = Some((k, t_k));
                 }
@@ -869,6 +863,26 @@ fn gain_rows(gain_t: &[f64], n: usize, nm: usize) -> Vec<f64> {
         }
     }
     g
+}
+
+/// out_i = f(a_i, b_i). Element-wise loops go through these two: as function
+/// arguments the slices are known not to overlap, so LLVM vectorises them; written
+/// inline over the engine's buffers, the same loops stay scalar.
+#[inline(always)]
+fn zip_into(out: &mut [f64], a: &[f64], b: &[f64], f: impl Fn(f64, f64) -> f64) {
+    let (a, b) = (&a[..out.len()], &b[..out.len()]);
+    for i in 0..out.len() {
+        out[i] = f(a[i], b[i]);
+    }
+}
+
+/// out_i = f(out_i, a_i).
+#[inline(always)]
+fn zip_update(out: &mut [f64], a: &[f64], f: impl Fn(f64, f64) -> f64) {
+    let a = &a[..out.len()];
+    for i in 0..out.len() {
+        out[i] = f(out[i], a[i]);
+    }
 }
 
 /// Whether every entry is finite (no early exit, so the loop vectorises).

@@ -282,22 +282,15 @@ fn predict_fixed<const N: usize>(
     b: &[[f64; N]; N],
     u: &mut [[f64; N]; N],
 ) {
-    for i in 0..N {
-        let (ui, ri) = (&mut u[i], &r[i]);
-        match e.row(i).split_first() {
-            None => *ui = *ri,
-            Some((&(_, k, v), rest)) => {
-                let rk = &r[k];
-                for j in 0..N {
-                    ui[j] = ri[j] + v * rk[j];
-                }
-                for &(_, k, v) in rest {
-                    let rk = &r[k];
-                    for j in 0..N {
-                        ui[j] += v * rk[j];
-                    }
-                }
-            }
+    // U = R, then + E_ik R_k for the non-zeros in order (sorted by row and column,
+    // so each row's terms are added as the row loop would): one flat loop, no
+    // per-row slicing.
+    *u = *r;
+    for &(i, k, v) in &e.nz {
+        let (ui, rk) = (&mut u[i], &r[k]);
+        #[allow(clippy::needless_range_loop)]
+        for j in 0..N {
+            ui[j] += v * rk[j];
         }
     }
     if let Some(dia) = &e.diagonals {

@@ -377,12 +377,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                 |m, y| if y.abs() > m { y.abs() } else { m },
             );
             if !all_finite(&y[..n]) {
-                return Err(Error::Numerical {
-                    step: k,
-                    t: t_k,
-                    path: "system.a".into(),
-                    message: "the mean state overflowed: the model diverges faster than f64 can follow on this interval".into(),
-                });
+                return Err(overflowed("the mean state", "system.a", k, t_k));
             }
 
             if frozen_at.is_none() {
@@ -413,12 +408,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                     pot[i] = big_r[i * n + i];
                 }
                 if !all_finite(&pot[..n]) {
-                    return Err(Error::Numerical {
-                        step: k,
-                        t: t_k,
-                        path: "system".into(),
-                        message: "the filtered covariance overflowed: the model diverges faster than f64 can follow on this interval".into(),
-                    });
+                    return Err(overflowed("the filtered covariance", "system", k, t_k));
                 }
                 for p in &mut pot[..n] {
                     *p = p.max(0.0).sqrt();
@@ -842,6 +832,18 @@ fn time_err(path: &str, k: u64, t: f64) -> Error {
         t,
         path: path.to_string(),
         message: "the expression is not finite here".to_string(),
+    }
+}
+
+/// The error for a quantity that left f64's range at step k (t).
+pub(crate) fn overflowed(what: &str, path: &str, k: u64, t: f64) -> Error {
+    Error::Numerical {
+        step: k,
+        t,
+        path: path.to_string(),
+        message: format!(
+            "{what} overflowed: the model diverges faster than f64 can follow on this interval"
+        ),
     }
 }
 

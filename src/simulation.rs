@@ -14,7 +14,7 @@
 //! result is bit-identical for a given seed whatever the executor. Memory is
 //! O(R·N + blocks·chunk), independent of D.
 
-use crate::analysis::{Avg, SetSums, criteria_set};
+use crate::analysis::{Avg, SetSums, criteria_set, overflowed};
 use crate::error::{Error, FieldError};
 use crate::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym, mul_vec};
 use crate::result::*;
@@ -687,12 +687,12 @@ impl<'m> Plan<'m> {
             self.chi[i] = s;
         }
         if !self.big_r.iter().all(|v| v.is_finite()) || !self.y.iter().all(|v| v.is_finite()) {
-            return Err(Error::Numerical {
-                step: k,
-                t: t_k,
-                path: "system".into(),
-                message: "the filtered covariance or the mean overflowed: the model diverges faster than f64 can follow on this interval".into(),
-            });
+            return Err(overflowed(
+                "the filtered covariance or the mean",
+                "system",
+                k,
+                t_k,
+            ));
         }
 
         // The record for the blocks.

@@ -99,3 +99,58 @@ fn simd_and_baseline_builds_agree_bitwise() {
         assert_eq!(simd, base, "{file:?}");
     }
 }
+
+/// `kea` with these arguments, `KEA_MAX_WORK` unset: (exit code, stdout, stderr).
+fn kea(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(KEA)
+        .args(args)
+        .env_remove("KEA_MAX_WORK")
+        .output()
+        .expect("kea runs");
+    let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
+    (
+        out.status.code().unwrap_or(-1),
+        text(&out.stdout),
+        text(&out.stderr),
+    )
+}
+
+/// Work above `--max-work` (the server's estimate and default) is refused before
+/// anything runs, naming the field that drives it and the flag that lifts it.
+#[test]
+fn work_above_the_limit_is_refused_up_front() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let seed = root.join("presets/seed-example.json");
+    let seed = seed.to_str().unwrap();
+    // The seed example: D = 10⁶ steps of N = 1, 217 units each.
+    let (code, out, err) = kea(&["analyze", seed, "--max-work", "1e8"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(out.is_empty(), "{out}");
+    assert!(
+        err.starts_with("time.steps: estimated work 2.170e8 (D = 1000000 steps"),
+        "{err}"
+    );
+    assert!(err.contains("above --max-work 1.000e8"), "{err}");
+    // 3·10¹⁴ units of simulation: above the default 1e12, refused at once.
+    let (code, _, err) = kea(&["simulate", "preset:seed-example", "--runs", "100000000"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.starts_with("runs: estimated work 3.000e14"), "{err}");
+    assert!(err.contains("above --max-work 1.000e12"), "{err}");
+    // A limit must be a positive number.
+    let (code, _, err) = kea(&["analyze", seed, "--max-work", "0"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("expected a positive number"), "{err}");
+    // Within the limit (here the environment's), the analysis runs as before.
+    let out = Command::new(KEA)
+        .args(["analyze", seed, "--json"])
+        .env("KEA_MAX_WORK", "2.2e8")
+        .output()
+        .expect("kea runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).expect("JSON result");
+    assert_eq!(v["steps"], 1_000_000);
+}

@@ -1,7 +1,7 @@
 //! `kea analyze MODEL.json [--set name=value]… [--json]`.
 
 use crate::Run;
-use kea_core::{NoProgress, Overrides};
+use kea_core::Overrides;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -16,6 +16,8 @@ pub struct Args {
     /// Print the whole result as JSON instead of the criteria table.
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub limit: super::WorkLimit,
 }
 
 impl Run for Args {
@@ -32,8 +34,17 @@ impl Run for Args {
             Err(e) => return super::report_error(&e),
         };
         let set: Overrides = self.set.into_iter().collect();
+        if let Err(code) = self
+            .limit
+            .check(crate::serve::jobs::analysis::work(&model, &set))
+        {
+            return code;
+        }
         let start = Instant::now();
-        let mut result = match kea_core::analyze(&model, &set, &mut NoProgress) {
+        let mut bar = super::Bar::new("analysis");
+        let result = kea_core::analyze(&model, &set, &mut bar);
+        bar.finish();
+        let mut result = match result {
             Ok(r) => r,
             Err(e) => return super::report_error(&e),
         };

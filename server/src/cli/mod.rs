@@ -6,7 +6,11 @@ pub mod presets;
 pub mod simulate;
 pub mod synthesize;
 
+use crate::serve::jobs::Work;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::ops::ControlFlow;
 use std::process::ExitCode;
+use std::time::{Duration, Instant};
 
 /// Exit code for invalid input (a model or argument the user must fix).
 pub const EXIT_INVALID: u8 = 2;
@@ -65,9 +69,101 @@ pub fn parse_override(arg: &str) -> Result<(String, f64), String> {
     Ok((name.to_string(), value))
 }
 
+/// The work limit of the commands that run the core: the server's estimate and its
+/// default, so that a model the service refuses is not silently left running for hours.
+#[derive(Debug, clap::Args)]
+pub struct WorkLimit {
+    /// Refuse a run whose estimated work is above this. A unit is about a nanosecond
+    /// of one core (the server's estimate: steps × (N³ + 16N² + 200) for an
+    /// analysis), so the default is ≈ 17 minutes; `--max-work inf` lifts the limit.
+    #[arg(long, env = "KEA_MAX_WORK", default_value_t = 1e12, value_name = "UNITS",
+          value_parser = parse_limit)]
+    pub max_work: f64,
+}
+
+impl WorkLimit {
+    /// Ok to run; else the estimate's error, or why the work is refused, on stderr and
+    /// the exit code for invalid input.
+    pub fn check(&self, work: Result<Work, kea_core::Error>) -> Result<(), ExitCode> {
+        let work = work.map_err(|e| report_error(&e))?;
+        if work.units <= self.max_work {
+            return Ok(());
+        }
+        // The model file is the root here, not a request's `model` member.
+        let path = work.path.strip_prefix("model.").unwrap_or(&work.path);
+        eprintln!(
+            "{path}: estimated work {:.3e} ({}) is above --max-work {:.3e}; make it smaller, or raise --max-work (KEA_MAX_WORK) to run it anyway",
+            work.units, work.explain, self.max_work
+        );
+        Err(ExitCode::from(EXIT_INVALID))
+    }
+}
+
+/// Parse `--max-work`: a positive number (or `inf`).
+fn parse_limit(arg: &str) -> Result<f64, String> {
+    match arg.trim().parse::<f64>() {
+        Ok(x) if x > 0.0 => Ok(x),
+        _ => Err(format!("expected a positive number (or inf), got `{arg}`")),
+    }
+}
+
+/// The core's progress as a bar on stderr, shown once a run has taken a second (short
+/// runs print nothing extra) and never when stderr is not a terminal (pipes, files).
+pub struct Bar {
+    bar: ProgressBar,
+    start: Instant,
+    shown: bool,
+}
+
+/// Positions of the bar (per mille).
+const BAR_LEN: u64 = 1000;
+
+impl Bar {
+    pub fn new(what: &'static str) -> Self {
+        let bar = ProgressBar::with_draw_target(Some(BAR_LEN), ProgressDrawTarget::hidden());
+        if let Ok(style) =
+            ProgressStyle::with_template("{msg} [{bar:30}] {percent:>3}% {elapsed} (ETA {eta})")
+        {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        bar.set_message(what);
+        Bar {
+            bar,
+            start: Instant::now(),
+            shown: false,
+        }
+    }
+
+    /// Remove the bar (if it was drawn) before the result is printed.
+    pub fn finish(self) {
+        self.bar.finish_and_clear();
+    }
+}
+
+impl kea_core::Progress for Bar {
+    fn report(&mut self, fraction: f64) -> ControlFlow<()> {
+        if !self.shown && self.start.elapsed() >= Duration::from_secs(1) {
+            self.bar.set_draw_target(ProgressDrawTarget::stderr());
+            self.shown = true;
+        }
+        self.bar
+            .set_position((fraction.clamp(0.0, 1.0) * BAR_LEN as f64) as u64);
+        ControlFlow::Continue(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
-    use super::parse_override;
+    use super::{parse_limit, parse_override};
+
+    #[test]
+    fn work_limit_parses_positive_numbers_only() {
+        assert_eq!(parse_limit("1e12"), Ok(1e12));
+        assert_eq!(parse_limit("inf"), Ok(f64::INFINITY));
+        for bad in ["0", "-5", "NaN", "lots"] {
+            assert!(parse_limit(bad).unwrap_err().contains("positive"), "{bad}");
+        }
+    }
 
     #[test]
     fn overrides_parse_and_reject_bad_syntax() {

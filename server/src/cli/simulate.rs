@@ -4,10 +4,10 @@
 
 use crate::Run;
 use crate::parallel::Rayon;
+use kea_core::Overrides;
 use kea_core::simulation::{
     Executor, ModelError, SimulationRequest, SimulationResult, Truth, Verdict,
 };
-use kea_core::{NoProgress, Overrides};
 use std::fmt::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -56,6 +56,8 @@ pub struct Args {
     /// Also write the traces (potential against real SKOs) as CSV to this file.
     #[arg(long, value_name = "FILE")]
     pub csv: Option<PathBuf>,
+    #[command(flatten)]
+    pub limit: super::WorkLimit,
 }
 
 impl Run for Args {
@@ -105,12 +107,19 @@ impl Run for Args {
             }
         };
         let set: Overrides = self.set.into_iter().collect();
+        let work = kea_core::validate::compile(&model, &set)
+            .map(|c| crate::serve::jobs::simulation::work(&c, &req));
+        if let Err(code) = self.limit.check(work) {
+            return code;
+        }
         let start = Instant::now();
-        let mut result =
-            match kea_core::simulation::simulate(&model, &set, &req, &exec, &mut NoProgress) {
-                Ok(r) => r,
-                Err(e) => return super::report_error(&e),
-            };
+        let mut bar = super::Bar::new("simulation");
+        let result = kea_core::simulation::simulate(&model, &set, &req, &exec, &mut bar);
+        bar.finish();
+        let mut result = match result {
+            Ok(r) => r,
+            Err(e) => return super::report_error(&e),
+        };
         result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         if let Some(path) = &self.csv
             && let Err(e) = std::fs::write(path, kea_core::simulation::traces_csv(&result))

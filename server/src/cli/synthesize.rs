@@ -4,7 +4,6 @@
 
 use crate::Run;
 use crate::parallel::Rayon;
-use kea_core::NoProgress;
 use kea_core::synthesis::{self, Status};
 use serde_json::Value;
 use std::path::PathBuf;
@@ -31,6 +30,8 @@ pub struct Args {
     /// Print the whole result as JSON instead of the table and message.
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub limit: super::WorkLimit,
 }
 
 fn read(path: &PathBuf) -> Result<String, ExitCode> {
@@ -109,8 +110,16 @@ impl Run for Args {
                 return ExitCode::from(super::EXIT_FAILURE);
             }
         };
+        let work = synthesis::validate(&request)
+            .and_then(|()| crate::serve::jobs::synthesis::work(&request));
+        if let Err(code) = self.limit.check(work) {
+            return code;
+        }
         let start = Instant::now();
-        let mut result = match synthesis::synthesize(&request, &exec, &mut NoProgress) {
+        let mut bar = super::Bar::new("synthesis");
+        let result = synthesis::synthesize(&request, &exec, &mut bar);
+        bar.finish();
+        let mut result = match result {
             Ok(r) => r,
             Err(e) => return super::report_error(&e),
         };

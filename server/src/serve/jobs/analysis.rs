@@ -26,22 +26,25 @@ impl JobKind for Analysis {
         let Some(model) = model.filter(|_| errors.is_empty()) else {
             return Err(Error::Invalid(errors));
         };
-        let estimate = kea_core::estimate_work(&model, &set).map_err(request::locate)?;
-        Ok(Box::new(Prepared {
-            model,
-            set,
-            work: Work {
-                units: estimate.work,
-                explain: format!(
-                    "D = {} steps × (N³ + 16N² + 200) = {} (N = {})",
-                    estimate.steps,
-                    kea_core::step_cost(estimate.states),
-                    estimate.states
-                ),
-                path: "model.time.steps".into(),
-            },
-        }))
+        let work = work(&model, &set).map_err(request::locate)?;
+        Ok(Box::new(Prepared { model, set, work }))
     }
+}
+
+/// The work of analysing `model` with `set`: the estimate the server's limits and the
+/// command line's `--max-work` compare (paths relative to the request).
+pub fn work(model: &Model, set: &Overrides) -> Result<Work, Error> {
+    let estimate = kea_core::estimate_work(model, set)?;
+    Ok(Work {
+        units: estimate.work,
+        explain: format!(
+            "D = {} steps × (N³ + 16N² + 200) = {} (N = {})",
+            estimate.steps,
+            kea_core::step_cost(estimate.states),
+            estimate.states
+        ),
+        path: "model.time.steps".into(),
+    })
 }
 
 struct Prepared {

@@ -5,6 +5,7 @@ use super::{JobKind, JobOutput, PreparedJob, Work};
 use crate::parallel::Rayon;
 use crate::serve::request;
 use kea_core::simulation::SimulationRequest;
+use kea_core::validate::CompiledModel;
 use kea_core::{Error, FieldError, Model, Overrides, Progress};
 use serde_json::{Map, Value};
 
@@ -80,20 +81,25 @@ impl JobKind for Simulation {
         }
         let compiled = kea_core::validate::compile(&model, &set).map_err(request::locate)?;
         kea_core::simulation::check_request(&sim, &compiled)?;
-        let n = compiled.n_states();
-        let steps = compiled.max_steps();
-        let w = kea_core::simulation::work(sim.runs, steps, n);
+        let work = work(&compiled, &sim);
         Ok(Box::new(Prepared {
             model,
             set,
-            work: Work {
-                // About 3 multiply-adds per runs × steps × N² (filter, truth, draws).
-                units: 3.0 * w,
-                explain: format!("runs R = {} × D = {steps} steps × N² = {}", sim.runs, n * n),
-                path: "runs".into(),
-            },
+            work,
             sim,
         }))
+    }
+}
+
+/// The work of `sim` on a compiled model: about 3 multiply-adds per runs × steps × N²
+/// (filter, truth, draws).
+pub fn work(compiled: &CompiledModel, sim: &SimulationRequest) -> Work {
+    let n = compiled.n_states();
+    let steps = compiled.max_steps();
+    Work {
+        units: 3.0 * kea_core::simulation::work(sim.runs, steps, n),
+        explain: format!("runs R = {} × D = {steps} steps × N² = {}", sim.runs, n * n),
+        path: "runs".into(),
     }
 }
 

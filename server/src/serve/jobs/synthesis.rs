@@ -22,23 +22,25 @@ impl JobKind for Synthesis {
         // `model_id` was resolved to `model` before a kind sees the request.
         let request = synthesis::request_from_value(request.clone())?;
         synthesis::validate(&request)?;
-        let analyses = synthesis::planned_analyses(&request);
-        let one = kea_core::estimate_work(&request.model, &request.set)
-            .map_err(crate::serve::request::locate)?;
-        Ok(Box::new(Prepared {
-            work: Work {
-                units: one.work * analyses as f64,
-                explain: format!(
-                    "at most {analyses} analyses × D = {} steps × (N³ + 16N² + 200) = {} (N = {})",
-                    one.steps,
-                    kea_core::step_cost(one.states),
-                    one.states
-                ),
-                path: "mode".into(),
-            },
-            request,
-        }))
+        let work = work(&request).map_err(crate::serve::request::locate)?;
+        Ok(Box::new(Prepared { work, request }))
     }
+}
+
+/// The work of a synthesis: at most its planned analyses, each the analysis' estimate.
+pub fn work(request: &SynthesisRequest) -> Result<Work, Error> {
+    let analyses = synthesis::planned_analyses(request);
+    let one = kea_core::estimate_work(&request.model, &request.set)?;
+    Ok(Work {
+        units: one.work * analyses as f64,
+        explain: format!(
+            "at most {analyses} analyses × D = {} steps × (N³ + 16N² + 200) = {} (N = {})",
+            one.steps,
+            kea_core::step_cost(one.states),
+            one.states
+        ),
+        path: "mode".into(),
+    })
 }
 
 struct Prepared {

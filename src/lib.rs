@@ -11,6 +11,7 @@ pub mod error;
 pub mod exec;
 pub mod expr;
 pub mod expr_block;
+mod inputs;
 mod lanes;
 pub mod linalg;
 pub mod model;

@@ -16,9 +16,10 @@
 
 use crate::analysis::{Avg, SetSums, criteria_set, overflowed};
 use crate::error::{Error, FieldError};
+use crate::inputs::{Inputs, time_err};
 use crate::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym, mul_vec};
 use crate::result::*;
-use crate::validate::{CompiledModel, MeasurementNoise};
+use crate::validate::CompiledModel;
 use crate::{Model, Overrides, Progress};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -419,20 +420,10 @@ struct Plan<'m> {
     m: &'m CompiledModel,
     d: Dims,
     dt: f64,
-    a_fn: crate::expr::TimeMatrix,
-    u_fn: crate::expr::TimeMatrix,
-    b_fn: crate::expr::TimeMatrix,
-    noise_fn: MeasurementNoise,
+    /// A = I + aΔt (dense here), uΔt, bΔt, B, Γ, Rv, ζ: the analysis' inputs.
+    inp: Inputs,
     schedule: Option<crate::schedule::Schedules>,
-    c_nz: Vec<(usize, usize, f64)>,
     big_a: Vec<f64>,
-    u_dt: Vec<f64>,
-    bd: Vec<f64>,
-    big_b: Vec<f64>,
-    b_phi: Vec<f64>,
-    gamma: Vec<f64>,
-    rv: Vec<f64>,
-    zeta: Vec<f64>,
     y: Vec<f64>,
     big_r: Vec<f64>,
     p_y: Vec<f64>,
@@ -459,35 +450,18 @@ impl<'m> Plan<'m> {
             nl: m.b.cols,
             ms: m.noise.sources(),
         };
-        let c_nz = (0..d.nm)
-            .flat_map(|j| (0..n).map(move |i| (j, i)))
-            .filter_map(|(j, i)| {
-                let v = m.c[j * n + i];
-                (v != 0.0).then_some((j, i, v))
-            })
-            .collect();
         let mut big_r = vec![0.0; n * n];
         for i in 0..n {
             big_r[i * n + i] = m.eta0[i] * m.eta0[i];
         }
+        let dt = (m.t_end - m.t0) / steps as f64;
         Plan {
             m,
             d,
-            dt: (m.t_end - m.t0) / steps as f64,
-            a_fn: m.a.clone(),
-            u_fn: m.u.clone(),
-            b_fn: m.b.clone(),
-            noise_fn: m.noise.clone(),
+            dt,
+            inp: Inputs::new(m, n, dt),
             schedule: m.schedule.clone(),
-            c_nz,
             big_a: vec![0.0; n * n],
-            u_dt: vec![0.0; n],
-            bd: vec![0.0; n * d.nl],
-            big_b: vec![0.0; n * n],
-            b_phi: vec![0.0; n],
-            gamma: vec![0.0; d.nm * d.ms],
-            rv: vec![0.0; d.nm * d.nm],
-            zeta: vec![0.0; d.nm],
             y: m.y0.clone(),
             p_y: big_r.clone(),
             big_r,
@@ -511,73 +485,24 @@ impl<'m> Plan<'m> {
         let m = self.m;
         let dt = self.dt;
         let t_k = m.t0 + k as f64 * dt;
-        let err = |(path, t): (&str, f64)| Error::Numerical {
-            step: k,
-            t,
-            path: path.to_string(),
-            message: "the expression is not finite here".to_string(),
-        };
-        // (1.11)–(1.15): A, uΔt, bΔt at t_{k−1}; Γ at t_k — grid points k − 1 and k,
-        // evaluated several steps at a time (the same values as one by one).
-        if k == 1 || !self.a_fn.is_constant() {
-            self.a_fn.update_grid(m.t0, dt, k - 1).map_err(err)?;
-            for i in 0..n {
-                for j in 0..n {
-                    self.big_a[i * n + j] =
-                        self.a_fn.values[i * n + j] * dt + if i == j { 1.0 } else { 0.0 };
-                }
-            }
-        }
-        if k == 1 || !self.u_fn.is_constant() {
-            self.u_fn.update_grid(m.t0, dt, k - 1).map_err(err)?;
-            for i in 0..n {
-                self.u_dt[i] = self.u_fn.values[i] * dt;
-            }
-        }
-        if k == 1 || !self.b_fn.is_constant() {
-            self.b_fn.update_grid(m.t0, dt, k - 1).map_err(err)?;
-            for (d, s) in self.bd.iter_mut().zip(&self.b_fn.values) {
-                *d = s * dt;
-            }
-            let mut bw = vec![0.0; n * nl];
-            mul(&mut bw, &self.bd, &m.w, n, nl, nl);
-            mul_abt_sym(&mut self.big_b, &bw, &self.bd, None, n, nl);
-            for i in 0..n {
-                self.b_phi[i] = (0..nl).map(|l| self.bd[i * nl + l].abs() * m.phi[l]).sum();
-            }
-        }
-        if k == 1 || !self.noise_fn.matrix().is_constant() {
-            match &mut self.noise_fn {
-                MeasurementNoise::Gamma(g) => {
-                    g.update_grid(m.t0, dt, k).map_err(err)?;
-                    self.gamma.copy_from_slice(&g.values);
-                }
-                MeasurementNoise::SeedG(g) => {
-                    g.update_grid(m.t0, dt, k).map_err(err)?;
-                    mul(&mut self.gamma, &m.c, &g.values, nm, n, ms);
-                }
-            }
-            let mut gv = vec![0.0; nm * ms];
-            mul(&mut gv, &self.gamma, &m.v, nm, ms, ms);
-            mul_abt_sym(&mut self.rv, &gv, &self.gamma, None, nm, ms);
-            for j in 0..nm {
-                self.zeta[j] = (0..ms)
-                    .map(|l| self.gamma[j * ms + l].abs() * m.psi[l])
-                    .sum();
-            }
+        // (1.11)–(1.15): A, uΔt, bΔt at t_{k−1}; Γ at t_k — the analysis' inputs.
+        let a_changed = k == 1 || !self.inp.a_fn.is_constant();
+        self.inp.at(m, k, k == 1)?;
+        if a_changed {
+            self.inp.dense_a_into(&mut self.big_a);
         }
         // The measurement schedule at step k (time t_k).
         if let Some(sched) = &mut self.schedule {
             sched
                 .mask(k, t_k, &mut self.avail)
-                .map_err(|p| err((&p, t_k)))?;
+                .map_err(|p| time_err(&p, k, t_k))?;
         }
         let n_avail = self.avail.iter().filter(|a| **a).count();
 
         // (3.3) y_k = A y + uΔt
         mul_vec(&mut self.tmp_n, &self.big_a, &self.y, n, n);
         for i in 0..n {
-            self.y[i] = self.tmp_n[i] + self.u_dt[i];
+            self.y[i] = self.tmp_n[i] + self.inp.u_dt[i];
         }
         // (2.1) r = A R Aᵀ + B
         mul(&mut self.tmp_nn, &self.big_a, &self.big_r, n, n, n);
@@ -585,7 +510,7 @@ impl<'m> Plan<'m> {
             &mut self.r_pred,
             &self.tmp_nn,
             &self.big_a,
-            Some(&self.big_b),
+            Some(&self.inp.big_b),
             n,
             n,
         );
@@ -593,7 +518,7 @@ impl<'m> Plan<'m> {
         // q_jj = 1 with no coupling: its gain column is then exactly zero and the
         // other columns are the Kalman gain of the available measurements alone.
         self.s_cr.fill(0.0);
-        for &(j, i, c) in &self.c_nz {
+        for &(j, i, c) in &self.inp.c_nz {
             if self.avail[j] {
                 for (s, r) in self.s_cr[j * n..j * n + n]
                     .iter_mut()
@@ -603,8 +528,8 @@ impl<'m> Plan<'m> {
                 }
             }
         }
-        self.q.copy_from_slice(&self.rv);
-        for &(l, i, c) in &self.c_nz {
+        self.q.copy_from_slice(&self.inp.rv);
+        for &(l, i, c) in &self.inp.c_nz {
             for j in 0..nm {
                 self.q[j * nm + l] += c * self.s_cr[j * n + i];
             }
@@ -645,7 +570,7 @@ impl<'m> Plan<'m> {
                 self.tmp_nn[i * n + j] = if i == j { 1.0 } else { 0.0 };
             }
         }
-        for &(l, j, c) in &self.c_nz {
+        for &(l, j, c) in &self.inp.c_nz {
             for i in 0..n {
                 self.tmp_nn[i * n + j] -= self.gain[i * nm + l] * c;
             }
@@ -654,7 +579,7 @@ impl<'m> Plan<'m> {
         mul_abt_sym(&mut self.big_r, &self.tmp_nn2, &self.tmp_nn, None, n, n); // h r hᵀ
         if nm > 0 {
             let mut prv = vec![0.0; n * nm];
-            mul(&mut prv, &self.gain, &self.rv, n, nm, nm);
+            mul(&mut prv, &self.gain, &self.inp.rv, n, nm, nm);
             let mut add = vec![0.0; n * n];
             mul_abt_sym(&mut add, &prv, &self.gain, None, n, nm);
             for (r, a) in self.big_r.iter_mut().zip(&add) {
@@ -667,7 +592,7 @@ impl<'m> Plan<'m> {
             &mut self.p_y,
             &self.tmp_nn2,
             &self.big_a,
-            Some(&self.big_b),
+            Some(&self.inp.big_b),
             n,
             n,
         );
@@ -682,7 +607,7 @@ impl<'m> Plan<'m> {
                 .map(|j| self.tmp_nn[i * n + j].abs() * self.xi[j])
                 .sum();
             for j in 0..nm {
-                s += self.gain[i * nm + j].abs() * self.zeta[j];
+                s += self.gain[i * nm + j].abs() * self.inp.zeta[j];
             }
             self.chi[i] = s;
         }
@@ -697,9 +622,9 @@ impl<'m> Plan<'m> {
 
         // The record for the blocks.
         rec[lay.a..lay.a + n * n].copy_from_slice(&self.big_a);
-        rec[lay.u..lay.u + n].copy_from_slice(&self.u_dt);
-        rec[lay.bd..lay.bd + n * nl].copy_from_slice(&self.bd);
-        rec[lay.gamma..lay.gamma + nm * ms].copy_from_slice(&self.gamma);
+        rec[lay.u..lay.u + n].copy_from_slice(&self.inp.u_dt);
+        rec[lay.bd..lay.bd + n * nl].copy_from_slice(&self.inp.bd);
+        rec[lay.gamma..lay.gamma + nm * ms].copy_from_slice(&self.inp.gamma);
         rec[lay.gain..lay.gain + n * nm].copy_from_slice(&self.gain);
         for j in 0..nm {
             rec[lay.avail + j] = if self.avail[j] { 1.0 } else { 0.0 };
@@ -1112,7 +1037,7 @@ fn run_n<const N: usize, E: Executor>(
     let sl = SumLayout::new(d);
     let w_sqrt = sqrt_psd(&m.w, d.nl);
     let v_sqrt = sqrt_psd(&m.v, d.ms);
-    let c_nz = plan.c_nz.clone();
+    let c_nz = plan.inp.c_nz.clone();
     let pattern = |tm: &crate::expr::TimeMatrix, diag: bool| -> Vec<(usize, usize)> {
         (0..tm.rows)
             .flat_map(|i| (0..tm.cols).map(move |j| (i, j)))

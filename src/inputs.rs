@@ -1,0 +1,192 @@
+//! The model's inputs at a step, for the analysis and the simulation's plan: the time
+//! functions evaluated on the grid (several steps at a time) and what is derived from
+//! them — METHOD (1.11)–(1.15), (3.16), (3.17).
+
+use crate::error::Error;
+use crate::expr::TimeMatrix;
+use crate::linalg::{SparseRows, mul, mul_abt_sym};
+use crate::validate::{CompiledModel, MeasurementNoise};
+
+/// The model's inputs at a step — A = I + aΔt (1.11), B = bΔt W (bΔt)ᵀ (1.15),
+/// uΔt, Rv = Γ V Γᵀ, and the bound's |A|, |bΔt| φ (3.16), ζ = |Γ| ψ (3.17) — at
+/// t_{k−1} (Γ at t_k). Constant parts are computed once; `at` re-evaluates the rest.
+pub(crate) struct Inputs {
+    pub(crate) n: usize,
+    pub(crate) nm: usize,
+    pub(crate) dt: f64,
+    pub(crate) a_fn: TimeMatrix,
+    pub(crate) b_fn: TimeMatrix,
+    pub(crate) u_fn: TimeMatrix,
+    pub(crate) noise_fn: MeasurementNoise,
+    /// C's non-zeros (row, col, value).
+    pub(crate) c_nz: Vec<(usize, usize, f64)>,
+    /// E = aΔt and |A| = |I + aΔt| on a's pattern (the diagonal always in |A|).
+    pub(crate) e: SparseRows,
+    pub(crate) abs_a: SparseRows,
+    pub(crate) bd: Vec<f64>,
+    pub(crate) bw: Vec<f64>,
+    pub(crate) big_b: Vec<f64>,
+    pub(crate) b_phi: Vec<f64>,
+    pub(crate) gamma: Vec<f64>,
+    pub(crate) gv: Vec<f64>,
+    pub(crate) rv: Vec<f64>,
+    /// Rv was re-evaluated at the last `at`.
+    pub(crate) rv_changed: bool,
+    pub(crate) zeta: Vec<f64>,
+    pub(crate) inv_zeta: Vec<f64>,
+    /// sqrt(diag Rv) and its reciprocal.
+    pub(crate) meas_sko: Vec<f64>,
+    pub(crate) inv_meas: Vec<f64>,
+    pub(crate) u: Vec<f64>,
+    pub(crate) u_dt: Vec<f64>,
+}
+
+impl Inputs {
+    pub(crate) fn new(m: &CompiledModel, n: usize, dt: f64) -> Self {
+        let nm = m.n_measurements();
+        let (nl, ms) = (m.b.cols, m.noise.sources());
+        let c_nz = (0..nm)
+            .flat_map(|j| (0..n).map(move |i| (j, i)))
+            .filter_map(|(j, i)| {
+                let v = m.c[j * n + i];
+                (v != 0.0).then_some((j, i, v))
+            })
+            .collect();
+        let in_a = |i: usize, j: usize| m.a.values[i * n + j] != 0.0 || m.a.varies(i * n + j);
+        let all = (0..n).flat_map(|i| (0..n).map(move |j| (i, j)));
+        Inputs {
+            n,
+            nm,
+            dt,
+            a_fn: m.a.clone(),
+            b_fn: m.b.clone(),
+            u_fn: m.u.clone(),
+            noise_fn: m.noise.clone(),
+            c_nz,
+            e: SparseRows::with_pattern(n, all.clone().filter(|&(i, j)| in_a(i, j)).collect()),
+            abs_a: SparseRows::with_pattern(
+                n,
+                all.filter(|&(i, j)| i == j || in_a(i, j)).collect(),
+            ),
+            bd: vec![0.0; n * nl],
+            bw: vec![0.0; n * nl],
+            big_b: vec![0.0; n * n],
+            b_phi: vec![0.0; n],
+            gamma: vec![0.0; nm * ms],
+            gv: vec![0.0; nm * ms],
+            rv: vec![0.0; nm * nm],
+            rv_changed: true,
+            zeta: vec![0.0; nm],
+            inv_zeta: vec![0.0; nm],
+            meas_sko: vec![0.0; nm],
+            inv_meas: vec![0.0; nm],
+            u: vec![0.0; n],
+            u_dt: vec![0.0; n],
+        }
+    }
+
+    /// Inputs of step k (a, b, u at t_{k−1}, Γ at t_k): everything when `first`,
+    /// else only what depends on t.
+    #[inline(always)]
+    pub(crate) fn at(&mut self, m: &CompiledModel, k: u64, first: bool) -> Result<(), Error> {
+        let (n, nm, dt) = (self.n, self.nm, self.dt);
+        // t_{k−1} and t_k are grid points k − 1 and k: `update_grid` evaluates the
+        // expressions for several steps at a time (the same values as one by one).
+        if first || !self.a_fn.is_constant() {
+            self.a_fn
+                .update_grid(m.t0, dt, k - 1)
+                .map_err(|(p, t)| time_err(p, k, t))?;
+            let a = &self.a_fn.values;
+            self.e.set_values(a, |a, _| a * dt);
+            self.abs_a
+                .set_values(a, |a, diag| (a * dt + if diag { 1.0 } else { 0.0 }).abs());
+        }
+        if first || !self.b_fn.is_constant() {
+            self.b_fn
+                .update_grid(m.t0, dt, k - 1)
+                .map_err(|(p, t)| time_err(p, k, t))?;
+            let nl = self.b_fn.cols;
+            for (d, s) in self.bd.iter_mut().zip(&self.b_fn.values) {
+                *d = s * dt;
+            }
+            mul(&mut self.bw, &self.bd, &m.w, n, nl, nl);
+            mul_abt_sym(&mut self.big_b, &self.bw, &self.bd, None, n, nl);
+            for i in 0..n {
+                self.b_phi[i] = (0..nl).map(|l| self.bd[i * nl + l].abs() * m.phi[l]).sum();
+            }
+        }
+        if first || !self.u_fn.is_constant() {
+            self.u_fn
+                .update_grid(m.t0, dt, k - 1)
+                .map_err(|(p, t)| time_err(p, k, t))?;
+            for i in 0..n {
+                self.u[i] = self.u_fn.values[i];
+                self.u_dt[i] = self.u[i] * dt;
+            }
+        }
+        self.rv_changed = first || !self.noise_fn.matrix().is_constant();
+        if self.rv_changed {
+            update_noise(&mut self.noise_fn, m.t0, dt, k).map_err(|(p, t)| time_err(&p, k, t))?;
+            let ms = self.gamma.len() / nm.max(1);
+            match &self.noise_fn {
+                MeasurementNoise::Gamma(g) => self.gamma.copy_from_slice(&g.values),
+                // Γ = C g (the seed's form Z = c (y + gΦ))
+                MeasurementNoise::SeedG(g) => mul(&mut self.gamma, &m.c, &g.values, nm, n, ms),
+            }
+            mul(&mut self.gv, &self.gamma, &m.v, nm, ms, ms);
+            mul_abt_sym(&mut self.rv, &self.gv, &self.gamma, None, nm, ms);
+            for j in 0..nm {
+                self.zeta[j] = (0..ms)
+                    .map(|l| self.gamma[j * ms + l].abs() * m.psi[l])
+                    .sum();
+                self.meas_sko[j] = self.rv[j * nm + j].max(0.0).sqrt();
+                self.inv_zeta[j] = 1.0 / self.zeta[j];
+                self.inv_meas[j] = 1.0 / self.meas_sko[j];
+            }
+        }
+        Ok(())
+    }
+
+    /// A = I + aΔt, dense (for the stationary solution).
+    pub(crate) fn dense_a(&self) -> Vec<f64> {
+        let mut a = vec![0.0; self.n * self.n];
+        self.dense_a_into(&mut a);
+        a
+    }
+
+    /// A = I + aΔt into a dense n × n buffer.
+    pub(crate) fn dense_a_into(&self, a: &mut [f64]) {
+        let n = self.n;
+        a.fill(0.0);
+        for i in 0..n {
+            a[i * n + i] = 1.0;
+        }
+        for &(i, j, v) in self.e.nonzeros() {
+            a[i * n + j] += v;
+        }
+    }
+}
+
+/// An expression that is not finite at step k (time t).
+pub(crate) fn time_err(path: &str, k: u64, t: f64) -> Error {
+    Error::Numerical {
+        step: k,
+        t,
+        path: path.to_string(),
+        message: "the expression is not finite here".to_string(),
+    }
+}
+
+/// Γ (or the seed's g) at the grid point t0 + k·Δt.
+fn update_noise(
+    noise: &mut MeasurementNoise,
+    t0: f64,
+    dt: f64,
+    k: u64,
+) -> Result<(), (String, f64)> {
+    match noise {
+        MeasurementNoise::Gamma(g) | MeasurementNoise::SeedG(g) => g
+            .update_grid(t0, dt, k)
+            .map_err(|(p, t)| (p.to_string(), t)),
+    }
+}

@@ -389,8 +389,13 @@ impl ExprBudget {
         self.exceeded
     }
 
-    /// Take one expression of `chars` characters, or say which limit it exceeds.
-    pub(crate) fn take(&mut self, chars: usize) -> Result<(), String> {
+    /// Take one time-dependent entry (its text's characters), or say which limit it
+    /// exceeds.
+    pub(crate) fn take(&mut self, entry: &Value) -> Result<(), String> {
+        let chars = match entry {
+            Value::Expr(text) => text.chars().count(),
+            Value::Number(_) => 0,
+        };
         let why = if self.count >= MAX_TIME_EXPRESSIONS {
             format!(
                 "more than {MAX_TIME_EXPRESSIONS} distinct time-dependent expressions in one model (the limit: each costs ≈ 45 KB)"
@@ -532,9 +537,8 @@ impl TimeMatrixBuilder {
                 let s = match compile_entry(value, params, &path, true, t0)? {
                     Entry::Const(x) => Shared::Const(x),
                     Entry::Time(f) => {
-                        let chars = text.map_or(0, |s| s.chars().count());
                         budget
-                            .take(chars)
+                            .take(value)
                             .map_err(|why| FieldError::new(&path, why))?;
                         self.m.fns.push(*f);
                         Shared::Fn(self.m.fns.len() - 1)

@@ -5,7 +5,7 @@
 
 use crate::error::FieldError;
 use crate::expr::{Entry, ExprBudget, TimeFn, compile_entry};
-use crate::model::{Schedule, Value};
+use crate::model::Schedule;
 use std::collections::BTreeMap;
 
 #[derive(Clone, Debug)]
@@ -124,12 +124,8 @@ pub fn compile(
                     Availability::Never
                 }),
                 Ok(Entry::Time(f)) => {
-                    let chars = match when {
-                        Value::Expr(text) => text.chars().count(),
-                        Value::Number(_) => 0,
-                    };
                     // Counted with the model's other time-dependent expressions.
-                    if let Err(why) = budget.take(chars) {
+                    if let Err(why) = budget.take(when) {
                         errs.push(FieldError::new(&p, why));
                     }
                     items.push(Availability::When(*f, p));

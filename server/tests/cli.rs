@@ -154,3 +154,53 @@ fn work_above_the_limit_is_refused_up_front() {
     let v: Value = serde_json::from_slice(&out.stdout).expect("JSON result");
     assert_eq!(v["steps"], 1_000_000);
 }
+
+/// `kea analyze preset:NAME` is the preset's file; `--csv` writes the result's traces,
+/// one row per trace point, columns `t` then `<series>:<state>`.
+#[test]
+fn analyze_a_preset_by_name_and_write_its_traces_as_csv() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let by_file = analyze(&root.join("presets/cv-tracker.json"), false);
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("traces.csv");
+    let (code, out, err) = kea(&[
+        "analyze",
+        "preset:cv-tracker",
+        "--json",
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let mut by_name: Value = serde_json::from_str(&out).expect("JSON result");
+    by_name.as_object_mut().unwrap().remove("timing");
+    assert_eq!(by_name, by_file);
+
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let rows: Vec<Vec<&str>> = text.lines().map(|l| l.split(',').collect()).collect();
+    let t = by_file["traces"]["t"].as_array().unwrap();
+    assert_eq!(rows.len(), 1 + t.len());
+    let col = |name: &str| rows[0].iter().position(|h| *h == name).expect(name);
+    let (ct, cv) = (col("t"), col("potential_sko:velocity"));
+    let state = by_file["traces"]["states"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["state"] == "velocity")
+        .unwrap();
+    for i in [0, t.len() / 2, t.len() - 1] {
+        let cell = |c: usize| rows[1 + i][c].parse::<f64>().unwrap();
+        assert_eq!(cell(ct), t[i].as_f64().unwrap(), "row {i}");
+        assert_eq!(
+            cell(cv),
+            state["potential_sko"][i].as_f64().unwrap(),
+            "row {i}"
+        );
+    }
+
+    let (code, _, err) = kea(&["analyze", "preset:no-such-preset"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.starts_with("model: no preset \"no-such-preset\" (presets: "),
+        "{err}"
+    );
+}

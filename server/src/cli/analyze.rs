@@ -1,4 +1,4 @@
-//! `kea analyze MODEL.json [--set name=value]… [--json]`.
+//! `kea analyze MODEL.json|preset:NAME [--set name=value]… [--json] [--csv FILE]`.
 
 use crate::Run;
 use kea_core::Overrides;
@@ -8,30 +8,27 @@ use std::time::Instant;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The model file (JSON, the format of `kea preset NAME`).
-    pub model: PathBuf,
+    /// The model file (JSON, the format of `kea preset NAME`), or `preset:NAME`.
+    pub model: String,
     /// Override a model parameter, e.g. `--set q=0.5` (repeatable).
     #[arg(long = "set", value_name = "NAME=VALUE", value_parser = super::parse_override)]
     pub set: Vec<(String, f64)>,
     /// Print the whole result as JSON instead of the criteria table.
     #[arg(long)]
     pub json: bool,
+    /// Also write the decimated traces as CSV to this file (t, then every series of
+    /// every state; an empty cell is undefined).
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
     #[command(flatten)]
     pub limit: super::WorkLimit,
 }
 
 impl Run for Args {
     fn run(self) -> ExitCode {
-        let text = match std::fs::read_to_string(&self.model) {
-            Ok(t) => t,
-            Err(e) => {
-                eprintln!("cannot read {}: {e}", self.model.display());
-                return ExitCode::from(super::EXIT_FAILURE);
-            }
-        };
-        let model = match kea_core::model_from_json(&text) {
+        let model = match super::load_model(&self.model) {
             Ok(m) => m,
-            Err(e) => return super::report_error(&e),
+            Err(code) => return code,
         };
         let set: Overrides = self.set.into_iter().collect();
         if let Err(code) = self
@@ -49,6 +46,11 @@ impl Run for Args {
             Err(e) => return super::report_error(&e),
         };
         result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        if let Some(path) = &self.csv
+            && let Err(code) = super::write_file(path, &kea_core::report::traces_csv(&result))
+        {
+            return code;
+        }
         if self.json {
             if let Err(code) = super::print_json(&result) {
                 return code;

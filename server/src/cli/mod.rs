@@ -50,6 +50,33 @@ pub fn print_text(text: &str) {
     let _ = std::io::stdout().lock().write_all(text.as_bytes());
 }
 
+/// The model a command names: a JSON file, or `preset:NAME` for a preset. On failure
+/// the reason is on stderr and the exit code is returned.
+pub fn load_model(arg: &str) -> Result<kea_core::Model, ExitCode> {
+    if let Some(name) = arg.strip_prefix("preset:") {
+        return kea_core::presets::get(name).ok_or_else(|| {
+            eprintln!(
+                "model: no preset \"{name}\" (presets: {})",
+                kea_core::presets::names().join(", ")
+            );
+            ExitCode::from(EXIT_INVALID)
+        });
+    }
+    let text = std::fs::read_to_string(arg).map_err(|e| {
+        eprintln!("cannot read {arg}: {e}");
+        ExitCode::from(EXIT_FAILURE)
+    })?;
+    kea_core::model_from_json(&text).map_err(|e| report_error(&e))
+}
+
+/// Write `text` to `path`; on failure say so and return the exit code.
+pub fn write_file(path: &std::path::Path, text: &str) -> Result<(), ExitCode> {
+    std::fs::write(path, text).map_err(|e| {
+        eprintln!("cannot write {}: {e}", path.display());
+        ExitCode::from(EXIT_FAILURE)
+    })
+}
+
 /// Parse one `--set name=value` argument.
 pub fn parse_override(arg: &str) -> Result<(String, f64), String> {
     let (name, value) = arg

@@ -62,29 +62,9 @@ pub struct Args {
 
 impl Run for Args {
     fn run(self) -> ExitCode {
-        let model = if let Some(name) = self.model.strip_prefix("preset:") {
-            match kea_core::presets::get(name) {
-                Some(m) => m,
-                None => {
-                    eprintln!(
-                        "model: no preset \"{name}\" (presets: {})",
-                        kea_core::presets::names().join(", ")
-                    );
-                    return ExitCode::from(super::EXIT_INVALID);
-                }
-            }
-        } else {
-            let text = match std::fs::read_to_string(&self.model) {
-                Ok(t) => t,
-                Err(e) => {
-                    eprintln!("cannot read {}: {e}", self.model);
-                    return ExitCode::from(super::EXIT_FAILURE);
-                }
-            };
-            match kea_core::model_from_json(&text) {
-                Ok(m) => m,
-                Err(e) => return super::report_error(&e),
-            }
+        let model = match super::load_model(&self.model) {
+            Ok(m) => m,
+            Err(code) => return code,
         };
         let req = SimulationRequest {
             runs: self.runs,
@@ -122,10 +102,9 @@ impl Run for Args {
         };
         result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         if let Some(path) = &self.csv
-            && let Err(e) = std::fs::write(path, kea_core::simulation::traces_csv(&result))
+            && let Err(code) = super::write_file(path, &kea_core::simulation::traces_csv(&result))
         {
-            eprintln!("cannot write {}: {e}", path.display());
-            return ExitCode::from(super::EXIT_FAILURE);
+            return code;
         }
         if self.json {
             if let Err(code) = super::print_json(&result) {

@@ -7,7 +7,15 @@
 // Cancelling a run: the page terminates this worker and starts a new one (instant).
 import init, * as kea from './pkg/kea_wasm.js';
 
-const ready = init();
+// The module is built with WebAssembly SIMD (see .cargo/config.toml): a browser without
+// it cannot compile the module, and every request says so instead of a bare CompileError.
+const ready = init().catch((e) => {
+  throw JSON.stringify({
+    kind: 'internal',
+    title: `this browser cannot run kea's WebAssembly module (it needs WebAssembly SIMD: Chrome or Edge 91+, Firefox 89+, Safari 16.4+): ${e && e.message ? e.message : e}`,
+    errors: [],
+  });
+});
 
 function asError(e) {
   if (typeof e === 'string') {

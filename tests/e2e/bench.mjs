@@ -3,10 +3,13 @@
 // of RUNS runs per preset. Run with `cargo xtask bench-web`; prints a Markdown table.
 
 import { kea, launchBrowser, newPage, startServer } from './lib.mjs';
+import fs from 'node:fs';
 import os from 'node:os';
 
 const RUNS = Number(process.env.KEA_BENCH_RUNS ?? 5);
 const PRESETS = (process.env.KEA_BENCH_PRESETS ?? 'seed-example,helicopter-range').split(',');
+// KEA_BENCH_STEPS: run every preset with this many steps instead of its own.
+const STEPS = process.env.KEA_BENCH_STEPS ? Number(process.env.KEA_BENCH_STEPS) : null;
 
 const median = (xs) => {
   const s = [...xs].sort((a, b) => a - b);
@@ -23,7 +26,13 @@ try {
   await page.waitForSelector('body[data-ready=true]', { timeout: 30000 });
   const rows = [];
   for (const name of PRESETS) {
-    const model = kea('preset', name);
+    // A name ending in .json is a model file.
+    let model = name.endsWith('.json') ? fs.readFileSync(name, 'utf8') : kea('preset', name);
+    if (STEPS) {
+      const m = JSON.parse(model);
+      m.time.steps = STEPS;
+      model = JSON.stringify(m);
+    }
     // One warm-up run each, then RUNS timed runs.
     const wasm = await page.evaluate(
       async ({ model, runs }) => {
@@ -50,8 +59,8 @@ try {
       { model, runs: RUNS },
     );
     const native = [];
-    const file = `${os.tmpdir()}/kea-bench-${name}.json`;
-    (await import('node:fs')).writeFileSync(file, model);
+    const file = `${os.tmpdir()}/kea-bench-${name.replace(/\W/g, '_')}.json`;
+    fs.writeFileSync(file, model);
     for (let i = 0; i <= RUNS; i++) {
       const r = JSON.parse(kea('analyze', file, '--json'));
       if (i > 0) native.push(r.timing.wall_ms);

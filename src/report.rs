@@ -3,11 +3,25 @@
 use crate::result::{AnalysisResult, CriteriaSet};
 use std::fmt::Write;
 
+/// Width of the table's number columns.
+const CELL: usize = 10;
+
+/// A criterion for a column of [`CELL`] characters: four decimals, or the exponent form
+/// where those would not fit or would show fewer than two significant digits.
 fn cell(x: Option<f64>) -> String {
-    match x {
-        Some(v) if v != 0.0 && !(1e-3..1e6).contains(&v.abs()) => format!("{v:.4e}"),
-        Some(v) => format!("{v:.4}"),
-        None => "—".to_string(),
+    let Some(v) = x else {
+        return "—".to_string();
+    };
+    let fixed = format!("{v:.4}");
+    if (v == 0.0 || v.abs() >= 1e-3) && fixed.len() <= CELL {
+        return fixed;
+    }
+    // (A three-digit exponent leaves room for three decimals.)
+    let exp = format!("{v:.4e}");
+    if exp.len() <= CELL {
+        exp
+    } else {
+        format!("{v:.3e}")
     }
 }
 
@@ -34,23 +48,26 @@ pub fn criteria_table(r: &AnalysisResult) -> String {
         .max()
         .unwrap_or(5)
         .max("weighted".len());
+    // Three columns and their separating spaces per set, and the rules under them.
+    let (cw, set_w) = (CELL, 3 * CELL + 2);
+    let rule = "-".repeat(w + 3 + set_w + 3 + set_w);
     let _ = writeln!(
         s,
-        "{:<w$} | {:^32} | {:^32}",
+        "{:<w$} | {:^set_w$} | {:^set_w$}",
         "", "bound (modulus procedure)", "covariance (exact)"
     );
     let _ = writeln!(
         s,
-        "{:<w$} | {:>10} {:>10} {:>10} | {:>10} {:>10} {:>10}",
+        "{:<w$} | {:>cw$} {:>cw$} {:>cw$} | {:>cw$} {:>cw$} {:>cw$}",
         "state", "F_YZ", "F_ZX", "F_YX", "F_YZ", "F_ZX", "F_YX"
     );
-    let _ = writeln!(s, "{}", "-".repeat(w + 70));
+    let _ = writeln!(s, "{rule}");
     let (b, c) = (&r.criteria.bound, &r.criteria.covariance);
     for (i, name) in r.states.iter().enumerate() {
         let (pb, pc) = (&b.per_state[i], &c.per_state[i]);
         let _ = writeln!(
             s,
-            "{:<w$} | {:>10} {:>10} {:>10} | {:>10} {:>10} {:>10}",
+            "{:<w$} | {:>cw$} {:>cw$} {:>cw$} | {:>cw$} {:>cw$} {:>cw$}",
             name,
             cell(pb.yz),
             cell(pb.zx),
@@ -60,10 +77,10 @@ pub fn criteria_table(r: &AnalysisResult) -> String {
             cell(pc.yx)
         );
     }
-    let _ = writeln!(s, "{}", "-".repeat(w + 70));
+    let _ = writeln!(s, "{rule}");
     let _ = writeln!(
         s,
-        "{:<w$} | {:>10} {:>10} {:>10} | {:>10} {:>10} {:>10}",
+        "{:<w$} | {:>cw$} {:>cw$} {:>cw$} | {:>cw$} {:>cw$} {:>cw$}",
         "weighted",
         cell(b.weighted.yz),
         cell(b.weighted.zx),
@@ -161,4 +178,27 @@ pub fn traces_csv(r: &AnalysisResult) -> String {
         s.push('\n');
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{CELL, cell};
+
+    #[test]
+    fn cells_fit_their_column() {
+        assert_eq!(cell(Some(48554.1906)), "48554.1906");
+        assert_eq!(cell(Some(99999.99994)), "99999.9999");
+        // Four decimals would take 11 characters here: the exponent form instead.
+        assert_eq!(cell(Some(99999.99996)), "1.0000e5");
+        assert_eq!(cell(Some(294309.2552)), "2.9431e5");
+        assert_eq!(cell(Some(5.5301e25)), "5.5301e25");
+        assert_eq!(cell(Some(0.0069)), "0.0069");
+        assert_eq!(cell(Some(4.2e-4)), "4.2000e-4");
+        assert_eq!(cell(Some(0.0)), "0.0000");
+        assert_eq!(cell(None), "—");
+        assert_eq!(cell(Some(1e-300)), "1.000e-300");
+        for v in [1e-300, 3.3e-3, 1.0, 12345.678, 1e5, 7.7e7, 1e300] {
+            assert!(cell(Some(v)).len() <= CELL, "{v}: {}", cell(Some(v)));
+        }
+    }
 }

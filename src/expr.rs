@@ -7,7 +7,7 @@
 //! spreads exmex's interpretation cost over the lanes (BENCHMARKS.md).
 
 use crate::error::FieldError;
-use crate::expr_block::{Block, BlockEx, LANES};
+use crate::expr_block::{Block, BlockEx, LANES, ScalarEx};
 use crate::model::Value;
 use exmex::prelude::*;
 use std::collections::{BTreeMap, HashMap};
@@ -28,7 +28,7 @@ pub fn is_reserved(name: &str) -> bool {
 /// same expression parsed over blocks of [`LANES`] time points (`expr_block`).
 #[derive(Clone, Debug)]
 pub struct TimeFn {
-    expr: FlatEx<f64>,
+    expr: ScalarEx,
     /// Values of the expression's variables in exmex's (alphabetical) order.
     vars: Vec<f64>,
     /// Index of `t` in `vars`.
@@ -109,7 +109,7 @@ pub fn compile_entry(
     }
     check_identifiers(text, params, path, allow_t)?;
     let plain = unary_minus_binds_loosely(&expand_exponents(text));
-    let expr = FlatEx::<f64>::parse(&plain).map_err(|e| {
+    let expr = ScalarEx::parse(&plain).map_err(|e| {
         FieldError::new(
             path,
             format!(

@@ -736,10 +736,36 @@ fn diag_close(a: &[f64], b: &[f64], n: usize, tol: f64) -> bool {
     (0..n).all(|i| (a[i * n + i] - b[i * n + i]).abs() <= tol * b[i * n + i].abs())
 }
 
-/// λ = Φ⁻¹((1+P)/2), the two-sided normal quantile (3.14).
+/// λ = Φ⁻¹((1+P)/2), the two-sided normal quantile (3.14): the root of
+/// erfc(λ/√2) = 1 − P, bisected on `libm`'s erfc down to adjacent floats. A quantile
+/// built on the standard library's exp and ln (statrs') differs in its last bits
+/// between the native C library and wasm (P = 0.99 did); this one is the same
+/// arithmetic on every target. `p` in (0, 1).
 pub fn laplace_lambda(p: f64) -> f64 {
-    use statrs::distribution::{ContinuousCDF, Normal};
-    Normal::standard().inverse_cdf((1.0 + p) / 2.0)
+    // 1 − P is exact for P ≥ 1/2 (Sterbenz), and erfc keeps its relative accuracy in
+    // the tail, so λ stays accurate for P near 1.
+    let tail = 1.0 - p;
+    let excess = |x: f64| libm::erfc(x * std::f64::consts::FRAC_1_SQRT_2) - tail;
+    // erfc(x/√2) falls from 1 at 0 to below f64's smallest 1 − P (2⁻⁵³, P < 1)
+    // before x = 40: the root is in the bracket, from which bisection is the same
+    // sequence of operations everywhere.
+    let (mut lo, mut hi) = (0.0f64, 40.0f64);
+    loop {
+        let mid = 0.5 * (lo + hi);
+        if mid <= lo || mid >= hi {
+            break;
+        }
+        if excess(mid) > 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    if excess(lo).abs() <= excess(hi).abs() {
+        lo
+    } else {
+        hi
+    }
 }
 
 /// Averaged (3.24) and weighted (3.25) criteria of one set from its running sums;

@@ -271,3 +271,38 @@ fn steady_state_shortcut_equals_full_recursion() {
         assert!(max_rel(&fast.final_.gain, &full.final_.gain) < 1e-12);
     }
 }
+
+/// λ = Φ⁻¹((1+P)/2): at P = erf(k/√2) it is k (closed form); the textbook quantiles;
+/// and statrs' inverse normal CDF (a second algorithm) over (0, 1).
+#[test]
+fn laplace_lambda_is_the_two_sided_normal_quantile() {
+    use kea_core::analysis::laplace_lambda;
+    use statrs::distribution::{ContinuousCDF, Normal};
+    for (p, k) in [
+        (0.682_689_492_137_085_9, 1.0),
+        (0.954_499_736_103_641_6, 2.0),
+        (0.997_300_203_936_739_8, 3.0),
+    ] {
+        assert!(
+            rel(laplace_lambda(p), k) < 1e-14,
+            "P = {p}: {}",
+            laplace_lambda(p)
+        );
+    }
+    assert!(rel(laplace_lambda(0.95), 1.959_963_984_540_054) < 1e-15);
+    assert!(rel(laplace_lambda(0.99), 2.575_829_303_548_900_4) < 1e-15);
+    let normal = Normal::standard();
+    for i in 1..1000 {
+        let p = i as f64 / 1000.0;
+        let want = normal.inverse_cdf((1.0 + p) / 2.0);
+        assert!(rel(laplace_lambda(p), want) < 1e-12, "P = {p}");
+    }
+    // Near 1 the tail keeps its accuracy: P = 1 − 1e-12 (so 1 − P = 9.999778782798785e-13
+    // in f64), λ = Φ⁻¹(1 − (1 − P)/2) = 7.130509892879273 (scipy's norm.isf((1 − P)/2)).
+    let p = 1.0 - 1e-12;
+    assert!(
+        rel(laplace_lambda(p), 7.130_509_892_879_273) < 1e-13,
+        "{}",
+        laplace_lambda(p)
+    );
+}

@@ -745,27 +745,30 @@ pub fn laplace_lambda(p: f64) -> f64 {
     // 1 − P is exact for P ≥ 1/2 (Sterbenz), and erfc keeps its relative accuracy in
     // the tail, so λ stays accurate for P near 1.
     let tail = 1.0 - p;
-    let excess = |x: f64| libm::erfc(x * std::f64::consts::FRAC_1_SQRT_2) - tail;
     // erfc(x/√2) falls from 1 at 0 to below f64's smallest 1 − P (2⁻⁵³, P < 1)
-    // before x = 40: the root is in the bracket, from which bisection is the same
-    // sequence of operations everywhere.
-    let (mut lo, mut hi) = (0.0f64, 40.0f64);
+    // before x = 40: the root is in the bracket.
+    bisect_root(0.0, 40.0, |x| {
+        tail - libm::erfc(x * std::f64::consts::FRAC_1_SQRT_2)
+    })
+}
+
+/// The root of an increasing g in [lo, hi] (g(lo) ≤ 0 ≤ g(hi)), bisected down to
+/// adjacent floats; of those two, the one where |g| is smaller. From a fixed bracket
+/// this is the same sequence of operations on every target (the quantiles of λ and of
+/// the Monte Carlo's χ² bands rely on it for the same bits natively and in wasm).
+pub(crate) fn bisect_root(mut lo: f64, mut hi: f64, g: impl Fn(f64) -> f64) -> f64 {
     loop {
         let mid = 0.5 * (lo + hi);
         if mid <= lo || mid >= hi {
             break;
         }
-        if excess(mid) > 0.0 {
+        if g(mid) < 0.0 {
             lo = mid;
         } else {
             hi = mid;
         }
     }
-    if excess(lo).abs() <= excess(hi).abs() {
-        lo
-    } else {
-        hi
-    }
+    if g(lo).abs() <= g(hi).abs() { lo } else { hi }
 }
 
 /// Averaged (3.24) and weighted (3.25) criteria of one set from its running sums;

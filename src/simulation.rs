@@ -14,7 +14,7 @@
 //! result is bit-identical for a given seed whatever the executor. Memory is
 //! O(R·N + blocks·chunk), independent of D.
 
-use crate::analysis::{Avg, SetSums, criteria_set, overflowed};
+use crate::analysis::{Avg, SetSums, bisect_root, criteria_set, overflowed};
 use crate::error::{Error, FieldError};
 use crate::inputs::{Inputs, time_err};
 use crate::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym, mul_vec};
@@ -975,23 +975,8 @@ pub fn chi2_band(dof: f64, scale: f64) -> [f64; 2] {
 fn chi2_quantile(dof: f64, p: f64) -> f64 {
     let a = dof / 2.0;
     // Far beyond any quantile the band uses (mean dof, standard deviation √(2 dof)).
-    let (mut lo, mut hi) = (0.0f64, dof + 40.0 * (2.0 * dof).sqrt() + 100.0);
-    loop {
-        let mid = 0.5 * (lo + hi);
-        if mid <= lo || mid >= hi {
-            break;
-        }
-        if gamma_p(a, mid / 2.0) < p {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    if (gamma_p(a, lo / 2.0) - p).abs() <= (gamma_p(a, hi / 2.0) - p).abs() {
-        lo
-    } else {
-        hi
-    }
+    let hi = dof + 40.0 * (2.0 * dof).sqrt() + 100.0;
+    bisect_root(0.0, hi, |x| gamma_p(a, x / 2.0) - p)
 }
 
 /// The regularized lower incomplete gamma function P(a, x), a > 0, x ≥ 0: its power

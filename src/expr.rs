@@ -12,16 +12,24 @@ use crate::model::Value;
 use exmex::prelude::*;
 use std::collections::{BTreeMap, HashMap};
 
-/// Names that are functions or constants in expressions, not parameters.
-const FUNCTIONS: &[&str] = &[
-    "sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "asinh", "acosh", "atanh",
-    "exp", "ln", "log", "log2", "log10", "sqrt", "cbrt", "abs", "signum", "floor", "ceil", "round",
-    "trunc", "fract", "PI", "π", "E",
-];
+/// Names that are functions or constants in expressions, not parameters: every named
+/// entry of the operator table (`expr_block::ScalarOps`), so that a name the parser
+/// knows can never pass for a parameter (a param `e` would otherwise be silently read
+/// as Euler's number).
+fn reserved() -> &'static [&'static str] {
+    static NAMES: std::sync::OnceLock<Vec<&'static str>> = std::sync::OnceLock::new();
+    NAMES.get_or_init(|| {
+        <crate::expr_block::ScalarOps as exmex::MakeOperators<f64>>::make()
+            .iter()
+            .map(|op| op.repr())
+            .filter(|r| r.chars().all(|c| c.is_alphanumeric() || c == '_'))
+            .collect()
+    })
+}
 
 /// Whether `name` is a function or constant of the expression language.
 pub fn is_reserved(name: &str) -> bool {
-    FUNCTIONS.contains(&name)
+    reserved().contains(&name)
 }
 
 /// A time-varying scalar: compiled expression plus its variable vector, and the
@@ -298,7 +306,7 @@ fn check_identifiers(
                 continue;
             }
             let name: String = chars[start..i].iter().map(|(_, c)| *c).collect();
-            if FUNCTIONS.contains(&name.as_str()) || params.contains_key(&name) {
+            if is_reserved(&name) || params.contains_key(&name) {
                 continue;
             }
             if name == "t" {
@@ -639,6 +647,39 @@ mod tests {
             panic!("expected time-varying")
         };
         assert!((f.eval(0.7) - (0.3 * (1.4f64).sin() + 100.0)).abs() < 1e-12);
+    }
+
+    /// The binary functions and every constant pass the identifier check and
+    /// evaluate to their values (they were once rejected as unknown parameters).
+    #[test]
+    fn binary_functions_and_constants_are_known() {
+        let e = compile_entry(
+            &"atan2(t, 2) + min(t, s) + max(t, m) + e + E + PI + π + TAU + τ".into(),
+            &params(),
+            "p",
+            true,
+            0.0,
+        )
+        .unwrap();
+        let Entry::Time(mut f) = e else {
+            panic!("expected time-varying")
+        };
+        let t = 0.7f64;
+        let want = t.atan2(2.0)
+            + t.min(37.17)
+            + t.max(100.0)
+            + 2.0 * std::f64::consts::E
+            + 2.0 * std::f64::consts::PI
+            + 2.0 * std::f64::consts::TAU;
+        assert!((f.eval(t) - want).abs() < 1e-12, "{} vs {want}", f.eval(t));
+        for name in [
+            "e", "E", "PI", "π", "TAU", "τ", "atan2", "min", "max", "sin", "log",
+        ] {
+            assert!(is_reserved(name), "{name}");
+        }
+        for name in ["t", "x", "sinh2", "mass", "+", "^"] {
+            assert!(!is_reserved(name), "{name}");
+        }
     }
 
     #[test]

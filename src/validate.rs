@@ -175,7 +175,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         } else if crate::expr::is_reserved(name) {
             errs.at(
                 &path,
-                format!("\"{name}\" is a function name and cannot be a parameter"),
+                format!("\"{name}\" is a function or constant of the expression language and cannot be a parameter"),
             );
         }
         if !value.is_finite() {

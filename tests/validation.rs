@@ -243,8 +243,17 @@ fn numbers_and_ranges() {
         |v| v["params"]["sin"] = json!(1.0),
         &[],
         "params.sin",
-        "function name",
+        "function or constant",
     );
+    // Constants too: a param `e` was once silently read as Euler's number.
+    for name in ["e", "E", "PI", "TAU", "τ", "atan2", "min", "max"] {
+        expect(
+            |v| v["params"][name] = json!(1.0),
+            &[],
+            &format!("params.{name}"),
+            "function or constant",
+        );
+    }
 }
 
 #[test]

@@ -55,8 +55,37 @@ pub fn run(model: &CompiledModel, progress: &mut dyn Progress) -> Result<Analysi
         }
     };
     let mut result = dispatch(model, steps, false, progress)?;
+    if let Some(w) = selection.as_ref().and_then(unconverged) {
+        result.warnings.insert(0, w);
+    }
     result.step_selection = selection;
     Ok(result)
+}
+
+/// The warning for a step selection that stopped at its cap, with the last measured
+/// difference and the D it would take: Euler's error halves when D doubles, so the
+/// difference falls as 1/D.
+fn unconverged(s: &StepSelection) -> Option<String> {
+    if s.converged {
+        return None;
+    }
+    let last = s
+        .history
+        .iter()
+        .rev()
+        .find_map(|h| h.difference.map(|d| (h.steps, d)));
+    let chosen = s.history.last().map_or(s.max_steps, |h| h.steps);
+    let measured = match last {
+        Some((d, diff)) => format!(
+            "; the difference was {diff:.2e} at D = {d}, so about D = {:.1e} would reach it",
+            d as f64 * diff / s.tolerance
+        ),
+        None => String::new(),
+    };
+    Some(format!(
+        "time.steps \"auto\" did not reach its tolerance {:e} within time.auto.max_steps = {}: the result uses D = {chosen}{measured}; raise time.auto.max_steps or time.auto.tolerance",
+        s.tolerance, s.max_steps
+    ))
 }
 
 /// The filter's covariance recursion alone — (2.1)–(2.7) and the mean (3.3) at every
@@ -641,8 +670,10 @@ impl<'m, const N: usize> Engine<'m, N> {
                 shortcut_used: frozen_at.is_some(),
             }
         });
-        if !invariant && m.steady_state_shortcut {
-            // Nothing to say: the shortcut applies to time-invariant models only.
+        if bound_why.is_none()
+            && let Some(w) = bound_growth(&m.states, &final_, lambda)
+        {
+            warnings.push(w);
         }
         Ok(AnalysisResult {
             steps: self.steps,
@@ -670,6 +701,43 @@ impl<'m, const N: usize> Engine<'m, N> {
             warnings,
         })
     }
+}
+
+/// How many times the covariance's confidence half-width λσ the bound may be at t_end
+/// before a warning says the bound set describes |A|'s growth rather than the filter.
+/// Bounds that follow the filter stay within ≈ 10³ of it (the seed's example: 716 for
+/// η, 652 for χ); the modulus procedure on oscillatory or feedback dynamics grows
+/// geometrically past 10⁶ (the textbook tracker: χ at 6.6·10³² times λσ after 100 s).
+pub const BOUND_GROWTH_WARN: f64 = 1e6;
+
+/// The warning for a bound (η or χ at t_end) above [`BOUND_GROWTH_WARN`] times the
+/// covariance's λσ (open-loop for η, potential for χ), naming the worst state.
+fn bound_growth(states: &[String], f: &Final, lambda: f64) -> Option<String> {
+    let worst = |bound: &[f64], sko: &[f64]| {
+        (0..states.len())
+            .filter(|&i| sko[i] > 0.0 && bound[i].is_finite())
+            .map(|i| (bound[i] / (lambda * sko[i]), i))
+            .fold(None, |w: Option<(f64, usize)>, x| match w {
+                Some(w) if w.0 >= x.0 => Some(w),
+                _ => Some(x),
+            })
+    };
+    let mut parts = Vec::new();
+    for (name, bound, sko, what) in [
+        ("χ", &f.chi, &f.potential_sko, "the potential"),
+        ("η", &f.eta, &f.open_loop_sko, "the open-loop"),
+    ] {
+        if let Some((ratio, i)) = worst(bound, sko).filter(|w| w.0 > BOUND_GROWTH_WARN) {
+            parts.push(format!(
+                "{name} of \"{}\" is {ratio:.1e} times {what} λσ",
+                states[i]
+            ));
+        }
+    }
+    (!parts.is_empty()).then(|| format!(
+        "the bound (modulus procedure) grew far beyond the covariance's confidence interval by t_end ({}): |A| and |I − pC| taken element-wise grow where A and I − pC do not (oscillatory or feedback dynamics), so the bound set's criteria describe that growth rather than the filter; see the covariance set",
+        parts.join("; ")
+    ))
 }
 
 /// The error for a quantity that left f64's range at step k (t).
@@ -947,12 +1015,14 @@ fn build_traces(m: &CompiledModel, dec: Decimator, y_max: &[f64], z_max: &[f64])
     let bucket_steps = dec.bucket_steps();
     let Decimator { t, mut columns, .. } = dec;
     let mut take = |i: usize, s: usize| std::mem::take(&mut columns[s * n + i]);
+    // y always has a value (a mean that overflows stops the run); every other series
+    // is null where it has none (an overflowed bound, an unavailable measurement), and
+    // never a stand-in 0.
     let plain = |v: Vec<Option<f64>>| {
         v.into_iter()
-            .map(|x| x.unwrap_or(0.0))
+            .map(|x| x.unwrap_or(f64::NAN))
             .collect::<Vec<f64>>()
     };
-    let scale = |v: &[f64], by: f64| v.iter().map(|x| x / by).collect::<Vec<f64>>();
     let scale_opt = |v: Vec<Option<f64>>, f: Option<f64>| -> Vec<Option<f64>> {
         v.into_iter()
             .map(|x| match (x, f) {
@@ -967,15 +1037,14 @@ fn build_traces(m: &CompiledModel, dec: Decimator, y_max: &[f64], z_max: &[f64])
         let pair = m.pair_of_state[i];
         let zb = pair.map(|j| z_max[j]);
         let y = plain(take(i, S_Y));
-        let eta = plain(take(i, S_ETA));
-        let chi = plain(take(i, S_CHI));
-        let zeta = pair.map(|_| plain(take(i, S_ZETA)));
-        let measured = pair.map(|_| plain(take(i, S_MEAS)));
+        let eta = take(i, S_ETA);
+        let chi = take(i, S_CHI);
+        let zeta = pair.map(|_| take(i, S_ZETA));
+        let measured = pair.map(|_| take(i, S_MEAS));
         let yb_ok = (yb > 0.0).then_some(yb);
         let zb_ok = zb.filter(|z| *z > 0.0);
-        let rel = |v: &[f64], b: Option<f64>| match b {
-            Some(b) => scale(v, b),
-            None => vec![0.0; v.len()],
+        let rel = |v: &[Option<f64>], b: Option<f64>| -> Vec<Option<f64>> {
+            v.iter().map(|x| x.zip(b).map(|(x, b)| x / b)).collect()
         };
         let local_yz =
             pair.map(|_| scale_opt(take(i, S_RYZ), zb_ok.zip(yb_ok).map(|(z, y)| z / y)));
@@ -991,8 +1060,8 @@ fn build_traces(m: &CompiledModel, dec: Decimator, y_max: &[f64], z_max: &[f64])
             eta,
             zeta,
             chi,
-            potential_sko: plain(take(i, S_POT)),
-            open_loop_sko: plain(take(i, S_OPEN)),
+            potential_sko: take(i, S_POT),
+            open_loop_sko: take(i, S_OPEN),
             measured_sko: measured,
             local_yz,
             local_zx,

@@ -25,6 +25,17 @@ fn cell(x: Option<f64>) -> String {
     }
 }
 
+/// A time for reading: 12 significant digits, so t0 + kΔt's rounding does not show
+/// (15.600000000000001 → 15.6).
+fn short(t: f64) -> String {
+    let r: f64 = format!("{t:.11e}").parse().unwrap_or(t);
+    if r == 0.0 || (1e-4..1e15).contains(&r.abs()) {
+        format!("{r}")
+    } else {
+        format!("{r:e}")
+    }
+}
+
 /// The seed's layout: per state and weighted, bound and covariance side by side.
 pub fn criteria_table(r: &AnalysisResult) -> String {
     let mut s = String::new();
@@ -96,7 +107,7 @@ pub fn criteria_table(r: &AnalysisResult) -> String {
             s,
             "steady state reached at step {} (t = {}){}",
             ss.reached_at_step,
-            ss.t,
+            short(ss.t),
             if ss.shortcut_used {
                 ", shortcut used"
             } else {
@@ -135,24 +146,25 @@ pub fn traces_csv(r: &AnalysisResult) -> String {
     let tr = &r.traces;
     let mut cols: Vec<(String, Vec<Option<f64>>)> = Vec::new();
     let some = |v: &Vec<f64>| v.iter().map(|x| Some(*x)).collect::<Vec<_>>();
+    let opt = |v: &Vec<Option<f64>>| v.clone();
     for st in &tr.states {
         let n = &st.state;
         cols.push((format!("y:{n}"), some(&st.y)));
-        cols.push((format!("eta:{n}"), some(&st.eta)));
+        cols.push((format!("eta:{n}"), opt(&st.eta)));
         if let Some(z) = &st.zeta {
-            cols.push((format!("zeta:{n}"), some(z)));
+            cols.push((format!("zeta:{n}"), opt(z)));
         }
-        cols.push((format!("chi:{n}"), some(&st.chi)));
-        cols.push((format!("potential_sko:{n}"), some(&st.potential_sko)));
-        cols.push((format!("open_loop_sko:{n}"), some(&st.open_loop_sko)));
+        cols.push((format!("chi:{n}"), opt(&st.chi)));
+        cols.push((format!("potential_sko:{n}"), opt(&st.potential_sko)));
+        cols.push((format!("open_loop_sko:{n}"), opt(&st.open_loop_sko)));
         if let Some(z) = &st.measured_sko {
-            cols.push((format!("measured_sko:{n}"), some(z)));
+            cols.push((format!("measured_sko:{n}"), opt(z)));
         }
-        cols.push((format!("rel_y:{n}"), some(&st.rel_y)));
+        cols.push((format!("rel_y:{n}"), opt(&st.rel_y)));
         if let Some(z) = &st.rel_z {
-            cols.push((format!("rel_z:{n}"), some(z)));
+            cols.push((format!("rel_z:{n}"), opt(z)));
         }
-        cols.push((format!("rel_x:{n}"), some(&st.rel_x)));
+        cols.push((format!("rel_x:{n}"), opt(&st.rel_x)));
         if let Some(z) = &st.local_yz {
             cols.push((format!("local_yz:{n}"), z.clone()));
         }
@@ -182,7 +194,16 @@ pub fn traces_csv(r: &AnalysisResult) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{CELL, cell};
+    use super::{CELL, cell, short};
+
+    #[test]
+    fn times_read_short() {
+        assert_eq!(short(0.0 + 156.0 * 0.1), "15.6");
+        assert_eq!(short(-1.0 / 3.0), "-0.333333333333");
+        assert_eq!(short(1e-30), "1e-30");
+        assert_eq!(short(2.5e20), "2.5e20");
+        assert_eq!(short(0.0), "0");
+    }
 
     #[test]
     fn cells_fit_their_column() {

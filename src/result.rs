@@ -169,18 +169,22 @@ pub struct StateTrace {
     pub state: String,
     /// Mean state y.
     pub y: Vec<f64>,
-    /// Bound SKOs (modulus procedure): a-priori η, measured ζ (paired), filtered χ.
-    pub eta: Vec<f64>,
-    pub zeta: Option<Vec<f64>>,
-    pub chi: Vec<f64>,
-    /// Exact SKOs: potential sqrt(R_ii), open-loop sqrt(P^Y_ii), measured sqrt(Rv_jj).
-    pub potential_sko: Vec<f64>,
-    pub open_loop_sko: Vec<f64>,
-    pub measured_sko: Option<Vec<f64>>,
-    /// Relative errors (3.20) of the bound set: D^Y, D^Z, D^X.
-    pub rel_y: Vec<f64>,
-    pub rel_z: Option<Vec<f64>>,
-    pub rel_x: Vec<f64>,
+    /// Bound SKOs (modulus procedure): a-priori η, measured ζ (paired), filtered χ;
+    /// null where the bound overflowed, or (ζ) the measurement was unavailable for a
+    /// whole trace bucket.
+    pub eta: Vec<Option<f64>>,
+    pub zeta: Option<Vec<Option<f64>>>,
+    pub chi: Vec<Option<f64>>,
+    /// Exact SKOs: potential sqrt(R_ii), open-loop sqrt(P^Y_ii) (null where it
+    /// overflowed), measured sqrt(Rv_jj) (null where unavailable).
+    pub potential_sko: Vec<Option<f64>>,
+    pub open_loop_sko: Vec<Option<f64>>,
+    pub measured_sko: Option<Vec<Option<f64>>>,
+    /// Relative errors (3.20) of the bound set: D^Y, D^Z, D^X (null where the SKO is,
+    /// or y_B, z_B is 0).
+    pub rel_y: Vec<Option<f64>>,
+    pub rel_z: Option<Vec<Option<f64>>>,
+    pub rel_x: Vec<Option<f64>>,
     /// Local criteria (3.23), bound set (null where a denominator is zero).
     pub local_yz: Option<Vec<Option<f64>>>,
     pub local_zx: Option<Vec<Option<f64>>>,

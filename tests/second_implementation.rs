@@ -2,6 +2,7 @@
 //! (nalgebra, explicit formulas, whole histories kept in memory) on random
 //! time-varying models.
 
+use kea_core::analysis::BOUND_GROWTH_WARN;
 use kea_core::{AnalysisResult, NoProgress, analyze, covariance_recursion, model_from_value};
 use nalgebra::{DMatrix, DVector};
 use rand::{RngExt, SeedableRng};
@@ -202,6 +203,7 @@ fn close(a: f64, b: f64, tol: f64, what: &str) {
 fn engine_matches_plain_implementation_on_random_time_varying_models() {
     let mut rng = ChaCha8Rng::seed_from_u64(20261121);
     let mut compared_bound = 0;
+    let mut grown = 0;
     for (case, (n, nm)) in [(1, 1), (2, 1), (3, 2), (5, 3), (13, 4), (4, 4)]
         .into_iter()
         .enumerate()
@@ -235,6 +237,15 @@ fn engine_matches_plain_implementation_on_random_time_varying_models() {
             assert!(r.criteria.bound.per_state.iter().all(|s| s.yx.is_none()));
         } else {
             compared_bound += 1;
+            // A finite bound far beyond the covariance's λσ is flagged, and only then.
+            let ratio = |b: f64, var: f64| b / (r.lambda * var.sqrt());
+            let grew = (0..n).any(|i| {
+                ratio(p.chi[i], p.r[(i, i)]) > BOUND_GROWTH_WARN
+                    || ratio(p.eta[i], p.p_y[(i, i)]) > BOUND_GROWTH_WARN
+            });
+            let warned = r.warnings.iter().any(|w| w.contains("grew far beyond"));
+            assert_eq!(warned, grew, "case {case}: growth warning {:?}", r.warnings);
+            grown += usize::from(grew);
         }
         let what = |s: &str| format!("case {case} (N={n}, n={nm}) {s}");
         // matrices: entry-wise differences relative to the largest entry
@@ -277,6 +288,7 @@ fn engine_matches_plain_implementation_on_random_time_varying_models() {
         compared_bound >= 3,
         "only {compared_bound} cases with a finite bound"
     );
+    eprintln!("{compared_bound} finite bounds, {grown} of them flagged as grown");
 }
 
 /// Correlated, singular measurement noise: two measurements share one noise source
@@ -336,6 +348,7 @@ fn schedule_every_second_step_skips_updates_exactly() {
         .zip(&pots)
         .enumerate()
     {
+        let x = x.expect("the potential SKO has a value at every step");
         assert!(((x - y) / y).abs() < 1e-13, "step {}: {x} vs {y}", k + 1);
     }
     // YZ/ZX are averaged over the 5 steps with a measurement only
@@ -373,10 +386,53 @@ fn shortcut_does_not_skip_a_late_measurement_outage() {
             .iter()
             .position(|t| (t - 9.0).abs() < 1e-9)
             .unwrap();
-        r.traces.states[0].potential_sko[i]
+        r.traces.states[0].potential_sko[i].expect("a value at t = 9")
     };
     let steady = full.final_.potential_sko[0];
     assert!(at9(&full) > 1.5 * steady, "{} vs {steady}", at9(&full));
     assert_eq!(at9(&fast), at9(&full));
     assert!(fast.steady_state.as_ref().is_none_or(|s| !s.shortcut_used));
+}
+
+/// After the bound overflows (the tracker over 10⁴ s: |I − pC||A| grows by ≈ 1.07 a
+/// step), its traces are null, not a stand-in 0, while the covariance's go on; the
+/// warning names the step.
+#[test]
+fn an_overflowed_bound_leaves_null_traces() {
+    let m = json!({
+        "params": {"q": 1.0, "r": 0.5},
+        "time": {"t0": 0.0, "t_end": 10000.0, "steps": 100000},
+        "system": {"states": ["position", "velocity"], "a": [[0, 1], [0, 0]],
+                   "b": [[0], [1]], "y0": [100, 10], "eta0": [10, 2], "phi": ["q"]},
+        "measurement": {"names": ["z"], "c": [[1, 0]], "gamma": [[1]], "psi": ["r"]},
+        "options": {"trace_points": 4}
+    });
+    let r = analyze(
+        &model_from_value(m).unwrap(),
+        &Default::default(),
+        &mut NoProgress,
+    )
+    .unwrap();
+    assert!(
+        r.warnings.iter().any(|w| w.contains("overflowed at step")),
+        "{:?}",
+        r.warnings
+    );
+    let last = r.traces.t.len() - 1;
+    for st in &r.traces.states {
+        assert_eq!(st.chi[last], None, "{}", st.state);
+        assert_eq!(st.eta[last], None, "{}", st.state);
+        assert_eq!(st.rel_x[last], None, "{}", st.state);
+        assert!(st.chi[0].is_some_and(|x| x > 0.0), "{}", st.state);
+        assert!(
+            st.potential_sko[last].is_some_and(|x| x > 0.0),
+            "{}",
+            st.state
+        );
+        assert!(
+            st.open_loop_sko[last].is_some_and(|x| x > 0.0),
+            "{}",
+            st.state
+        );
+    }
 }

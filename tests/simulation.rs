@@ -86,7 +86,7 @@ fn matched_filter_sample_variances_lie_in_chi2_bands_around_riccati() {
         for (i, st) in r.traces.states.iter().enumerate() {
             let pot = st.potential_sko[row];
             // The simulation's Riccati agrees with the analysis engine's.
-            let pot_a = analysis.traces.states[i].potential_sko[row];
+            let pot_a = analysis.traces.states[i].potential_sko[row].expect("a value");
             assert!(
                 (pot - pot_a).abs() <= 1e-9 * pot_a,
                 "{}: potential {pot} vs analysis {pot_a} at k={k}",
@@ -279,7 +279,7 @@ fn every_kth_step_schedule_matches_a_hand_computation() {
             "k={k}: simulation R = {} vs hand {big_r}",
             pot * pot
         );
-        let pot_a = analysis.traces.states[0].potential_sko[row];
+        let pot_a = analysis.traces.states[0].potential_sko[row].expect("a value");
         assert!(
             (pot_a * pot_a - big_r).abs() <= 1e-12 * big_r,
             "k={k}: analysis R = {} vs hand {big_r}",

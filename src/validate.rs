@@ -264,6 +264,38 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
             StepPlan::Fixed(1)
         }
     };
+    // The grid t0 + kΔt must be representable: a finite span, and a finest step that
+    // moves t at both ends (t_end = 5e-324 gave Δt = 0; t0 = −1e308, t_end = 1e308 an
+    // infinite span).
+    if t.t0.is_finite() && t.t_end.is_finite() && t.t_end > t.t0 {
+        let span = t.t_end - t.t0;
+        let finest = match steps {
+            StepPlan::Fixed(d) => d,
+            StepPlan::Auto { max_steps, .. } => max_steps,
+        };
+        let dt = span / finest as f64;
+        if !span.is_finite() {
+            errs.at(
+                "time.t_end",
+                format!(
+                    "t_end − t0 = {} − ({}) overflows f64",
+                    num(t.t_end),
+                    num(t.t0)
+                ),
+            );
+        } else if !(t.t0 + dt > t.t0 && t.t_end - dt < t.t_end) {
+            errs.at(
+                "time.steps",
+                format!(
+                    "the step Δt = (t_end − t0)/D = {}/{finest} = {} is below f64's resolution of t on [{}, {}]: use fewer steps or a wider interval",
+                    num(span),
+                    num(dt),
+                    num(t.t0),
+                    num(t.t_end)
+                ),
+            );
+        }
+    }
     let t0 = if t.t0.is_finite() { t.t0 } else { 0.0 };
 
     // --- system
@@ -756,6 +788,13 @@ fn const_vector(
                     errs.at(&p, format!("an SKO must be ≥ 0, got {x}"));
                     0.0
                 }
+                Ok(x) if non_negative && !(x * x).is_finite() => {
+                    errs.at(
+                        &p,
+                        format!("an SKO must be below 1.34e154 (its square, the variance, must be a finite f64), got {x:e}"),
+                    );
+                    0.0
+                }
                 Ok(x) => x,
                 Err(e) => {
                     errs.push(e);
@@ -851,6 +890,16 @@ fn noise_cov(
             let s = (0..dim).map(|i| cov[i * dim + i].max(0.0).sqrt()).collect();
             (cov, s)
         }
+    }
+}
+
+/// A number for a message: plain in [1e-4, 1e15), else in exponent form (never 300
+/// digits).
+fn num(x: f64) -> String {
+    if x == 0.0 || (1e-4..1e15).contains(&x.abs()) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
     }
 }
 

@@ -654,3 +654,58 @@ fn noise_sources_are_limited_before_anything_is_sized_by_them() {
         "M (columns of gamma) = 300000: more than the limit of 200 noise sources",
     );
 }
+
+/// Numbers too large to square, and time grids f64 cannot step through, are named at
+/// their field — not reported as a singular innovation covariance (an infinite one was)
+/// nor run with Δt = 0.
+#[test]
+fn overflows_and_unresolvable_grids() {
+    expect(
+        |v| v["system"]["eta0"][0] = json!(1e200),
+        &[],
+        "system.eta0[0]",
+        "its square, the variance",
+    );
+    expect(
+        |v| v["measurement"]["psi"] = json!(["psi"]),
+        &[("psi", 1e200)],
+        "measurement.psi[0]",
+        "below 1.34e154",
+    );
+    expect(
+        |v| v["measurement"]["gamma"] = json!([["1e200*(1 + t)"]]),
+        &[],
+        "measurement",
+        "measurement-noise covariance Γ V Γᵀ overflowed",
+    );
+    expect(
+        |v| v["system"]["b"] = json!([[0], ["1e300*(1 + t)"]]),
+        &[],
+        "system",
+        "process-noise covariance B = bΔt W (bΔt)ᵀ overflowed",
+    );
+    expect(
+        |v| v["time"]["t_end"] = json!(5e-324),
+        &[],
+        "time.steps",
+        "below f64's resolution",
+    );
+    expect(
+        |v| {
+            v["time"]["t0"] = json!(1e17);
+            v["time"]["t_end"] = json!(1.00000000000001e17);
+        },
+        &[],
+        "time.steps",
+        "below f64's resolution",
+    );
+    expect(
+        |v| {
+            v["time"]["t0"] = json!(-1e308);
+            v["time"]["t_end"] = json!(1e308);
+        },
+        &[],
+        "time.t_end",
+        "overflows f64",
+    );
+}

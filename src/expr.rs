@@ -22,8 +22,8 @@
 //!   `1e-5^2` is (1e-5)².
 //! - There is no implicit multiplication: `2t` and `2(t+1)` are errors (write `2*t`).
 //! - `log` is the natural logarithm, like `ln` (base 10 is `log10`, base 2 `log2`).
-//! - `signum(x)` is Rust's `f64::signum`, the sign bit: `signum(0)` is 1 (not 0, as
-//!   numpy's and MATLAB's `sign` give) and `signum(-0)` is −1.
+//! - `signum(x)` is the sign function of mathematics (numpy's and MATLAB's `sign`):
+//!   −1, 0 or 1 (`signum(0)` is 0, not Rust's `f64::signum`'s 1).
 //! - `round` rounds halves away from zero: `round(2.5)` is 3, `round(-2.5)` is −3.
 
 use crate::error::FieldError;
@@ -872,7 +872,7 @@ fn unknown_function(text: &str, name: &str, path: &str, at: usize) -> FieldError
     let lang = language();
     let hint = match name {
         "pow" => "; for a power write a^b",
-        "sign" | "sgn" => "; the sign function is signum (signum(0) is 1)",
+        "sign" | "sgn" => "; the sign function is signum",
         _ => "",
     };
     FieldError::new(
@@ -1595,8 +1595,9 @@ mod tests {
     /// What the module docs say of `signum`, `log` and `round`.
     #[test]
     fn documented_function_values() {
-        assert_eq!(value("signum(0)"), 1.0);
-        assert_eq!(value("signum(-0)"), -1.0);
+        assert_eq!(value("signum(0)"), 0.0);
+        assert_eq!(value("signum(-0)"), 0.0);
+        assert_eq!(value("signum(1e-300)"), 1.0);
         assert_eq!(value("signum(-2)"), -1.0);
         assert_eq!(value("log(e)"), 1.0);
         assert_eq!(value("log(10)"), value("ln(10)"));

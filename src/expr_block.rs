@@ -126,7 +126,12 @@ macro_rules! operators {
                 },
             ),
             Operator::make_unary("abs", $un!(f64::abs)),
-            Operator::make_unary("signum", $un!(f64::signum)),
+            // The sign function of mathematics (numpy, MATLAB, Julia): 0 at ±0, where
+            // Rust's f64::signum gives ±1; NaN stays NaN.
+            Operator::make_unary(
+                "signum",
+                $un!(|a: f64| if a == 0.0 { a } else { a.signum() }),
+            ),
             Operator::make_unary("sin", $un!(libm::sin)),
             Operator::make_unary("cos", $un!(libm::cos)),
             Operator::make_unary("tan", $un!(libm::tan)),

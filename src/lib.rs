@@ -120,11 +120,62 @@ pub fn estimate_work(model: &Model, set: &Overrides) -> Result<WorkEstimate, Err
 
 /// Parse a model from a JSON value, with serde errors located at their field path.
 pub fn model_from_value(value: serde_json::Value) -> Result<Model, Error> {
+    // Not an object, or without the required parts: say so for all of them at once
+    // (serde would read an array as the fields in order, and name one missing field).
+    let Some(object) = value.as_object() else {
+        return Err(Error::invalid(
+            "",
+            format!(
+                "a model is a JSON object ({{\"kea_model\": 1, \"time\": …, \"system\": …, \"measurement\": …}}), got {}",
+                json_kind(&value)
+            ),
+        ));
+    };
+    let missing: Vec<FieldError> = ["time", "system", "measurement"]
+        .into_iter()
+        .filter(|k| !object.contains_key(*k))
+        .map(|k| {
+            FieldError::new(
+                k,
+                "missing: a model needs time, system and measurement (README, \"Model format\")",
+            )
+        })
+        .collect();
+    if !missing.is_empty() {
+        return Err(Error::Invalid(missing));
+    }
     serde_path_to_error::deserialize(value).map_err(|e| {
         let path = e.path().to_string();
         let path = if path == "." { String::new() } else { path };
-        Error::invalid(path, e.into_inner().to_string())
+        let message = e.into_inner().to_string();
+        // "missing field `x`" at `system` is an error at `system.x`.
+        match message
+            .strip_prefix("missing field `")
+            .and_then(|m| m.strip_suffix('`'))
+        {
+            Some(field) if !field.contains('`') => Error::invalid(
+                if path.is_empty() {
+                    field.to_string()
+                } else {
+                    format!("{path}.{field}")
+                },
+                "missing: this field is required",
+            ),
+            _ => Error::invalid(path, message),
+        }
     })
+}
+
+/// "an array", "a number"… for messages.
+fn json_kind(v: &serde_json::Value) -> &'static str {
+    match v {
+        serde_json::Value::Null => "null",
+        serde_json::Value::Bool(_) => "a boolean",
+        serde_json::Value::Number(_) => "a number",
+        serde_json::Value::String(_) => "a string",
+        serde_json::Value::Array(_) => "an array",
+        serde_json::Value::Object(_) => "an object",
+    }
 }
 
 /// Parse a model from JSON text, with serde errors located at their field path.

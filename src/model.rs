@@ -11,11 +11,41 @@ use std::collections::BTreeMap;
 pub const MODEL_FORMAT_VERSION: u32 = 1;
 
 /// A matrix or vector entry: a number, or an expression in `t` and the params.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum Value {
     Number(f64),
     Expr(String),
+}
+
+/// By hand rather than serde's untagged derive, whose error for anything else is
+/// "data did not match any variant of untagged enum Value".
+impl<'de> Deserialize<'de> for Value {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl serde::de::Visitor<'_> for V {
+            type Value = Value;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a number or an expression string (like \"0.3*sin(2*t)\")")
+            }
+            fn visit_f64<E>(self, x: f64) -> Result<Value, E> {
+                Ok(Value::Number(x))
+            }
+            fn visit_i64<E>(self, x: i64) -> Result<Value, E> {
+                Ok(Value::Number(x as f64))
+            }
+            fn visit_u64<E>(self, x: u64) -> Result<Value, E> {
+                Ok(Value::Number(x as f64))
+            }
+            fn visit_str<E>(self, s: &str) -> Result<Value, E> {
+                Ok(Value::Expr(s.to_string()))
+            }
+            fn visit_string<E>(self, s: String) -> Result<Value, E> {
+                Ok(Value::Expr(s))
+            }
+        }
+        d.deserialize_any(V)
+    }
 }
 
 impl From<f64> for Value {
@@ -70,11 +100,51 @@ pub struct Time {
     pub auto: Option<AutoSteps>,
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum Steps {
     Fixed(u64),
     Auto(String),
+}
+
+/// By hand, for errors that say what is expected (serde's untagged derive says "data
+/// did not match any variant"). A whole number written as a float (`1e6`, `1000.0`)
+/// is D; one beyond u64 is `u64::MAX`, which validation reports as over the limit.
+impl<'de> Deserialize<'de> for Steps {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        struct V;
+        impl serde::de::Visitor<'_> for V {
+            type Value = Steps;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a positive whole number of steps D, or \"auto\"")
+            }
+            fn visit_u64<E>(self, x: u64) -> Result<Steps, E> {
+                Ok(Steps::Fixed(x))
+            }
+            fn visit_i64<E: Error>(self, x: i64) -> Result<Steps, E> {
+                u64::try_from(x).map(Steps::Fixed).map_err(|_| {
+                    E::custom(format!(
+                        "expected a positive whole number of steps D, or \"auto\"; got {x}"
+                    ))
+                })
+            }
+            fn visit_f64<E: Error>(self, x: f64) -> Result<Steps, E> {
+                if x >= 0.0 && x.fract() == 0.0 {
+                    // (as saturates: 2^70 becomes u64::MAX, over the limit)
+                    Ok(Steps::Fixed(x as u64))
+                } else {
+                    Err(E::custom(format!(
+                        "expected a positive whole number of steps D, or \"auto\"; got {x}"
+                    )))
+                }
+            }
+            fn visit_str<E>(self, s: &str) -> Result<Steps, E> {
+                Ok(Steps::Auto(s.to_string()))
+            }
+        }
+        d.deserialize_any(V)
+    }
 }
 
 /// Step-size selection: D, 2D, 4D, … until successive mean solutions agree.

@@ -709,3 +709,58 @@ fn overflows_and_unresolvable_grids() {
         "overflows f64",
     );
 }
+
+/// Wrong JSON types are named with what is expected (serde's untagged enums said "data
+/// did not match any variant"); a whole number written as a float is a step count.
+#[test]
+fn wrong_types_say_what_is_expected() {
+    for bad in [json!(-5), json!(10.5), json!(true), json!([1000])] {
+        expect(
+            |v| v["time"]["steps"] = bad.clone(),
+            &[],
+            "time.steps",
+            "expected a positive whole number of steps D, or \"auto\"",
+        );
+    }
+    for bad in [json!(true), json!(null), json!({}), json!([1])] {
+        expect(
+            |v| v["system"]["a"][1][0] = bad.clone(),
+            &[],
+            "system.a[1][0]",
+            "expected a number or an expression string",
+        );
+    }
+    let mut v = good();
+    v["time"]["steps"] = json!(1e3);
+    let m = model_from_value(v).unwrap();
+    assert_eq!(
+        analyze(&m, &Overrides::new(), &mut NoProgress)
+            .unwrap()
+            .steps,
+        1000
+    );
+}
+
+/// A model that is not an object, or lacks its parts, gets one error per part, each at
+/// its path (serde read an array as the fields in order, and named one missing field
+/// with an empty path).
+#[test]
+fn missing_parts_are_all_named() {
+    let e = model_from_value(json!([1, 2])).unwrap_err().field_errors();
+    assert_eq!(e.len(), 1);
+    assert!(e[0].message.contains("a model is a JSON object"), "{e:?}");
+    assert!(e[0].message.contains("got an array"), "{e:?}");
+    let e = model_from_value(json!({"kea_model": 1}))
+        .unwrap_err()
+        .field_errors();
+    let paths: Vec<&str> = e.iter().map(|f| f.path.as_str()).collect();
+    assert_eq!(paths, ["time", "system", "measurement"]);
+    expect(
+        |v| {
+            v["system"].as_object_mut().unwrap().remove("states");
+        },
+        &[],
+        "system.states",
+        "missing",
+    );
+}

@@ -53,8 +53,8 @@ pub struct Args {
     /// Largest request body, bytes.
     #[arg(long, env = "KEA_MAX_BODY_BYTES", default_value_t = 2 * 1024 * 1024)]
     pub max_body_bytes: usize,
-    /// Largest work (steps × (N³ + 16N² + 200), about 1 ns each) that POST /v1/analyze
-    /// answers synchronously: ≈ half a second.
+    /// Largest estimated work (about 1 ns of one core a unit; openapi.yaml, "Work") that
+    /// POST /v1/analyze answers synchronously: ≈ half a second.
     #[arg(long, env = "KEA_SYNC_WORK_LIMIT", default_value_t = 5e8)]
     pub sync_work_limit: f64,
     /// Largest work accepted at all; above it a request is refused.

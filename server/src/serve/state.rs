@@ -14,7 +14,7 @@ use tokio::sync::{Semaphore, watch};
 pub struct Limits {
     /// Largest request body, bytes.
     pub max_body_bytes: usize,
-    /// Largest work (steps × `kea_core::step_cost(N)`, ≈ ns) answered synchronously by
+    /// Largest work (the estimate of `jobs::cost`, ≈ ns) answered synchronously by
     /// `POST /v1/analyze`.
     pub sync_work: f64,
     /// Largest work accepted at all (a job above this is refused as absurd).

@@ -1,7 +1,8 @@
 //! The `analysis` job kind: `{model, set?}` → the core's analysis result (METHOD §1.2–§1.6).
 
-use super::{JobKind, JobOutput, PreparedJob, Work};
+use super::{JobKind, JobOutput, PreparedJob, Work, cost};
 use crate::serve::request;
+use kea_core::validate::CompiledModel;
 use kea_core::{Error, Model, Overrides, Progress};
 use serde_json::Value;
 use std::time::Instant;
@@ -32,19 +33,27 @@ impl JobKind for Analysis {
 }
 
 /// The work of analysing `model` with `set`: the estimate the server's limits and the
-/// command line's `--max-work` compare (paths relative to the request).
+/// command line's `--max-work` compare (paths relative to the request). Validates the
+/// model.
 pub fn work(model: &Model, set: &Overrides) -> Result<Work, Error> {
-    let estimate = kea_core::estimate_work(model, set)?;
-    Ok(Work {
-        units: estimate.work,
+    let compiled = kea_core::validate::compile(model, set)?;
+    Ok(work_of(&compiled, Some(model)))
+}
+
+/// The work of analysing a compiled model (`model`: its expressions' texts, see
+/// [`cost::Expressions::of`]): D (for `"auto"` the cap) × the step's cost.
+pub fn work_of(compiled: &CompiledModel, model: Option<&Model>) -> Work {
+    let step = cost::AnalysisStep::of(compiled, model);
+    let steps = compiled.max_steps();
+    Work {
+        units: steps as f64 * step.units(),
         explain: format!(
-            "D = {} steps × (N³ + 16N² + 200) = {} (N = {})",
-            estimate.steps,
-            kea_core::step_cost(estimate.states),
-            estimate.states
+            "D = {steps} steps × {:.0} ({})",
+            step.units(),
+            step.explain()
         ),
         path: "model.time.steps".into(),
-    })
+    }
 }
 
 struct Prepared {

@@ -7,6 +7,7 @@
 //! in [`registry`].
 
 pub mod analysis;
+pub mod cost;
 pub mod simulation;
 pub mod synthesis;
 
@@ -31,11 +32,12 @@ pub trait PreparedJob: Send {
     fn run(self: Box<Self>, progress: &mut dyn Progress) -> Result<JobOutput, Error>;
 }
 
-/// A work estimate, in units where 1e8 is roughly a tenth of a second of one core.
+/// A work estimate, in units of about a nanosecond of one core ([`cost`]).
 #[derive(Clone, Debug)]
 pub struct Work {
     pub units: f64,
-    /// How it was computed, for messages (e.g. "D = 1000 steps × (N³ + 16N² + 200) = 328 (N = 2)").
+    /// How it was computed, for messages (e.g. "D = 1000 steps × 272 (N³ + 16N² + 200 =
+    /// 272 (N = 2))"); [`cost`] has the model.
     pub explain: String,
     /// The request field that drives it (for the error path).
     pub path: String,

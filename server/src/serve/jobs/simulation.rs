@@ -1,7 +1,7 @@
 //! The `simulation` job kind: `{model, set?, runs, seed?, truth?, model_error?,
 //! trace_points?}` → the core's Monte Carlo result (METHOD §1.8).
 
-use super::{JobKind, JobOutput, PreparedJob, Work};
+use super::{JobKind, JobOutput, PreparedJob, Work, cost};
 use crate::parallel::Rayon;
 use crate::serve::request;
 use kea_core::simulation::SimulationRequest;
@@ -81,7 +81,7 @@ impl JobKind for Simulation {
         }
         let compiled = kea_core::validate::compile(&model, &set).map_err(request::locate)?;
         kea_core::simulation::check_request(&sim, &compiled)?;
-        let work = work(&compiled, &sim);
+        let work = work_of(&compiled, Some(&model), &sim);
         Ok(Box::new(Prepared {
             model,
             set,
@@ -91,14 +91,29 @@ impl JobKind for Simulation {
     }
 }
 
-/// The work of `sim` on a compiled model: about 3 multiply-adds per runs × steps × N²
-/// (filter, truth, draws).
+/// The work of `sim` on a compiled model, each time-dependent entry counted as a
+/// distinct expression (see [`work_of`], which reads their texts from the model).
 pub fn work(compiled: &CompiledModel, sim: &SimulationRequest) -> Work {
-    let n = compiled.n_states();
+    work_of(compiled, None, sim)
+}
+
+/// The work of `sim` on a compiled model (`model`: its expressions' texts): the
+/// analysis it starts with, then per step the plan (the inputs and a dense Riccati
+/// step, [`cost::simulation_plan_step`]) and every run's step
+/// ([`cost::simulation_run_step`]).
+pub fn work_of(compiled: &CompiledModel, model: Option<&Model>, sim: &SimulationRequest) -> Work {
+    let analysis = super::analysis::work_of(compiled, model);
     let steps = compiled.max_steps();
+    let plan = cost::simulation_plan_step(compiled, model);
+    let run = cost::simulation_run_step(compiled, sim.model_error);
+    let per_run_once = cost::simulation_run_start(compiled, sim.model_error);
+    let runs = sim.runs as f64;
     Work {
-        units: 3.0 * kea_core::simulation::work(sim.runs, steps, n),
-        explain: format!("runs R = {} × D = {steps} steps × N² = {}", sim.runs, n * n),
+        units: analysis.units + steps as f64 * (plan + runs * run) + runs * per_run_once,
+        explain: format!(
+            "the analysis {:.3e} + D = {steps} steps × (the plan {plan:.0} + runs R = {} × {run:.0} per run)",
+            analysis.units, sim.runs
+        ),
         path: "runs".into(),
     }
 }

@@ -30,15 +30,11 @@ impl JobKind for Synthesis {
 /// The work of a synthesis: at most its planned analyses, each the analysis' estimate.
 pub fn work(request: &SynthesisRequest) -> Result<Work, Error> {
     let analyses = synthesis::planned_analyses(request);
-    let one = kea_core::estimate_work(&request.model, &request.set)?;
+    let compiled = kea_core::validate::compile(&request.model, &request.set)?;
+    let one = super::analysis::work_of(&compiled, Some(&request.model));
     Ok(Work {
-        units: one.work * analyses as f64,
-        explain: format!(
-            "at most {analyses} analyses × D = {} steps × (N³ + 16N² + 200) = {} (N = {})",
-            one.steps,
-            kea_core::step_cost(one.states),
-            one.states
-        ),
+        units: one.units * analyses as f64,
+        explain: format!("at most {analyses} analyses × {}", one.explain),
         path: "mode".into(),
     })
 }

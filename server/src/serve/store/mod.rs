@@ -94,7 +94,7 @@ pub struct JobRecord {
     pub status: JobStatus,
     pub progress: f64,
     pub request_json: String,
-    /// The work estimate at submission (kind-specific units, e.g. steps × (N³ + 16N² + 200)).
+    /// The work estimate at submission (`jobs::cost`, about 1 ns of one core a unit).
     pub work: f64,
     pub created_at: String,
     pub started_at: Option<String>,

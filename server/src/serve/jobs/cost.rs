@@ -1,0 +1,347 @@
+//! The work estimate: a cost model of the core's steps, in units of about a
+//! nanosecond of one core. The server's limits (`--sync-work-limit`, `--max-work`) and
+//! the command line's `--max-work` compare it, so it must follow what the engine
+//! does per step (src/analysis.rs, src/inputs.rs, src/simulation.rs), not only N.
+//!
+//! An analysis step costs (units ≈ ns; N states, n measurements, L = columns of b,
+//! M = columns of Γ or g):
+//!
+//! - the engine, whatever varies: N³ + 16N² + 200 ([`kea_core::step_cost`]);
+//! - b(t) varying: re-forming B = bΔt W (bΔt)ᵀ, N·L²/4 (bΔt W, a vectorised product)
+//!   + N(N+1)/2·L (the symmetric product's dot products, ≈ 1 ns a term) + 2NL;
+//! - Γ(t) (or g(t)) varying: Γ V Γᵀ the same way, n·M²/4 + n(n+1)/2·M + 2nM (plus
+//!   n·N·M/4 for Γ = C g), and Rv's factorisation n³/3 + n²N/2;
+//! - a(t) varying: 2N², u(t): 2N; a measurement schedule: n·N + n³/3 + n²N/2 (the
+//!   measurements are prepared again whenever the available ones change);
+//! - each distinct time-dependent expression: 10 + its length in characters (entries
+//!   of one matrix with the same text are evaluated once), plus 2 per entry that
+//!   varies; a schedule's `when` (evaluated point by point): 20 + 4 per character.
+//!
+//! Measured (CPU time of `kea analyze`, a 2-core x86-64 with AVX2, per step, against
+//! the estimate): the presets 175–613 ns against 240–1085; N = 10, L = M = 200, b(t)
+//! of one expression 74 µs against 118 000, of 2000 distinct `sin(k*t)/1e3` 124 µs
+//! against 171 000; N = 100, L = M = 100 577 µs against 1.9e6 (N³ dominates, and the
+//! engine's N³ is pessimistic on this machine). Per distinct expression and step: 1000–2000
+//! `sin(k*t)/1e3` 33–42 ns, `k*t` 16 ns, 39 characters 64 ns, 242 characters 269 ns,
+//! 977 characters 772 ns (a parsed expression is tens of KB, so hundreds of them no
+//! longer fit in the caches).
+//!
+//! A simulation adds the plan's and the runs' steps ([`simulation_plan_step`],
+//! [`simulation_run_step`]); estimated 1.07–2.4 times the CPU time of the presets and of
+//! N = 10, L = M = 200 with 2 to 1000 runs.
+
+use kea_core::Model;
+use kea_core::model::Value;
+use kea_core::schedule::Availability;
+use kea_core::simulation::ModelError;
+use kea_core::validate::{CompiledModel, MeasurementNoise};
+use std::collections::HashSet;
+
+/// The cost of the expressions in t of a model, per step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Expressions {
+    /// Distinct time-dependent texts (per matrix; schedule `when`s not included).
+    pub distinct: usize,
+    /// Their characters.
+    pub chars: usize,
+    /// Entries whose value depends on t.
+    pub entries: usize,
+    /// Schedule `when` expressions and their characters.
+    pub whens: usize,
+    pub when_chars: usize,
+}
+
+/// The characters assumed for an expression whose text is not known.
+const ASSUMED_CHARS: usize = 20;
+
+impl Expressions {
+    /// The expressions of `compiled`, with their texts from `model` when given (else
+    /// every varying entry counts as a distinct expression of 20 characters).
+    pub fn of(compiled: &CompiledModel, model: Option<&Model>) -> Expressions {
+        let mut e = Expressions::default();
+        let sys = model.map(|m| &m.system);
+        let meas = model.map(|m| &m.measurement);
+        let u_rows: Option<Vec<Vec<Value>>> = sys
+            .and_then(|s| s.u.as_ref())
+            .map(|u| u.iter().map(|v| vec![v.clone()]).collect());
+        let noise_rows = meas.and_then(|m| match &compiled.noise {
+            MeasurementNoise::Gamma(_) => m.gamma.as_ref(),
+            MeasurementNoise::SeedG(_) => m.g.as_ref(),
+        });
+        let matrices = [
+            (&compiled.a, sys.map(|s| &s.a)),
+            (&compiled.u, u_rows.as_ref()),
+            (&compiled.b, sys.map(|s| &s.b)),
+            (compiled.noise.matrix(), noise_rows),
+        ];
+        for (m, rows) in matrices {
+            let mut texts = HashSet::new();
+            for i in 0..m.rows * m.cols {
+                if !m.varies(i) {
+                    continue;
+                }
+                e.entries += 1;
+                let text = rows
+                    .and_then(|r| r.get(i / m.cols))
+                    .and_then(|r| r.get(i % m.cols));
+                match text {
+                    Some(Value::Expr(s)) => {
+                        if texts.insert(s.as_str()) {
+                            e.distinct += 1;
+                            e.chars += s.chars().count();
+                        }
+                    }
+                    _ => {
+                        e.distinct += 1;
+                        e.chars += ASSUMED_CHARS;
+                    }
+                }
+            }
+        }
+        if let Some(s) = &compiled.schedule {
+            let texts = meas.and_then(|m| m.schedule.as_ref());
+            for (j, a) in s.items.iter().enumerate() {
+                if let Availability::When(..) = a {
+                    e.whens += 1;
+                    e.when_chars += match texts
+                        .and_then(|t| t.get(j))
+                        .and_then(|s| s.as_ref())
+                        .and_then(|s| s.when.as_ref())
+                    {
+                        Some(Value::Expr(s)) => s.chars().count(),
+                        _ => ASSUMED_CHARS,
+                    };
+                }
+            }
+        }
+        e
+    }
+
+    /// Units per step.
+    pub fn units(&self) -> f64 {
+        (10 * self.distinct + self.chars + 2 * self.entries) as f64
+            + (20 * self.whens + 4 * self.when_chars) as f64
+    }
+}
+
+/// The cost of one analysis step, in parts (for messages).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AnalysisStep {
+    pub n: usize,
+    /// N³ + 16N² + 200.
+    pub engine: f64,
+    /// Re-forming the inputs that vary with t (B, Rv, A, u; the schedule's masks).
+    pub inputs: f64,
+    /// Evaluating the expressions in t.
+    pub expressions: Expressions,
+}
+
+impl AnalysisStep {
+    pub fn of(compiled: &CompiledModel, model: Option<&Model>) -> AnalysisStep {
+        let n = compiled.n_states() as f64;
+        let nm = compiled.n_measurements() as f64;
+        let l = compiled.b.cols as f64;
+        let ms = compiled.noise.sources() as f64;
+        let mut inputs = 0.0;
+        if !compiled.b.is_constant() {
+            inputs += n * l * l / 4.0 + n * (n + 1.0) / 2.0 * l + 2.0 * n * l;
+        }
+        let noise = compiled.noise.matrix();
+        let rv_factor = nm * nm * nm / 3.0 + nm * nm * n / 2.0;
+        if !noise.is_constant() {
+            inputs += nm * ms * ms / 4.0 + nm * (nm + 1.0) / 2.0 * ms + 2.0 * nm * ms + rv_factor;
+            if let MeasurementNoise::SeedG(_) = compiled.noise {
+                inputs += nm * n * ms / 4.0;
+            }
+        }
+        if !compiled.a.is_constant() {
+            inputs += 2.0 * n * n;
+        }
+        if !compiled.u.is_constant() {
+            inputs += 2.0 * n;
+        }
+        if compiled.schedule.is_some() {
+            inputs += nm * n + rv_factor;
+        }
+        AnalysisStep {
+            n: compiled.n_states(),
+            engine: kea_core::step_cost(compiled.n_states()),
+            inputs,
+            expressions: Expressions::of(compiled, model),
+        }
+    }
+
+    /// Units per step.
+    pub fn units(&self) -> f64 {
+        self.engine + self.inputs + self.expressions.units()
+    }
+
+    /// The parts, e.g. "N³ + 16N² + 200 = 2800 (N = 10); inputs in t 114000;
+    /// 2000 expressions in t (31000 characters) 55000".
+    pub fn explain(&self) -> String {
+        let mut s = format!("N³ + 16N² + 200 = {} (N = {})", self.engine, self.n);
+        if self.inputs > 0.0 {
+            s += &format!(" + inputs varying in t {:.0}", self.inputs);
+        }
+        let e = &self.expressions;
+        if e.entries + e.whens > 0 {
+            let count = e.distinct + e.whens;
+            s += &format!(
+                " + {count} expression{} in t ({} characters) {:.0}",
+                if count == 1 { "" } else { "s" },
+                e.chars + e.when_chars,
+                e.units()
+            );
+        }
+        s
+    }
+}
+
+/// The Monte Carlo plan's step, computed once for all runs (src/simulation.rs, `Plan`):
+/// the inputs and expressions as in the analysis, and a dense Riccati step with the
+/// open-loop covariance, 2N³ + 4N²n + 2Nn² + n³, plus 300 of bookkeeping.
+/// Measured: N = 1 330 ns against 303; N = 6, n = 4 1.56 µs against 1.56; N = 30,
+/// n = 5 44 µs against 74; N = 100, n = 5 1.5 ms against 2.2.
+pub fn simulation_plan_step(compiled: &CompiledModel, model: Option<&Model>) -> f64 {
+    let step = AnalysisStep::of(compiled, model);
+    let n = compiled.n_states() as f64;
+    let nm = compiled.n_measurements() as f64;
+    step.inputs
+        + step.expressions.units()
+        + 2.0 * n * n * n
+        + 4.0 * n * n * nm
+        + 2.0 * n * nm * nm
+        + nm * nm * nm
+        + 300.0
+}
+
+/// One run's step (src/simulation.rs, `Block::advance`): the normal draws (≈ 5 ns
+/// each) times the lower-triangular square roots of W and V (L(L+1)/2 and M(M+1)/2
+/// sequential terms, ≈ 1 ns each), and the products over the runs, vectorised (≈ 0.5
+/// ns a term): A Y and A X, bΔt F, Γ Φ, C, the gain, the errors, NEES and NIS. F is
+/// drawn at every step for a white model error only.
+/// Measured (ns): N = 1 22 against 17; N = 6, n = 4 88 against 113; N = 10,
+/// L = M = 20 768 against 927; N = 30, L = M = n = 5 473 against 620; N = 10,
+/// L = M = 200 40 400 against 42 000.
+pub fn simulation_run_step(compiled: &CompiledModel, model_error: ModelError) -> f64 {
+    let n = compiled.n_states();
+    let nm = compiled.n_measurements();
+    let l = match model_error {
+        ModelError::White => compiled.b.cols as f64,
+        ModelError::Constant => 0.0,
+    };
+    let ms = compiled.noise.sources() as f64;
+    let pattern = |m: &kea_core::expr::TimeMatrix, diag: bool| {
+        (0..m.rows * m.cols)
+            .filter(|&i| (diag && i / m.cols == i % m.cols) || m.values[i] != 0.0 || m.varies(i))
+            .count()
+    };
+    let nnz_gamma = match &compiled.noise {
+        MeasurementNoise::Gamma(g) => pattern(g, false),
+        MeasurementNoise::SeedG(_) => nm * compiled.noise.sources(),
+    };
+    let nnz_c = compiled.c.iter().filter(|c| **c != 0.0).count();
+    let products = 2 * pattern(&compiled.a, true)
+        + pattern(&compiled.b, false)
+        + nnz_gamma
+        + nnz_c
+        + n * nm
+        + 3 * n
+        + n * (n + 1) / 2
+        + nm * (nm + 1) / 2;
+    6.0 + 5.0 * (l + ms) + (l * (l + 1.0) + ms * (ms + 1.0)) / 2.0 + 0.5 * products as f64
+}
+
+/// What a run costs once: its initial state and, for a constant model error, F.
+pub fn simulation_run_start(compiled: &CompiledModel, model_error: ModelError) -> f64 {
+    let n = compiled.n_states() as f64;
+    let l = compiled.b.cols as f64;
+    let f = match model_error {
+        ModelError::White => 0.0,
+        ModelError::Constant => 5.0 * l + l * (l + 1.0) / 2.0,
+    };
+    100.0 + 5.0 * n + f
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kea_core::Overrides;
+
+    fn model(json: serde_json::Value) -> (Model, CompiledModel) {
+        let m = kea_core::model_from_value(json).unwrap();
+        let c = kea_core::validate::compile(&m, &Overrides::new()).unwrap();
+        (m, c)
+    }
+
+    /// Two states, two noise sources of each kind; `b` and `gamma` given.
+    fn two_states(b: serde_json::Value, gamma: serde_json::Value) -> serde_json::Value {
+        serde_json::json!({
+            "params": {"k": 2},
+            "time": {"t0": 0, "t_end": 1, "steps": 1000},
+            "system": {"states": ["x", "v"], "a": [[0, 1], [0, 0]], "b": b, "phi": [1, 1]},
+            "measurement": {"names": ["z"], "c": [[1, 0]], "gamma": gamma, "psi": [1, 1]}
+        })
+    }
+
+    #[test]
+    fn a_constant_model_costs_the_engine_step() {
+        let (m, c) = model(two_states(
+            serde_json::json!([[0, "k"], [1, 0]]),
+            serde_json::json!([[1, 0.5]]),
+        ));
+        let step = AnalysisStep::of(&c, Some(&m));
+        assert_eq!(step.inputs, 0.0);
+        assert_eq!(step.expressions, Expressions::default());
+        assert_eq!(step.units(), kea_core::step_cost(2));
+    }
+
+    #[test]
+    fn varying_inputs_cost_their_products_and_expressions_their_length() {
+        // b(t): two entries share one text, the third is another; Γ constant.
+        let (m, c) = model(two_states(
+            serde_json::json!([["sin(t)", "sin(t)"], ["k*t", 0]]),
+            serde_json::json!([[1, 0.5]]),
+        ));
+        let step = AnalysisStep::of(&c, Some(&m));
+        let (n, l) = (2.0, 2.0);
+        assert_eq!(
+            step.inputs,
+            n * l * l / 4.0 + n * (n + 1.0) / 2.0 * l + 2.0 * n * l
+        );
+        let e = step.expressions;
+        assert_eq!((e.distinct, e.chars, e.entries), (2, 6 + 3, 3));
+        assert_eq!(e.units(), (10 * 2 + 9 + 2 * 3) as f64);
+        // Without the texts, every varying entry is an expression of 20 characters.
+        let blind = Expressions::of(&c, None);
+        assert_eq!((blind.distinct, blind.chars, blind.entries), (3, 60, 3));
+    }
+
+    #[test]
+    fn a_varying_noise_matrix_and_a_schedule_cost_their_factorisation() {
+        let mut json = two_states(
+            serde_json::json!([[0, 1], [1, 0]]),
+            serde_json::json!([["1 + t", 0.5]]),
+        );
+        json["measurement"]["schedule"] = serde_json::json!([{"when": "sin(t)"}]);
+        let (m, c) = model(json);
+        let step = AnalysisStep::of(&c, Some(&m));
+        let (n, nm, ms) = (2.0, 1.0, 2.0);
+        let rv_factor = nm * nm * nm / 3.0 + nm * nm * n / 2.0;
+        assert_eq!(
+            step.inputs,
+            nm * ms * ms / 4.0
+                + nm * (nm + 1.0) / 2.0 * ms
+                + 2.0 * nm * ms
+                + rv_factor
+                + nm * n
+                + rv_factor
+        );
+        let e = step.expressions;
+        assert_eq!((e.distinct, e.chars, e.whens, e.when_chars), (1, 5, 1, 6));
+        assert!(
+            step.explain()
+                .contains("2 expressions in t (11 characters)")
+        );
+    }
+}

@@ -203,7 +203,13 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
             params.insert(name.clone(), *value);
         }
     }
-    if !errs.0.is_empty() {
+    // Errors in the version or the params stop here (every expression depends on the
+    // params); an unknown `set` name does not: the model's own errors are listed with it.
+    if errs
+        .0
+        .iter()
+        .any(|e| e.path == "kea_model" || e.path.starts_with("params."))
+    {
         return Err(errs.into_error());
     }
 
@@ -301,6 +307,8 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
     // --- system
     let sys = &model.system;
     let n = sys.states.len();
+    // (Errors in the sizes stop the validation: everything after is sized by them.)
+    let before = errs.0.len();
     if n == 0 {
         errs.at("system.states", "at least one state is needed");
     } else if n > MAX_STATES {
@@ -310,7 +318,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         );
     }
     check_names(&sys.states, "system.states", &mut errs);
-    if !errs.0.is_empty() {
+    if errs.0.len() > before {
         return Err(errs.into_error());
     }
 
@@ -329,6 +337,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
             model.measurement.g.as_ref().and_then(|g| g.first()),
         ),
     ];
+    let before = errs.0.len();
     for (path, what, row) in sources {
         if let Some(row) = row
             && row.len() > MAX_SOURCES
@@ -342,7 +351,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
             );
         }
     }
-    if !errs.0.is_empty() {
+    if errs.0.len() > before {
         return Err(errs.into_error());
     }
 

@@ -764,3 +764,17 @@ fn missing_parts_are_all_named() {
         "missing",
     );
 }
+
+/// An unknown `--set` name is listed with the model's own errors, not instead of them.
+#[test]
+fn an_unknown_override_does_not_hide_the_models_errors() {
+    let mut v = good();
+    v["system"]["a"][1][0] = json!("-s/mass");
+    let m = model_from_value(v).unwrap();
+    let set: Overrides = [("nope".to_string(), 1.0)].into_iter().collect();
+    let e = analyze(&m, &set, &mut NoProgress)
+        .unwrap_err()
+        .field_errors();
+    let paths: Vec<&str> = e.iter().map(|f| f.path.as_str()).collect();
+    assert_eq!(paths, ["set.nope", "system.a[1][0]"], "{e:?}");
+}

@@ -200,7 +200,67 @@ fn analyze_a_preset_by_name_and_write_its_traces_as_csv() {
     let (code, _, err) = kea(&["analyze", "preset:no-such-preset"]);
     assert_eq!(code, 2, "{err}");
     assert!(
-        err.starts_with("model: no preset \"no-such-preset\" (presets: "),
+        err.starts_with("no preset \"no-such-preset\" (presets: "),
         "{err}"
     );
+}
+
+/// Input the user must fix exits 2 before any work, with the file or flag named: a
+/// preset's name given as a file gets a hint, text that is not JSON names its file, a
+/// `--csv` path that cannot be written is refused before the run; synthesize takes
+/// `--model preset:NAME` like the others' `preset:NAME`, and says where a model goes.
+#[test]
+fn input_errors_name_their_source_and_exit_2_up_front() {
+    let (code, _, err) = kea(&["analyze", "cv-tracker"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("(for the preset, write preset:cv-tracker)"),
+        "{err}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, "{\"time\": ").unwrap();
+    let bad = bad.to_str().unwrap();
+    let (code, _, err) = kea(&["analyze", bad]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.starts_with(&format!("{bad}: not valid JSON")), "{err}");
+    let nowhere = dir.path().join("no/such/dir/t.csv");
+    let (code, out, err) = kea(&[
+        "analyze",
+        "preset:seed-example",
+        "--csv",
+        nowhere.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(out.is_empty(), "ran before refusing: {out}");
+    assert!(err.starts_with("cannot write"), "{err}");
+
+    let request = dir.path().join("request.json");
+    std::fs::write(
+        &request,
+        r#"{"target": {"criterion": "yx", "set": "covariance", "threshold": 2}, "mode": {"grid": {"params": [{"name": "r", "values": [0.5, 1]}]}}}"#,
+    )
+    .unwrap();
+    let request = request.to_str().unwrap();
+    let (code, _, err) = kea(&["synthesize", request]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.starts_with("model: missing: give the model in the request, or with --model"),
+        "{err}"
+    );
+    let by_model = kea(&[
+        "synthesize",
+        request,
+        "--model",
+        "preset:cv-tracker",
+        "--json",
+    ]);
+    let by_preset = kea(&["synthesize", request, "--preset", "cv-tracker", "--json"]);
+    assert_eq!(by_model.0, 0, "{}", by_model.2);
+    let strip = |s: &str| {
+        let mut v: Value = serde_json::from_str(s).expect("JSON result");
+        v.as_object_mut().unwrap().remove("timing");
+        v
+    };
+    assert_eq!(strip(&by_model.1), strip(&by_preset.1));
 }

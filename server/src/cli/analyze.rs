@@ -37,6 +37,10 @@ impl Run for Args {
         {
             return code;
         }
+        let csv_file = match self.csv.as_deref().map(super::create_file).transpose() {
+            Ok(f) => f,
+            Err(code) => return code,
+        };
         let start = Instant::now();
         let mut bar = super::Bar::new("analysis");
         let result = kea_core::analyze(&model, &set, &mut bar);
@@ -46,8 +50,8 @@ impl Run for Args {
             Err(e) => return super::report_error(&e),
         };
         result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        if let Some(path) = &self.csv
-            && let Err(code) = super::write_file(path, &kea_core::report::traces_csv(&result))
+        if let (Some(path), Some(file)) = (&self.csv, csv_file)
+            && let Err(code) = super::write_file(file, path, &kea_core::report::traces_csv(&result))
         {
             return code;
         }

@@ -50,28 +50,62 @@ pub fn print_text(text: &str) {
     let _ = std::io::stdout().lock().write_all(text.as_bytes());
 }
 
-/// The model a command names: a JSON file, or `preset:NAME` for a preset. On failure
-/// the reason is on stderr and the exit code is returned.
-pub fn load_model(arg: &str) -> Result<kea_core::Model, ExitCode> {
+/// The JSON a command names: a file, or `preset:NAME` for a preset. Every failure
+/// to get it is the user's to fix (exit 2): an unreadable file (with a hint when a
+/// preset has that name), text that is not JSON (named with the file), an unknown
+/// preset. The reason is on stderr.
+pub fn read_json(arg: &str) -> Result<serde_json::Value, ExitCode> {
+    let invalid = |message: String| {
+        eprintln!("{message}");
+        ExitCode::from(EXIT_INVALID)
+    };
     if let Some(name) = arg.strip_prefix("preset:") {
-        return kea_core::presets::get(name).ok_or_else(|| {
-            eprintln!(
-                "model: no preset \"{name}\" (presets: {})",
-                kea_core::presets::names().join(", ")
-            );
-            ExitCode::from(EXIT_INVALID)
-        });
+        let text = kea_core::presets::get_json(name).ok_or_else(|| invalid(no_preset(name)))?;
+        return serde_json::from_str(text)
+            .map_err(|e| invalid(format!("preset {name}: not valid JSON: {e}")));
     }
     let text = std::fs::read_to_string(arg).map_err(|e| {
-        eprintln!("cannot read {arg}: {e}");
-        ExitCode::from(EXIT_FAILURE)
+        let hint = if kea_core::presets::get_json(arg).is_some() {
+            format!(" (for the preset, write preset:{arg})")
+        } else {
+            String::new()
+        };
+        invalid(format!("cannot read {arg}: {e}{hint}"))
     })?;
-    kea_core::model_from_json(&text).map_err(|e| report_error(&e))
+    serde_json::from_str(&text).map_err(|e| invalid(format!("{arg}: not valid JSON: {e}")))
 }
 
-/// Write `text` to `path`; on failure say so and return the exit code.
-pub fn write_file(path: &std::path::Path, text: &str) -> Result<(), ExitCode> {
-    std::fs::write(path, text).map_err(|e| {
+/// The one wording of an unknown preset, with the list.
+pub fn no_preset(name: &str) -> String {
+    format!(
+        "no preset \"{name}\" (presets: {})",
+        kea_core::presets::names().join(", ")
+    )
+}
+
+/// The model a command names ([`read_json`]), parsed; errors at their field paths.
+pub fn load_model(arg: &str) -> Result<kea_core::Model, ExitCode> {
+    let value = read_json(arg)?;
+    kea_core::model_from_value(value).map_err(|e| report_error(&e))
+}
+
+/// Create (truncate) the file an option names before a run, so that a path that
+/// cannot be written is refused up front (exit 2) rather than after the work.
+pub fn create_file(path: &std::path::Path) -> Result<std::fs::File, ExitCode> {
+    std::fs::File::create(path).map_err(|e| {
+        eprintln!("cannot write {}: {e}", path.display());
+        ExitCode::from(EXIT_INVALID)
+    })
+}
+
+/// Write `text` to a file made by [`create_file`]; on failure say so (exit 1).
+pub fn write_file(
+    mut file: std::fs::File,
+    path: &std::path::Path,
+    text: &str,
+) -> Result<(), ExitCode> {
+    use std::io::Write;
+    file.write_all(text.as_bytes()).map_err(|e| {
         eprintln!("cannot write {}: {e}", path.display());
         ExitCode::from(EXIT_FAILURE)
     })

@@ -48,11 +48,7 @@ impl Run for ShowArgs {
                 ExitCode::SUCCESS
             }
             None => {
-                eprintln!(
-                    "no preset named `{}`; known: {}",
-                    self.name,
-                    kea_core::presets::names().join(", ")
-                );
+                eprintln!("{}", super::no_preset(&self.name));
                 ExitCode::from(super::EXIT_INVALID)
             }
         }

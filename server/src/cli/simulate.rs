@@ -92,6 +92,10 @@ impl Run for Args {
         if let Err(code) = self.limit.check(work) {
             return code;
         }
+        let csv_file = match self.csv.as_deref().map(super::create_file).transpose() {
+            Ok(f) => f,
+            Err(code) => return code,
+        };
         let start = Instant::now();
         let mut bar = super::Bar::new("simulation");
         let result = kea_core::simulation::simulate(&model, &set, &req, &exec, &mut bar);
@@ -101,8 +105,9 @@ impl Run for Args {
             Err(e) => return super::report_error(&e),
         };
         result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        if let Some(path) = &self.csv
-            && let Err(code) = super::write_file(path, &kea_core::simulation::traces_csv(&result))
+        if let (Some(path), Some(file)) = (&self.csv, csv_file)
+            && let Err(code) =
+                super::write_file(file, path, &kea_core::simulation::traces_csv(&result))
         {
             return code;
         }
@@ -135,12 +140,19 @@ pub fn table(r: &SimulationResult, threads: usize) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "Monte Carlo: {} runs × {} steps, seed {}, truth = {:?}, model error = {:?} ({:.0} ms, {threads} threads)",
+        "Monte Carlo: {} runs × {} steps, seed {}, truth = {}, model error = {} ({:.0} ms, {threads} threads)",
         r.request.runs,
         r.steps,
         r.request.seed,
-        r.request.truth,
-        r.request.model_error,
+        // (the names of the JSON and of the flags: process, white…)
+        serde_json::to_value(r.request.truth)
+            .unwrap_or_default()
+            .as_str()
+            .unwrap_or("?"),
+        serde_json::to_value(r.request.model_error)
+            .unwrap_or_default()
+            .as_str()
+            .unwrap_or("?"),
         r.timing.wall_ms
     );
     let _ = writeln!(

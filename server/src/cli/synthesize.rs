@@ -1,4 +1,4 @@
-//! `kea synthesize REQUEST.json [--model FILE | --preset NAME] [--set name=value]…
+//! `kea synthesize REQUEST.json [--model FILE|preset:NAME | --preset NAME] [--set name=value]…
 //! [--threads N] [--json]`: the error levels that reach a desired filtering effect
 //! (METHOD §1.7), on every core.
 
@@ -6,7 +6,6 @@ use crate::Run;
 use crate::parallel::Rayon;
 use kea_core::synthesis::{self, Status};
 use serde_json::Value;
-use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -14,11 +13,11 @@ use std::time::Instant;
 pub struct Args {
     /// The synthesis request (JSON: `target`, `mode`, and `model` unless given below);
     /// see docs/synthesis.md.
-    pub request: PathBuf,
-    /// Take the model from this file (replaces the request's `model`).
+    pub request: String,
+    /// Take the model from this file, or `preset:NAME` (replaces the request's `model`).
     #[arg(long, conflicts_with = "preset")]
-    pub model: Option<PathBuf>,
-    /// Take the model from a preset (see `kea presets`).
+    pub model: Option<String>,
+    /// Take the model from a preset (see `kea presets`): the same as `--model preset:NAME`.
     #[arg(long)]
     pub preset: Option<String>,
     /// Override a model parameter at every point, e.g. `--set c=0.25` (repeatable).
@@ -34,60 +33,35 @@ pub struct Args {
     pub limit: super::WorkLimit,
 }
 
-fn read(path: &PathBuf) -> Result<String, ExitCode> {
-    std::fs::read_to_string(path).map_err(|e| {
-        eprintln!("cannot read {}: {e}", path.display());
-        ExitCode::from(super::EXIT_FAILURE)
-    })
-}
-
 impl Run for Args {
     fn run(self) -> ExitCode {
-        let text = match read(&self.request) {
-            Ok(t) => t,
+        let mut value = match super::read_json(&self.request) {
+            Ok(v) => v,
             Err(c) => return c,
         };
-        let mut value: Value = match serde_json::from_str(&text) {
-            Ok(v) => v,
-            Err(e) => {
-                return super::report_error(&kea_core::Error::invalid(
-                    "",
-                    format!("not valid JSON: {e}"),
-                ));
-            }
-        };
         let Value::Object(obj) = &mut value else {
-            return super::report_error(&kea_core::Error::invalid("", "expected a JSON object"));
+            return super::report_error(&kea_core::Error::invalid(
+                "",
+                "a synthesis request is a JSON object ({\"target\": …, \"mode\": …, \"model\": …}, docs/synthesis.md)",
+            ));
         };
-        let model_text = match (&self.model, &self.preset) {
-            (Some(path), _) => match read(path) {
-                Ok(t) => Some(t),
-                Err(c) => return c,
-            },
-            (None, Some(name)) => match kea_core::presets::get_json(name) {
-                Some(t) => Some(t.to_string()),
-                None => {
-                    eprintln!(
-                        "no preset `{name}` (presets: {})",
-                        kea_core::presets::names().join(", ")
-                    );
-                    return ExitCode::from(super::EXIT_INVALID);
-                }
-            },
+        let model = match (&self.model, &self.preset) {
+            (Some(arg), _) => Some(arg.clone()),
+            (None, Some(name)) => Some(format!("preset:{name}")),
             (None, None) => None,
         };
-        if let Some(t) = model_text {
-            match serde_json::from_str::<Value>(&t) {
+        if let Some(arg) = model {
+            match super::read_json(&arg) {
                 Ok(m) => {
                     obj.insert("model".into(), m);
                 }
-                Err(e) => {
-                    return super::report_error(&kea_core::Error::invalid(
-                        "model",
-                        format!("not valid JSON: {e}"),
-                    ));
-                }
+                Err(c) => return c,
             }
+        } else if !obj.contains_key("model") {
+            return super::report_error(&kea_core::Error::invalid(
+                "model",
+                "missing: give the model in the request, or with --model FILE|preset:NAME",
+            ));
         }
         if !self.set.is_empty() {
             let set = obj

@@ -224,6 +224,21 @@ fn input_errors_name_their_source_and_exit_2_up_front() {
     let (code, _, err) = kea(&["analyze", bad]);
     assert_eq!(code, 2, "{err}");
     assert!(err.starts_with(&format!("{bad}: not valid JSON")), "{err}");
+    // `-` is stdin.
+    let mut child = Command::new(KEA)
+        .args(["analyze", "-", "--json"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("kea runs");
+    let preset = kea(&["preset", "cv-tracker"]).1;
+    std::io::Write::write_all(&mut child.stdin.take().unwrap(), preset.as_bytes()).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let mut piped: Value = serde_json::from_slice(&out.stdout).expect("JSON result");
+    piped.as_object_mut().unwrap().remove("timing");
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    assert_eq!(piped, analyze(&root.join("presets/cv-tracker.json"), false));
     let nowhere = dir.path().join("no/such/dir/t.csv");
     let (code, out, err) = kea(&[
         "analyze",

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The model file (JSON, the format of `kea preset NAME`), or `preset:NAME`.
+    /// The model file (JSON, the format of `kea preset NAME`), `-` for stdin, or `preset:NAME`.
     pub model: String,
     /// Override a model parameter, e.g. `--set q=0.5` (repeatable).
     #[arg(long = "set", value_name = "NAME=VALUE", value_parser = super::parse_override)]

@@ -50,7 +50,7 @@ pub fn print_text(text: &str) {
     let _ = std::io::stdout().lock().write_all(text.as_bytes());
 }
 
-/// The JSON a command names: a file, or `preset:NAME` for a preset. Every failure
+/// The JSON a command names: a file, `-` for stdin, or `preset:NAME` for a preset. Every failure
 /// to get it is the user's to fix (exit 2): an unreadable file (with a hint when a
 /// preset has that name), text that is not JSON (named with the file), an unknown
 /// preset. The reason is on stderr.
@@ -63,6 +63,13 @@ pub fn read_json(arg: &str) -> Result<serde_json::Value, ExitCode> {
         let text = kea_core::presets::get_json(name).ok_or_else(|| invalid(no_preset(name)))?;
         return serde_json::from_str(text)
             .map_err(|e| invalid(format!("preset {name}: not valid JSON: {e}")));
+    }
+    if arg == "-" {
+        let mut text = String::new();
+        std::io::Read::read_to_string(&mut std::io::stdin(), &mut text)
+            .map_err(|e| invalid(format!("cannot read stdin: {e}")))?;
+        return serde_json::from_str(&text)
+            .map_err(|e| invalid(format!("stdin: not valid JSON: {e}")));
     }
     let text = std::fs::read_to_string(arg).map_err(|e| {
         let hint = if kea_core::presets::get_json(arg).is_some() {

@@ -27,7 +27,7 @@ pub enum ModelErrorArg {
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The model file (JSON), or `preset:NAME` for a preset (see `kea presets`).
+    /// The model file (JSON), `-` for stdin, or `preset:NAME` for a preset (see `kea presets`).
     pub model: String,
     /// Number of runs R.
     #[arg(long, default_value_t = 1000)]

@@ -711,3 +711,59 @@ fn heavy_inputs_are_not_answered_synchronously() {
     let per_step = job.json()["work"].as_f64().unwrap() / 500.0;
     assert!((1e5..3e5).contains(&per_step), "{per_step}");
 }
+
+/// Every list route refuses a query it cannot honour with 400 naming the parameter: a
+/// cursor that no page gave (it was read as "from the start"), an empty one (it gave
+/// an empty page) and a repeated parameter (the last one silently won).
+#[test]
+fn list_queries_are_checked() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    for name in ["cv-tracker", "seed-example"] {
+        assert_eq!(s.post("/v1/models", &preset(name)).status, 201);
+    }
+    for _ in 0..2 {
+        let job = s.submit_analysis(preset("cv-tracker"));
+        s.wait_finished(&job, LONG);
+    }
+    let refused = |query: &str, path: &str| {
+        let r = s.get(query);
+        assert_eq!(r.status, 400, "GET {query}: {}", r.text);
+        assert_eq!(r.content_type, "application/problem+json", "{query}");
+        assert_eq!(r.json()["status"], 400);
+        assert_eq!(r.error_paths(), vec![path.to_string()], "GET {query}");
+        r.json()["errors"][0]["message"]
+            .as_str()
+            .unwrap()
+            .to_string()
+    };
+    for list in ["/v1/models", "/v1/jobs"] {
+        let m = refused(&format!("{list}?cursor=garbage"), "cursor");
+        assert!(m.contains("next_cursor"), "{m}");
+        let m = refused(&format!("{list}?cursor="), "cursor");
+        assert!(m.contains("empty"), "{m}");
+        let m = refused(&format!("{list}?limit=1&limit=2"), "limit");
+        assert!(m.contains("2 times"), "{m}");
+        refused(&format!("{list}?limit=1&cursor=x&cursor=y"), "cursor");
+        // A real cursor, but not as the server wrote it.
+        let page = s.get(&format!("{list}?limit=1")).json();
+        let cursor = page["next_cursor"].as_str().unwrap().to_string();
+        refused(
+            &format!("{list}?cursor={}", cursor.to_uppercase()),
+            "cursor",
+        );
+        refused(
+            &format!("{list}?cursor={}", cursor.replace('-', "")),
+            "cursor",
+        );
+        // As written, it continues the listing.
+        let next = s.get(&format!("{list}?limit=1&cursor={cursor}"));
+        assert_eq!(next.status, 200, "{}", next.text);
+        assert_eq!(next.json()["items"].as_array().unwrap().len(), 1);
+    }
+    refused("/v1/jobs?status=queued&status=running", "status");
+    refused("/v1/jobs?status=", "status");
+    let m = refused("/v1/presets?limit=1", "limit");
+    assert!(m.contains("takes none"), "{m}");
+    assert_eq!(s.get("/v1/presets").status, 200);
+}

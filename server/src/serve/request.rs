@@ -216,7 +216,8 @@ pub fn locate(err: kea_core::Error) -> kea_core::Error {
     }
 }
 
-/// Query parameters of the list routes: `limit` (1..=1000, default 50), `cursor`.
+/// Query parameters of the list routes: `limit` (1..=1000, default 50), `cursor` (the
+/// `next_cursor` of the previous page), and the route's `extra` ones; each at most once.
 pub struct ListQuery {
     pub limit: usize,
     pub cursor: Option<String>,
@@ -226,15 +227,18 @@ pub struct ListQuery {
 pub const DEFAULT_PAGE: usize = 50;
 pub const MAX_PAGE: usize = 1000;
 
+/// Read a list route's query string. Unknown, repeated or invalid parameters are a
+/// 400 problem naming each: a cursor is an id a page returned (`next_cursor`), never
+/// empty, so a mistyped or truncated one is refused rather than read as "from the
+/// start".
 pub fn list_query(raw: Option<String>, extra: &[&str]) -> Result<ListQuery, Problem> {
     let mut limit = DEFAULT_PAGE;
     let mut cursor = None;
     let mut rest = BTreeMap::new();
     let mut errors = Vec::new();
-    let pairs: Vec<(String, String)> = match raw.as_deref() {
-        None | Some("") => Vec::new(),
-        Some(q) => serde_urlencoded_pairs(q),
-    };
+    let mut known = vec!["limit", "cursor"];
+    known.extend_from_slice(extra);
+    let pairs = query_pairs(raw.as_deref(), &known, &mut errors);
     for (k, v) in pairs {
         match k.as_str() {
             "limit" => match v.parse::<usize>() {
@@ -244,17 +248,12 @@ pub fn list_query(raw: Option<String>, extra: &[&str]) -> Result<ListQuery, Prob
                     format!("expected an integer from 1 to {MAX_PAGE}, got `{v}`"),
                 )),
             },
-            "cursor" => cursor = Some(v),
-            other if extra.contains(&other) => {
-                rest.insert(k, v);
-            }
+            "cursor" => match check_cursor(&v) {
+                Ok(()) => cursor = Some(v),
+                Err(message) => errors.push(FieldError::new("cursor", message)),
+            },
             _ => {
-                let mut known = vec!["limit", "cursor"];
-                known.extend_from_slice(extra);
-                errors.push(FieldError::new(
-                    k.clone(),
-                    format!("unknown query parameter; known: {}", known.join(", ")),
-                ))
+                rest.insert(k, v);
             }
         }
     }
@@ -266,6 +265,72 @@ pub fn list_query(raw: Option<String>, extra: &[&str]) -> Result<ListQuery, Prob
         cursor,
         rest,
     })
+}
+
+/// Refuse any query parameter (routes that take none).
+pub fn no_query(raw: Option<String>) -> Result<(), Problem> {
+    let mut errors = Vec::new();
+    query_pairs(raw.as_deref(), &[], &mut errors);
+    if errors.is_empty() {
+        Ok(())
+    } else {
+        Err(query_problem(errors))
+    }
+}
+
+/// The decoded pairs of a query string whose names are in `known` and appear once;
+/// one error for each unknown name and each repeated one.
+fn query_pairs(
+    raw: Option<&str>,
+    known: &[&str],
+    errors: &mut Vec<FieldError>,
+) -> Vec<(String, String)> {
+    let pairs = raw.map(serde_urlencoded_pairs).unwrap_or_default();
+    let mut out = Vec::new();
+    for (i, (k, v)) in pairs.iter().enumerate() {
+        let first = pairs.iter().position(|(name, _)| name == k) == Some(i);
+        let count = pairs.iter().filter(|(name, _)| name == k).count();
+        if !known.contains(&k.as_str()) {
+            if first {
+                let message = if known.is_empty() {
+                    "unknown query parameter; this route takes none".to_string()
+                } else {
+                    format!("unknown query parameter; known: {}", known.join(", "))
+                };
+                errors.push(FieldError::new(k.clone(), message));
+            }
+        } else if count > 1 {
+            if first {
+                errors.push(FieldError::new(
+                    k.clone(),
+                    format!("given {count} times; give it once"),
+                ));
+            }
+        } else {
+            out.push((k.clone(), v.clone()));
+        }
+    }
+    out
+}
+
+/// A cursor is the id of the last item of a page: a UUID, lower-case and hyphenated,
+/// as `next_cursor` gives it.
+fn check_cursor(v: &str) -> Result<(), String> {
+    if v.is_empty() {
+        return Err(
+            "empty; omit `cursor` for the first page, or pass the `next_cursor` of the \
+             previous page"
+                .into(),
+        );
+    }
+    match uuid::Uuid::parse_str(v) {
+        Ok(u) if u.hyphenated().to_string() == v => Ok(()),
+        _ => Err(format!(
+            "`{v}` is not a cursor of this server; pass the `next_cursor` of the previous \
+             page (an id such as 0190b2a4-7c1e-7d3a-9f00-2b6c1d8e4f10), or omit it for \
+             the first page"
+        )),
+    }
 }
 
 pub fn query_problem(errors: Vec<FieldError>) -> Problem {

@@ -483,7 +483,13 @@ fn bad_request_corpus() {
             422,
             vec![],
         ),
-        ("/v1/models", json!({"time": 1}), 422, vec!["time"]),
+        ("/v1/models", with("time", json!(1)), 422, vec!["time"]),
+        (
+            "/v1/models",
+            json!({"time": 1}),
+            422,
+            vec!["system", "measurement"],
+        ),
         (
             "/v1/models",
             with("system.states", json!("x")),
@@ -766,4 +772,124 @@ fn list_queries_are_checked() {
     let m = refused("/v1/presets?limit=1", "limit");
     assert!(m.contains("takes none"), "{m}");
     assert_eq!(s.get("/v1/presets").status, 200);
+}
+
+/// Job requests' errors name the member and say what is expected, in the API's words:
+/// serde's "missing field `target`" at the root, "invalid value: map, expected map
+/// with a single key", "invalid type: string \"5\", expected u64" leaked through.
+#[test]
+fn job_request_errors_name_the_member_and_what_is_expected() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    let cv = preset("cv-tracker");
+    let target = json!({"criterion": "yx", "threshold": 2});
+    let bisect = json!({"param": "q", "low": 0.1, "high": 10});
+    let mut bad_t_end = cv.clone();
+    bad_t_end["time"]["t_end"] = json!("soon");
+    let cases: Vec<(Value, Vec<&str>, Vec<&str>)> = vec![
+        (
+            json!({"kind": "synthesis", "model": cv, "mode": {"bisect": bisect}}),
+            vec!["target"],
+            vec!["missing", "criterion", "threshold"],
+        ),
+        (
+            json!({"kind": "synthesis", "model": cv, "target": target}),
+            vec!["mode"],
+            vec!["missing", "seed_search", "bisect", "grid"],
+        ),
+        (
+            json!({"kind": "synthesis", "model": cv}),
+            vec!["target", "mode"],
+            vec!["missing"],
+        ),
+        (
+            json!({"kind": "synthesis", "model": cv, "target": target,
+                   "mode": {"bisect": bisect, "grid": {"params": []}}}),
+            vec!["mode"],
+            vec!["exactly one", "seed_search", "bisect", "grid", "got 2"],
+        ),
+        (
+            json!({"kind": "synthesis", "model": cv, "target": target, "mode": {}}),
+            vec!["mode"],
+            vec!["exactly one", "empty"],
+        ),
+        (
+            json!({"kind": "synthesis", "model": cv, "target": target, "mode": "bisect"}),
+            vec!["mode"],
+            vec!["expected an object", "got a string"],
+        ),
+        (
+            json!({"kind": "synthesis", "model": cv, "target": target, "mode": {"newton": {}}}),
+            vec!["mode.newton"],
+            vec!["unknown mode", "seed_search, bisect, grid"],
+        ),
+        (
+            json!({"kind": "synthesis", "model": cv, "target": {"threshold": 2},
+                   "mode": {"bisect": bisect}}),
+            vec!["target.criterion"],
+            vec!["missing", "yz, zx, yx"],
+        ),
+        (
+            json!({"kind": "synthesis", "model": cv, "target": {"criterion": "yx", "threshold": "2"},
+                   "mode": {"bisect": bisect}}),
+            vec!["target.threshold"],
+            vec!["expected a number", "got a string"],
+        ),
+        (
+            json!({"kind": "synthesis", "model": cv, "target": target,
+                   "mode": {"bisect": {"low": 1, "high": 2}}}),
+            vec!["mode.bisect.param"],
+            vec!["missing", "param"],
+        ),
+        (
+            json!({"kind": "simulation", "model": cv, "runs": "5"}),
+            vec!["runs"],
+            vec!["expected a whole number of runs", "got a string"],
+        ),
+        (
+            json!({"kind": "simulation", "model": cv, "runs": 5, "truth": "real"}),
+            vec!["truth"],
+            vec!["\"process\"", "\"mean\""],
+        ),
+        (
+            json!({"kind": "simulation", "model": cv, "runs": 5, "model_error": 3}),
+            vec!["model_error"],
+            vec!["\"white\"", "\"constant\"", "got 3"],
+        ),
+        (
+            json!({"kind": "analysis", "model": bad_t_end}),
+            vec!["model.time.t_end"],
+            vec!["expected a number", "got a string"],
+        ),
+    ];
+    let serde_words = [
+        "missing field",
+        "invalid type",
+        "invalid value",
+        "single key",
+        "variant",
+        "f64",
+        "u64",
+        "usize",
+        "struct ",
+        "sequence",
+    ];
+    for (body, paths, words) in cases {
+        let r = s.post("/v1/jobs", &body);
+        assert_eq!(r.status, 422, "{body}: {}", r.text);
+        assert_eq!(r.error_paths(), paths, "{}", r.text);
+        let messages: Vec<String> = r.json()["errors"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|e| e["message"].as_str().unwrap().to_string())
+            .collect();
+        let all = messages.join(" | ");
+        for w in &words {
+            assert!(all.contains(w), "`{w}` not in {all}");
+        }
+        for w in serde_words {
+            assert!(!all.contains(w), "serde's `{w}` in {all}");
+        }
+    }
 }

@@ -53,7 +53,8 @@ pub async fn create_model(
     State(state): State<AppState>,
     JsonBody(body): JsonBody,
 ) -> Result<Response, Problem> {
-    let model = kea_core::model_from_value(body.clone()).map_err(Problem::from_core)?;
+    let model = kea_core::model_from_value(body.clone())
+        .map_err(|e| Problem::from_core(request::plain_serde_errors(e, &[])))?;
     kea_core::check(&model, &Default::default()).map_err(Problem::from_core)?;
     let record = ModelRecord {
         id: new_id(),

@@ -4,10 +4,10 @@
 use super::{JobKind, JobOutput, PreparedJob, Work, cost};
 use crate::parallel::Rayon;
 use crate::serve::request;
-use kea_core::simulation::SimulationRequest;
+use kea_core::simulation::{ModelError, SimulationRequest, Truth};
 use kea_core::validate::CompiledModel;
 use kea_core::{Error, FieldError, Model, Overrides, Progress};
-use serde_json::{Map, Value};
+use serde_json::Value;
 
 use std::time::Instant;
 
@@ -36,23 +36,24 @@ impl JobKind for Simulation {
         };
         let mut errors = request::unknown_members(obj, MEMBERS);
         let (model, set) = request::model_and_set(obj, &mut errors);
-        // The simulation's own members, each parsed at its own path.
+        // The simulation's own members, each checked at its own path.
         let mut sim = SimulationRequest::new(0, 0);
-        fn member<T: serde::de::DeserializeOwned>(
-            obj: &Map<String, Value>,
-            name: &str,
-            errors: &mut Vec<FieldError>,
-        ) -> Option<T> {
+        let whole = |name: &str, what: &str, errors: &mut Vec<FieldError>| {
             let v = obj.get(name)?;
-            match serde_json::from_value(v.clone()) {
-                Ok(x) => Some(x),
-                Err(e) => {
-                    errors.push(FieldError::new(name, e.to_string()));
-                    None
-                }
+            let n = v.as_u64();
+            if n.is_none() {
+                errors.push(FieldError::new(
+                    name,
+                    format!("expected {what}, got {}", request::got(v)),
+                ));
             }
-        }
-        match member::<u64>(obj, "runs", &mut errors) {
+            n
+        };
+        match whole(
+            "runs",
+            "a whole number of runs, at least 2 (e.g. 1000)",
+            &mut errors,
+        ) {
             Some(r) => sim.runs = r,
             None if !obj.contains_key("runs") => errors.push(FieldError::new(
                 "runs",
@@ -60,17 +61,60 @@ impl JobKind for Simulation {
             )),
             None => {}
         }
-        if let Some(x) = member(obj, "seed", &mut errors) {
+        if let Some(x) = whole(
+            "seed",
+            "a whole number ≥ 0 (the random streams' seed)",
+            &mut errors,
+        ) {
             sim.seed = x;
         }
-        if let Some(x) = member(obj, "truth", &mut errors) {
-            sim.truth = x;
+        let choice = |name: &str, choices: &[(&str, &str)], errors: &mut Vec<FieldError>| {
+            let v = obj.get(name)?;
+            let found = v
+                .as_str()
+                .and_then(|s| choices.iter().position(|(c, _)| *c == s));
+            if found.is_none() {
+                let list: Vec<String> = choices
+                    .iter()
+                    .map(|(c, what)| format!("\"{c}\" ({what})"))
+                    .collect();
+                errors.push(FieldError::new(
+                    name,
+                    format!("expected {}, got {}", list.join(" or "), request::got(v)),
+                ));
+            }
+            found
+        };
+        match choice(
+            "truth",
+            &[
+                ("process", "the imitated process Y, the Kalman reading"),
+                ("mean", "the mean y, seed 000's reading"),
+            ],
+            &mut errors,
+        ) {
+            Some(0) => sim.truth = Truth::Process,
+            Some(_) => sim.truth = Truth::Mean,
+            None => {}
         }
-        if let Some(x) = member(obj, "model_error", &mut errors) {
-            sim.model_error = x;
+        match choice(
+            "model_error",
+            &[
+                ("white", "F drawn at every step"),
+                ("constant", "F drawn once per run"),
+            ],
+            &mut errors,
+        ) {
+            Some(0) => sim.model_error = ModelError::White,
+            Some(_) => sim.model_error = ModelError::Constant,
+            None => {}
         }
-        if let Some(x) = member(obj, "trace_points", &mut errors) {
-            sim.trace_points = Some(x);
+        if let Some(x) = whole(
+            "trace_points",
+            "a whole number of trace rows (≥ 2)",
+            &mut errors,
+        ) {
+            sim.trace_points = Some(usize::try_from(x).unwrap_or(usize::MAX));
         }
         let sim = Some(sim);
         let (Some(model), Some(sim)) = (model, sim) else {

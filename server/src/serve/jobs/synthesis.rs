@@ -3,12 +3,52 @@
 
 use super::{JobKind, JobOutput, PreparedJob, Work};
 use crate::parallel::Rayon;
+use crate::serve::request as req;
 use kea_core::synthesis::{self, SynthesisRequest};
-use kea_core::{Error, Progress};
+use kea_core::{Error, FieldError, Progress};
 use serde_json::Value;
 use std::time::Instant;
 
 pub struct Synthesis;
+
+/// The members a synthesis request may have (`model_id` is resolved to `model`).
+pub const MEMBERS: &[&str] = &["model", "model_id", "set", "target", "mode"];
+
+/// The modes, the members of `mode` (exactly one).
+pub const MODES: &[&str] = &["seed_search", "bisect", "grid"];
+
+/// What each member of a synthesis request is, for "missing: …" (docs/synthesis.md).
+const HINTS: &[(&str, &str)] = &[
+    (
+        "target",
+        "the desired effect, an object such as {\"criterion\": \"yx\", \"threshold\": 14}",
+    ),
+    ("criterion", "the criterion to reach, one of: yz, zx, yx"),
+    (
+        "threshold",
+        "the least value the criterion must reach (a number > 0)",
+    ),
+    ("params", "the params to search (an array)"),
+    (
+        "param",
+        "the name of the param to search (one of the model's params)",
+    ),
+    ("name", "the name of one of the model's params"),
+    ("low", "the lower end of the param's range (a number > 0)"),
+    (
+        "high",
+        "the upper end of the param's range (a number > low)",
+    ),
+    (
+        "shrink",
+        "the factor in (0, 1) each step multiplies the param by",
+    ),
+    ("values", "the param's values (an array of numbers)"),
+    (
+        "cheaper",
+        "which values of the param cost less: \"higher\" or \"lower\"",
+    ),
+];
 
 impl JobKind for Synthesis {
     fn name(&self) -> &'static str {
@@ -16,14 +56,92 @@ impl JobKind for Synthesis {
     }
 
     fn prepare(&self, request: &Value) -> Result<Box<dyn PreparedJob>, Error> {
-        if !request.is_object() {
+        let Value::Object(obj) = request else {
             return Err(Error::invalid("", "expected a JSON object"));
+        };
+        // The request's shape first, every problem at its member's path; then the
+        // core reads it (its serde messages put plainly).
+        let mut errors = req::unknown_members(obj, MEMBERS);
+        req::model_and_set(obj, &mut errors);
+        match obj.get("target") {
+            None => errors.push(missing("target")),
+            Some(Value::Object(_)) => {}
+            Some(other) => errors.push(FieldError::new(
+                "target",
+                format!(
+                    "expected an object such as {{\"criterion\": \"yx\", \"threshold\": 14}}, got {}",
+                    req::got(other)
+                ),
+            )),
         }
-        // `model_id` was resolved to `model` before a kind sees the request.
-        let request = synthesis::request_from_value(request.clone())?;
+        errors.extend(mode_errors(obj.get("mode")));
+        if !errors.is_empty() {
+            return Err(Error::Invalid(errors));
+        }
+        let request = synthesis::request_from_value(request.clone())
+            .map_err(|e| req::plain_serde_errors(e, HINTS))?;
         synthesis::validate(&request)?;
-        let work = work(&request).map_err(crate::serve::request::locate)?;
+        let work = work(&request).map_err(req::locate)?;
         Ok(Box::new(Prepared { work, request }))
+    }
+}
+
+fn missing(member: &str) -> FieldError {
+    req::plain_serde_error(
+        FieldError::new("", format!("missing field `{member}`")),
+        HINTS,
+    )
+}
+
+/// `mode` must be an object with exactly one member, a mode's name.
+fn mode_errors(mode: Option<&Value>) -> Vec<FieldError> {
+    let one_of = format!(
+        "exactly one of `{}` (docs/synthesis.md), e.g. {{\"bisect\": {{\"param\": \"psi\", \"low\": 1e-6, \"high\": 1e-3}}}}",
+        MODES.join("`, `")
+    );
+    let m = match mode {
+        None => {
+            return vec![FieldError::new(
+                "mode",
+                format!("missing: how to search, an object with {one_of}"),
+            )];
+        }
+        Some(Value::Object(m)) => m,
+        Some(other) => {
+            return vec![FieldError::new(
+                "mode",
+                format!("expected an object with {one_of}, got {}", req::got(other)),
+            )];
+        }
+    };
+    let unknown: Vec<FieldError> = m
+        .keys()
+        .filter(|k| !MODES.contains(&k.as_str()))
+        .map(|k| {
+            FieldError::new(
+                format!("mode.{k}"),
+                format!("unknown mode; expected one of: {}", MODES.join(", ")),
+            )
+        })
+        .collect();
+    if !unknown.is_empty() {
+        return unknown;
+    }
+    let given: Vec<&str> = m.keys().map(String::as_str).collect();
+    match given.len() {
+        1 => Vec::new(),
+        0 => vec![FieldError::new(
+            "mode",
+            format!("expected {one_of}; got an empty object"),
+        )],
+        n => vec![FieldError::new(
+            "mode",
+            format!(
+                "expected exactly one mode of `{}`; got {n}: {} (one synthesis searches one way: submit one job per mode)",
+                MODES.join("`, `"),
+                given.join(", ")
+            ),
+        )],
     }
 }
 

@@ -318,11 +318,20 @@ fn graceful_shutdown_requeues_and_restart_finishes() {
     let dir = tmp();
     let mut s = Server::start(dir.path(), &["--workers", "1", "--shutdown-grace", "0"]);
     let (id, _) = start_long_job(&s);
+    let before = s.get(&format!("/v1/jobs/{id}")).json()["progress"]
+        .as_f64()
+        .unwrap();
     assert!(
         s.terminate(Duration::from_secs(30)),
         "kea serve exits on SIGTERM"
     );
     let s = Server::start(dir.path(), &["--workers", "1"]);
+    // Run again, it shows at least the progress it had reached: never backwards.
+    let again = s.get(&format!("/v1/jobs/{id}")).json();
+    assert!(
+        again["progress"].as_f64().unwrap() >= before,
+        "{again} after {before}"
+    );
     assert_eq!(s.wait_finished(&id, LONG)["status"], "succeeded");
 }
 
@@ -892,4 +901,55 @@ fn job_request_errors_name_the_member_and_what_is_expected() {
             assert!(!all.contains(w), "serde's `{w}` in {all}");
         }
     }
+}
+
+/// What GET /v1/jobs/{id} reports never goes back, around a cancel too (polls showed
+/// 0.0903, then DELETE, then 0.0899: the cancelled job showed the progress last
+/// written to the store), and a requested cancel shows before the job stops.
+#[test]
+fn progress_never_goes_back_and_a_requested_cancel_shows() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &["--workers", "1"]);
+    let id = s.submit_analysis(long_model(50_000_000));
+    let path = format!("/v1/jobs/{id}");
+    let first = s.wait_job(&id, LONG, |j| {
+        j["status"] == "running" && j["progress"].as_f64().unwrap() > 0.0
+    });
+    assert_eq!(first["cancel_requested"], false, "{first}");
+    let mut seen = vec![first["progress"].as_f64().unwrap()];
+    // Long enough for the progress to be written to the store (every 0.5 s).
+    let until = std::time::Instant::now() + Duration::from_millis(800);
+    while std::time::Instant::now() < until {
+        seen.push(s.get(&path).json()["progress"].as_f64().unwrap());
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let c = s.delete(&path);
+    assert_eq!(c.status, 200, "{}", c.text);
+    assert_eq!(c.json()["cancel_requested"], true);
+    seen.push(c.json()["progress"].as_f64().unwrap());
+    let done = loop {
+        let job = s.get(&path).json();
+        assert_eq!(job["cancel_requested"], true, "{job}");
+        seen.push(job["progress"].as_f64().unwrap());
+        if job["status"] != "running" {
+            break job;
+        }
+    };
+    assert_eq!(done["status"], "cancelled", "{done}");
+    for _ in 0..3 {
+        seen.push(s.get(&path).json()["progress"].as_f64().unwrap());
+    }
+    let back: Vec<(f64, f64)> = seen
+        .windows(2)
+        .filter(|w| w[1] < w[0])
+        .map(|w| (w[0], w[1]))
+        .collect();
+    assert!(back.is_empty(), "progress went back: {back:?}");
+    let listed = s.get("/v1/jobs?status=cancelled").json();
+    assert_eq!(listed["items"][0]["cancel_requested"], true);
+    let events = s.events(&format!("{path}/events"));
+    assert_eq!(events.last().unwrap().1["cancel_requested"], true);
+    // A job never asked to cancel says so when it has finished.
+    let other = s.submit_analysis(preset("cv-tracker"));
+    assert_eq!(s.wait_finished(&other, LONG)["cancel_requested"], false);
 }

@@ -17,18 +17,17 @@ use serde_json::{Value, json};
 use std::convert::Infallible;
 use std::time::Duration;
 
-/// The public view of a job.
+/// The public view of a job: the stored record, with the live progress when this
+/// process runs it (fresher than the store's, written every 500 ms). Both only grow,
+/// so the larger is the latest, whichever was read first.
 pub fn job_view(job: &JobRecord, live: Option<Snapshot>) -> Value {
-    let (status, progress) = match live {
-        // The live progress is fresher than the store's (written every 500 ms).
-        Some(s) if s.status == job.status => (job.status, s.progress),
-        _ => (job.status, job.progress),
-    };
+    let progress = live.map_or(job.progress, |s| s.progress.max(job.progress));
     let mut v = json!({
         "id": job.id,
         "kind": job.kind,
-        "status": status,
+        "status": job.status,
         "progress": progress,
+        "cancel_requested": job.cancel_requested,
         "work": job.work,
         "created_at": job.created_at,
         "started_at": job.started_at,
@@ -118,6 +117,7 @@ pub async fn submit(
         finished_at: None,
         error_json: None,
         attempts: 0,
+        cancel_requested: false,
     };
     let pool = state.pool.clone();
     let stored = job.clone();

@@ -34,13 +34,10 @@ pub struct LiveJob {
 }
 
 impl LiveJob {
-    fn new(status: JobStatus) -> Arc<LiveJob> {
+    fn new(status: JobStatus, progress: f64) -> Arc<LiveJob> {
         Arc::new(LiveJob {
             cancel: AtomicBool::new(false),
-            tx: watch::Sender::new(Snapshot {
-                status,
-                progress: 0.0,
-            }),
+            tx: watch::Sender::new(Snapshot { status, progress }),
         })
     }
 
@@ -150,7 +147,10 @@ impl Pool {
         {
             let mut live = self.live.lock().unwrap();
             self.store.insert_job(job)?;
-            live.insert(job.id.clone(), LiveJob::new(JobStatus::Queued));
+            live.insert(
+                job.id.clone(),
+                LiveJob::new(JobStatus::Queued, job.progress),
+            );
         }
         self.wake_one();
         Ok(())
@@ -252,13 +252,15 @@ impl Pool {
         let Some(job) = self.store.claim_next(&now_rfc3339())? else {
             return Ok(None);
         };
+        // A job run again (after a restart) keeps the progress it had reached: it
+        // shows that until the new run passes it, so progress never goes back.
         let entry = live
             .entry(job.id.clone())
-            .or_insert_with(|| LiveJob::new(JobStatus::Running))
+            .or_insert_with(|| LiveJob::new(JobStatus::Running, job.progress))
             .clone();
-        entry.tx.send_replace(Snapshot {
-            status: JobStatus::Running,
-            progress: 0.0,
+        entry.tx.send_modify(|s| {
+            s.status = JobStatus::Running;
+            s.progress = s.progress.max(job.progress);
         });
         Ok(Some((job, entry)))
     }
@@ -278,11 +280,15 @@ impl Pool {
             let prepared = kind.prepare(&request)?;
             let mut last_persist = Instant::now();
             let mut progress = |fraction: f64| {
+                // Never backwards, whatever order the core's parts report in.
                 let fraction = fraction.clamp(0.0, 1.0);
-                live.tx.send_modify(|s| s.progress = fraction);
+                if fraction > live.snapshot().progress {
+                    live.tx
+                        .send_modify(|s| s.progress = s.progress.max(fraction));
+                }
                 if last_persist.elapsed() >= PERSIST_EVERY {
                     last_persist = Instant::now();
-                    if let Err(e) = self.store.set_progress(&job.id, fraction) {
+                    if let Err(e) = self.store.set_progress(&job.id, live.snapshot().progress) {
                         tracing::warn!(error = %e, "cannot record progress");
                     }
                 }
@@ -313,6 +319,11 @@ impl Pool {
             Ok(Err(Error::Cancelled)) => match stop.get() {
                 Some(Stop::Shutdown) => {
                     tracing::info!("interrupted by shutdown: re-queued");
+                    // Recorded before re-queueing: the next run shows it until it passes.
+                    let reached = live.snapshot().progress;
+                    if let Err(e) = self.store.set_progress(&job.id, reached) {
+                        tracing::warn!(error = %e, "cannot record progress");
+                    }
                     self.forget(&job.id, JobStatus::Queued);
                     if let Err(e) = self.store.requeue(&job.id) {
                         tracing::error!(error = %e, "cannot re-queue job");
@@ -341,7 +352,14 @@ impl Pool {
             Outcome::Failed { .. } => JobStatus::Failed,
             Outcome::Cancelled => JobStatus::Cancelled,
         };
-        if let Err(e) = self.store.finish_job(&job.id, &outcome, &now_rfc3339()) {
+        let reached = match status {
+            JobStatus::Succeeded => 1.0,
+            _ => live.snapshot().progress,
+        };
+        if let Err(e) = self
+            .store
+            .finish_job(&job.id, &outcome, reached, &now_rfc3339())
+        {
             tracing::error!(error = %e, "cannot record the job's outcome");
         }
         tracing::info!(

@@ -103,6 +103,8 @@ pub struct JobRecord {
     pub error_json: Option<String>,
     /// How many times a worker has started this job (re-queues count).
     pub attempts: u32,
+    /// A cancel was asked for (`DELETE`), whether or not the job has stopped yet.
+    pub cancel_requested: bool,
 }
 
 /// How a job ended.
@@ -147,19 +149,29 @@ pub trait Store: Send + Sync + 'static {
     fn count_jobs(&self, status: JobStatus) -> Result<u64>;
     /// Atomically take the oldest queued job and mark it running.
     fn claim_next(&self, started_at: &str) -> Result<Option<JobRecord>>;
+    /// Record a running job's progress; it never decreases (a lower value is ignored).
     fn set_progress(&self, id: &str, progress: f64) -> Result<()>;
-    /// Record how a running job ended (with its result, if any).
-    fn finish_job(&self, id: &str, outcome: &Outcome, finished_at: &str) -> Result<()>;
+    /// Record how a running job ended (with its result, if any) and how far it got
+    /// (1 for a success; never below the progress recorded before).
+    fn finish_job(
+        &self,
+        id: &str,
+        outcome: &Outcome,
+        progress: f64,
+        finished_at: &str,
+    ) -> Result<()>;
     /// Record that a cancel was asked for while the job runs (kept with the job, so a
     /// process that stops first does not run it again); false if it is not running.
     fn request_cancel(&self, id: &str) -> Result<bool>;
     /// Put a running job back in the queue (shutdown, crash recovery of one job), or
-    /// mark it cancelled if a cancel was asked for.
+    /// mark it cancelled if a cancel was asked for. Its progress is kept: a run again
+    /// shows it until the new run passes it, so progress never goes back.
     fn requeue(&self, id: &str) -> Result<()>;
     /// [`Store::requeue`] for every running job (start-up after a crash); returns how
     /// many were (re-queued, cancelled).
     fn requeue_all_running(&self) -> Result<(u64, u64)>;
-    /// Cancel a queued job; false if it was not queued.
+    /// Cancel a queued job (recording that a cancel was asked for); false if it was
+    /// not queued.
     fn cancel_queued(&self, id: &str, finished_at: &str) -> Result<bool>;
     /// A finished job's result JSON and traces CSV.
     fn get_result(&self, id: &str) -> Result<Option<(String, Option<String>)>>;

@@ -50,7 +50,7 @@ fn db_err(e: rusqlite::Error) -> StoreError {
 }
 
 const JOB_COLUMNS: &str = "id, kind, status, progress, request_json, work, created_at, \
-                           started_at, finished_at, error_json, attempts";
+                           started_at, finished_at, error_json, attempts, cancel_requested";
 
 fn job_from_row(row: &Row<'_>) -> rusqlite::Result<JobRecord> {
     let status: String = row.get(2)?;
@@ -66,6 +66,7 @@ fn job_from_row(row: &Row<'_>) -> rusqlite::Result<JobRecord> {
         finished_at: row.get(8)?,
         error_json: row.get(9)?,
         attempts: row.get(10)?,
+        cancel_requested: row.get::<_, i64>(11)? != 0,
     })
 }
 
@@ -136,7 +137,7 @@ impl SqliteStore {
                 params![id, finished_at],
             )?;
             let requeued = tx.execute(
-                "UPDATE jobs SET status = 'queued', started_at = NULL, progress = 0
+                "UPDATE jobs SET status = 'queued', started_at = NULL
                  WHERE status = 'running' AND (?1 IS NULL OR id = ?1)",
                 params![id],
             )?;
@@ -274,7 +275,7 @@ impl Store for SqliteStore {
         self.with(|c| {
             c.query_row(
                 &format!(
-                    "UPDATE jobs SET status = 'running', started_at = ?1, progress = 0,
+                    "UPDATE jobs SET status = 'running', started_at = ?1,
                         attempts = attempts + 1
                      WHERE id = (SELECT id FROM jobs WHERE status = 'queued'
                                  ORDER BY rowid LIMIT 1)
@@ -290,14 +291,21 @@ impl Store for SqliteStore {
     fn set_progress(&self, id: &str, progress: f64) -> Result<()> {
         self.with(|c| {
             c.execute(
-                "UPDATE jobs SET progress = ?2 WHERE id = ?1 AND status = 'running'",
+                "UPDATE jobs SET progress = max(progress, ?2)
+                 WHERE id = ?1 AND status = 'running'",
                 params![id, progress],
             )
             .map(|_| ())
         })
     }
 
-    fn finish_job(&self, id: &str, outcome: &Outcome, finished_at: &str) -> Result<()> {
+    fn finish_job(
+        &self,
+        id: &str,
+        outcome: &Outcome,
+        progress: f64,
+        finished_at: &str,
+    ) -> Result<()> {
         self.with(|c| {
             let tx = c.transaction()?;
             match outcome {
@@ -318,15 +326,18 @@ impl Store for SqliteStore {
                 }
                 Outcome::Failed { error_json } => {
                     tx.execute(
-                        "UPDATE jobs SET status = 'failed', finished_at = ?2, error_json = ?3
+                        "UPDATE jobs SET status = 'failed', finished_at = ?2, error_json = ?3,
+                            progress = max(progress, ?4)
                          WHERE id = ?1",
-                        params![id, finished_at, error_json],
+                        params![id, finished_at, error_json, progress],
                     )?;
                 }
                 Outcome::Cancelled => {
                     tx.execute(
-                        "UPDATE jobs SET status = 'cancelled', finished_at = ?2 WHERE id = ?1",
-                        params![id, finished_at],
+                        "UPDATE jobs SET status = 'cancelled', finished_at = ?2,
+                            progress = max(progress, ?3)
+                         WHERE id = ?1",
+                        params![id, finished_at, progress],
                     )?;
                 }
             }
@@ -355,7 +366,7 @@ impl Store for SqliteStore {
     fn cancel_queued(&self, id: &str, finished_at: &str) -> Result<bool> {
         self.with(|c| {
             c.execute(
-                "UPDATE jobs SET status = 'cancelled', finished_at = ?2
+                "UPDATE jobs SET status = 'cancelled', finished_at = ?2, cancel_requested = 1
                  WHERE id = ?1 AND status = 'queued'",
                 params![id, finished_at],
             )
@@ -403,6 +414,7 @@ mod tests {
             finished_at: None,
             error_json: None,
             attempts: 0,
+            cancel_requested: false,
         }
     }
 
@@ -432,6 +444,7 @@ mod tests {
                 result_json: "{\"x\":1}".into(),
                 traces_csv: Some("t\n0\n".into()),
             },
+            1.0,
             &now_rfc3339(),
         )
         .unwrap();
@@ -476,6 +489,37 @@ mod tests {
         assert_eq!(s.get_job(&b).unwrap().unwrap().status, JobStatus::Queued);
         assert_eq!(s.claim_next(&now_rfc3339()).unwrap().unwrap().id, b);
         assert!(s.claim_next(&now_rfc3339()).unwrap().is_none());
+    }
+
+    #[test]
+    fn progress_never_decreases_and_a_cancel_request_is_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = SqliteStore::open(dir.path()).unwrap();
+        let (a, b) = (new_id(), new_id());
+        s.insert_job(&job(&a)).unwrap();
+        s.insert_job(&job(&b)).unwrap();
+        let progress = |id: &str| s.get_job(id).unwrap().unwrap().progress;
+        s.claim_next(&now_rfc3339()).unwrap().unwrap();
+        s.set_progress(&a, 0.5).unwrap();
+        s.set_progress(&a, 0.3).unwrap();
+        assert_eq!(progress(&a), 0.5);
+        // Re-queued and run again: it keeps what it had reached.
+        s.requeue(&a).unwrap();
+        assert_eq!(progress(&a), 0.5);
+        let again = s.claim_next(&now_rfc3339()).unwrap().unwrap();
+        assert_eq!((again.id.as_str(), again.progress), (a.as_str(), 0.5));
+        assert!(!again.cancel_requested);
+        assert!(s.request_cancel(&a).unwrap());
+        assert!(s.get_job(&a).unwrap().unwrap().cancel_requested);
+        s.finish_job(&a, &Outcome::Cancelled, 0.4, &now_rfc3339())
+            .unwrap();
+        assert_eq!(progress(&a), 0.5);
+        let done = s.get_job(&a).unwrap().unwrap();
+        assert_eq!(done.status, JobStatus::Cancelled);
+        assert!(done.cancel_requested);
+        // A queued job cancelled at once records the request too.
+        assert!(s.cancel_queued(&b, &now_rfc3339()).unwrap());
+        assert!(s.get_job(&b).unwrap().unwrap().cancel_requested);
     }
 
     #[test]

@@ -6,6 +6,7 @@ mod common;
 
 use common::{Server, preset};
 use serde_json::{Value, json};
+use std::cell::RefCell;
 use std::collections::BTreeSet;
 
 fn spec() -> Value {
@@ -47,109 +48,185 @@ fn every_served_route_is_in_the_spec_and_vice_versa() {
 
 /// A small JSON Schema validator for the subset openapi.yaml uses: type (or a list),
 /// required, properties, additionalProperties, items, enum, const, oneOf, allOf,
-/// minimum, maximum and local `$ref`s.
-fn validate(root: &Value, schema: &Value, v: &Value, path: &str, errors: &mut Vec<String>) {
-    if let Some(r) = schema.get("$ref").and_then(Value::as_str) {
+/// minimum, maximum, exclusiveMinimum, exclusiveMaximum and local `$ref`s.
+///
+/// Stricter than JSON Schema in one way, on purpose: an object schema that lists
+/// `properties` and says nothing of `additionalProperties` is closed (with the
+/// properties of its `allOf` siblings), so a member the server sends that the spec
+/// does not document is an error. It records the `$ref`s it followed, so a test can
+/// check that every schema a response can use was met by a real response.
+struct Validator<'a> {
+    root: &'a Value,
+    visited: RefCell<BTreeSet<String>>,
+}
+
+impl<'a> Validator<'a> {
+    fn new(root: &'a Value) -> Self {
+        Validator {
+            root,
+            visited: RefCell::new(BTreeSet::new()),
+        }
+    }
+
+    fn resolve(&self, r: &str) -> &'a Value {
         let target = r
             .trim_start_matches("#/")
             .split('/')
-            .fold(root, |node, key| &node[key]);
+            .fold(self.root, |node, key| &node[key]);
         assert!(!target.is_null(), "dangling $ref {r}");
-        return validate(root, target, v, path, errors);
+        target
     }
-    if let Some(t) = schema.get("type") {
-        let types: Vec<&str> = match t {
-            Value::String(s) => vec![s.as_str()],
-            Value::Array(a) => a.iter().filter_map(Value::as_str).collect(),
-            _ => vec![],
-        };
-        let ok = types.iter().any(|t| match *t {
-            "object" => v.is_object(),
-            "array" => v.is_array(),
-            "string" => v.is_string(),
-            "number" => v.is_number(),
-            "integer" => v.is_u64() || v.is_i64(),
-            "boolean" => v.is_boolean(),
-            "null" => v.is_null(),
-            _ => false,
-        });
-        if !ok {
-            errors.push(format!("{path}: expected {types:?}, got {v}"));
-            return;
+
+    /// The property names `schema` documents, through `$ref`s and `allOf`.
+    fn property_names(&self, schema: &Value, out: &mut BTreeSet<String>) {
+        if let Some(r) = schema.get("$ref").and_then(Value::as_str) {
+            return self.property_names(self.resolve(r), out);
+        }
+        if let Some(p) = schema.get("properties").and_then(Value::as_object) {
+            out.extend(p.keys().cloned());
+        }
+        for s in schema
+            .get("allOf")
+            .and_then(Value::as_array)
+            .into_iter()
+            .flatten()
+        {
+            self.property_names(s, out);
         }
     }
-    if let Some(c) = schema.get("const") {
-        if c != v {
-            errors.push(format!("{path}: expected {c}, got {v}"));
-        }
+
+    fn check(&self, schema: &Value, v: &Value, path: &str, errors: &mut Vec<String>) {
+        self.check_with(schema, v, path, &BTreeSet::new(), errors)
     }
-    if let Some(e) = schema.get("enum").and_then(Value::as_array) {
-        if !e.contains(v) {
-            errors.push(format!("{path}: {v} not in {e:?}"));
+
+    /// `siblings`: property names documented by the `allOf` this schema is part of.
+    fn check_with(
+        &self,
+        schema: &Value,
+        v: &Value,
+        path: &str,
+        siblings: &BTreeSet<String>,
+        errors: &mut Vec<String>,
+    ) {
+        if let Some(r) = schema.get("$ref").and_then(Value::as_str) {
+            self.visited.borrow_mut().insert(r.to_string());
+            return self.check_with(self.resolve(r), v, path, siblings, errors);
         }
-    }
-    if let (Some(min), Some(x)) = (schema.get("minimum").and_then(Value::as_f64), v.as_f64()) {
-        if x < min {
-            errors.push(format!("{path}: {x} < {min}"));
+        if let Some(t) = schema.get("type") {
+            let types: Vec<&str> = match t {
+                Value::String(s) => vec![s.as_str()],
+                Value::Array(a) => a.iter().filter_map(Value::as_str).collect(),
+                _ => vec![],
+            };
+            let ok = types.iter().any(|t| match *t {
+                "object" => v.is_object(),
+                "array" => v.is_array(),
+                "string" => v.is_string(),
+                "number" => v.is_number(),
+                "integer" => v.is_u64() || v.is_i64(),
+                "boolean" => v.is_boolean(),
+                "null" => v.is_null(),
+                _ => false,
+            });
+            if !ok {
+                errors.push(format!("{path}: expected {types:?}, got {v}"));
+                return;
+            }
         }
-    }
-    if let (Some(max), Some(x)) = (schema.get("maximum").and_then(Value::as_f64), v.as_f64()) {
-        if x > max {
-            errors.push(format!("{path}: {x} > {max}"));
+        if let Some(c) = schema.get("const") {
+            if c != v {
+                errors.push(format!("{path}: expected {c}, got {v}"));
+            }
         }
-    }
-    if let Some(all) = schema.get("allOf").and_then(Value::as_array) {
-        for s in all {
-            validate(root, s, v, path, errors);
+        if let Some(e) = schema.get("enum").and_then(Value::as_array) {
+            if !e.contains(v) {
+                errors.push(format!("{path}: {v} not in {e:?}"));
+            }
         }
-    }
-    if let Some(one) = schema.get("oneOf").and_then(Value::as_array) {
-        let passing = one
-            .iter()
-            .filter(|s| {
-                let mut e = Vec::new();
-                validate(root, s, v, path, &mut e);
-                e.is_empty()
-            })
-            .count();
-        if passing != 1 {
-            errors.push(format!(
-                "{path}: matches {passing} of oneOf, expected exactly 1"
-            ));
-        }
-    }
-    if let Some(obj) = v.as_object() {
-        if let Some(req) = schema.get("required").and_then(Value::as_array) {
-            for r in req.iter().filter_map(Value::as_str) {
-                if !obj.contains_key(r) {
-                    errors.push(format!("{path}: missing `{r}`"));
+        if let Some(x) = v.as_f64() {
+            let bound = |k: &str| schema.get(k).and_then(Value::as_f64);
+            for (k, bad) in [
+                ("minimum", bound("minimum").is_some_and(|b| x < b)),
+                ("maximum", bound("maximum").is_some_and(|b| x > b)),
+                (
+                    "exclusiveMinimum",
+                    bound("exclusiveMinimum").is_some_and(|b| x <= b),
+                ),
+                (
+                    "exclusiveMaximum",
+                    bound("exclusiveMaximum").is_some_and(|b| x >= b),
+                ),
+            ] {
+                if bad {
+                    errors.push(format!("{path}: {x} breaks {k} {}", schema[k]));
                 }
             }
         }
-        let props = schema.get("properties").and_then(Value::as_object);
-        for (k, x) in obj {
-            let sub = format!("{path}.{k}");
-            match props.and_then(|p| p.get(k)) {
-                Some(s) => validate(root, s, x, &sub, errors),
-                None => match schema.get("additionalProperties") {
-                    Some(Value::Bool(false)) => errors.push(format!("{sub}: not allowed")),
-                    Some(s @ Value::Object(_)) => validate(root, s, x, &sub, errors),
-                    _ => {}
-                },
+        if let Some(all) = schema.get("allOf").and_then(Value::as_array) {
+            let mut names = siblings.clone();
+            self.property_names(schema, &mut names);
+            for s in all {
+                self.check_with(s, v, path, &names, errors);
+            }
+        }
+        if let Some(one) = schema.get("oneOf").and_then(Value::as_array) {
+            let passing = one
+                .iter()
+                .filter(|s| {
+                    let mut e = Vec::new();
+                    self.check_with(s, v, path, siblings, &mut e);
+                    e.is_empty()
+                })
+                .count();
+            if passing != 1 {
+                errors.push(format!(
+                    "{path}: matches {passing} of oneOf, expected exactly 1"
+                ));
+            }
+        }
+        if let Some(obj) = v.as_object() {
+            if let Some(req) = schema.get("required").and_then(Value::as_array) {
+                for r in req.iter().filter_map(Value::as_str) {
+                    if !obj.contains_key(r) {
+                        errors.push(format!("{path}: missing `{r}`"));
+                    }
+                }
+            }
+            let props = schema.get("properties").and_then(Value::as_object);
+            for (k, x) in obj {
+                let sub = format!("{path}.{k}");
+                match props.and_then(|p| p.get(k)) {
+                    Some(s) => self.check(s, x, &sub, errors),
+                    None => match schema.get("additionalProperties") {
+                        Some(Value::Bool(false)) if !siblings.contains(k) => {
+                            errors.push(format!("{sub}: not allowed"))
+                        }
+                        Some(s @ Value::Object(_)) => self.check(s, x, &sub, errors),
+                        // Closed unless the spec says otherwise (see above).
+                        None if props.is_some() && !siblings.contains(k) => {
+                            errors.push(format!("{sub}: not documented"))
+                        }
+                        _ => {}
+                    },
+                }
+            }
+        }
+        if let (Some(items), Some(arr)) = (schema.get("items"), v.as_array()) {
+            for (i, x) in arr.iter().enumerate() {
+                self.check(items, x, &format!("{path}[{i}]"), errors);
             }
         }
     }
-    if let (Some(items), Some(arr)) = (schema.get("items"), v.as_array()) {
-        for (i, x) in arr.iter().enumerate() {
-            validate(root, items, x, &format!("{path}[{i}]"), errors);
-        }
+
+    fn expect(&self, schema: &Value, v: &Value, what: &str) {
+        let mut errors = Vec::new();
+        self.check(schema, v, "", &mut errors);
+        assert!(errors.is_empty(), "{what} does not validate: {errors:#?}");
     }
 }
 
 fn check(spec: &Value, schema: &Value, v: &Value, what: &str) {
-    let mut errors = Vec::new();
-    validate(spec, schema, v, "", &mut errors);
-    assert!(errors.is_empty(), "{what} does not validate: {errors:#?}");
+    Validator::new(spec).expect(schema, v, what)
 }
 
 /// The spec path template matching a concrete path (`/v1/jobs/abc` → `/v1/jobs/{id}`).
@@ -255,10 +332,135 @@ fn readme_examples_validate_against_the_spec() {
     }
 }
 
-/// Real responses of the running server validate against the documented schemas.
+/// `Analysis` for `analysis`: the prefix of a kind's schemas (`AnalysisJobRequest`,
+/// `AnalysisResult`).
+fn camel(kind: &str) -> String {
+    kind.split('_')
+        .map(|w| {
+            let mut c = w.chars();
+            c.next()
+                .map(|f| f.to_uppercase().collect::<String>() + c.as_str())
+                .unwrap_or_default()
+        })
+        .collect()
+}
+
+/// The `$ref`s of a `oneOf`.
+fn one_of_refs(schema: &Value) -> BTreeSet<String> {
+    schema["oneOf"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no oneOf in {schema}"))
+        .iter()
+        .map(|s| s["$ref"].as_str().unwrap().to_string())
+        .collect()
+}
+
+/// Every job kind the server runs is in the spec, and nothing else: `JobKind`, the
+/// request's `oneOf` and its discriminator, a `<Kind>JobRequest` whose `kind` is the
+/// kind, and a `<Kind>Result` among the result's `oneOf`. (The spec once listed two
+/// of the three kinds, with `additionalProperties: false`.)
+#[test]
+fn the_spec_knows_every_job_kind() {
+    let spec = spec();
+    let schemas = &spec["components"]["schemas"];
+    let kinds: BTreeSet<String> = kea_server::serve::jobs::registry()
+        .names()
+        .into_iter()
+        .map(String::from)
+        .collect();
+    let listed: BTreeSet<String> = schemas["JobKind"]["enum"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|k| k.as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(listed, kinds, "JobKind");
+    let request = &schemas["JobRequest"];
+    let mapping: BTreeSet<String> = request["discriminator"]["mapping"]
+        .as_object()
+        .unwrap()
+        .keys()
+        .cloned()
+        .collect();
+    assert_eq!(mapping, kinds, "JobRequest's discriminator");
+    let refs = |suffix: &str| -> BTreeSet<String> {
+        kinds
+            .iter()
+            .map(|k| format!("#/components/schemas/{}{suffix}", camel(k)))
+            .collect()
+    };
+    assert_eq!(
+        one_of_refs(request),
+        refs("JobRequest"),
+        "JobRequest's oneOf"
+    );
+    for k in &kinds {
+        let name = format!("{}JobRequest", camel(k));
+        assert_eq!(
+            request["discriminator"]["mapping"][k],
+            format!("#/components/schemas/{name}")
+        );
+        assert_eq!(schemas[&name]["properties"]["kind"]["const"], k.as_str());
+        assert!(
+            !schemas[format!("{}Result", camel(k))].is_null(),
+            "no {}Result",
+            camel(k)
+        );
+    }
+    let result = response_schema(
+        &spec,
+        "get",
+        "/v1/jobs/{id}/result",
+        200,
+        "application/json",
+    );
+    assert_eq!(one_of_refs(result), refs("Result"), "the result's oneOf");
+}
+
+/// The component schemas a response can reach (through `$ref`s, transitively).
+fn response_schemas(spec: &Value) -> BTreeSet<String> {
+    fn refs(v: &Value, out: &mut Vec<String>) {
+        match v {
+            Value::Object(m) => {
+                if let Some(Value::String(r)) = m.get("$ref") {
+                    out.push(r.clone());
+                }
+                m.values().for_each(|x| refs(x, out));
+            }
+            Value::Array(a) => a.iter().for_each(|x| refs(x, out)),
+            _ => {}
+        }
+    }
+    let mut todo = Vec::new();
+    for item in spec["paths"].as_object().unwrap().values() {
+        for m in METHODS {
+            if let Some(op) = item.get(*m) {
+                refs(&op["responses"], &mut todo);
+            }
+        }
+    }
+    let mut seen = BTreeSet::new();
+    while let Some(r) = todo.pop() {
+        if seen.insert(r.clone()) {
+            let target = r
+                .trim_start_matches("#/")
+                .split('/')
+                .fold(spec, |node, key| &node[key]);
+            refs(target, &mut todo);
+        }
+    }
+    seen.into_iter()
+        .filter(|r| r.starts_with("#/components/schemas/"))
+        .collect()
+}
+
+/// Real responses of the running server validate against the documented schemas —
+/// every member documented, every required one present — for every route and every
+/// job kind, and every schema a response can use is met by one of them.
 #[test]
 fn responses_validate_against_the_spec() {
     let spec = spec();
+    let v = Validator::new(&spec);
     let dir = tempfile::tempdir().unwrap();
     let s = Server::start(dir.path(), &[]);
     let expect = |method: &str, path: &str, r: &common::Reply, status: u16| {
@@ -266,15 +468,13 @@ fn responses_validate_against_the_spec() {
         let tpl = template(&spec, path).unwrap();
         let ct = r.content_type.split(';').next().unwrap().to_string();
         let schema = response_schema(&spec, method, &tpl, status, &ct);
-        check(
-            &spec,
-            schema,
-            &r.json(),
-            &format!("{method} {path} → {status}"),
-        );
+        if ct.ends_with("json") {
+            v.expect(schema, &r.json(), &format!("{method} {path} → {status}"));
+        }
     };
     expect("get", "/healthz", &s.get("/healthz"), 200);
     expect("get", "/v1/presets", &s.get("/v1/presets"), 200);
+    expect("get", "/v1/presets", &s.get("/v1/presets?x=1"), 400);
     for name in kea_core::presets::names() {
         let p = format!("/v1/presets/{name}");
         expect("get", &p, &s.get(&p), 200);
@@ -283,12 +483,15 @@ fn responses_validate_against_the_spec() {
     let created = s.post("/v1/models", &preset("cv-tracker"));
     expect("post", "/v1/models", &created, 201);
     let id = created.json()["id"].as_str().unwrap().to_string();
-    expect("get", "/v1/models", &s.get("/v1/models?limit=1"), 200);
+    s.post("/v1/models", &preset("seed-example"));
+    let page = s.get("/v1/models?limit=1");
+    expect("get", "/v1/models", &page, 200);
+    assert!(page.json()["next_cursor"].is_string());
+    expect("get", "/v1/models", &s.get("/v1/models?cursor=x"), 400);
     let mp = format!("/v1/models/{id}");
     expect("get", &mp, &s.get(&mp), 200);
     let body = json!({"model_id": id, "set": {"q": 3}});
-    check(
-        &spec,
+    v.expect(
         request_schema(&spec, "post", "/v1/analyze"),
         &body,
         "analyze body",
@@ -300,30 +503,148 @@ fn responses_validate_against_the_spec() {
         &s.post("/v1/analyze", &json!({"model": {}})),
         422,
     );
-    let jb = json!({"kind": "analysis", "model": preset("helicopter-range")});
-    check(
-        &spec,
-        request_schema(&spec, "post", "/v1/jobs"),
-        &jb,
-        "job body",
+    expect(
+        "post",
+        "/v1/analyze",
+        &s.post_raw("/v1/analyze", "application/json", "{"),
+        400,
     );
-    let job = s.post("/v1/jobs", &jb);
-    expect("post", "/v1/jobs", &job, 202);
-    let jid = job.json()["id"].as_str().unwrap().to_string();
-    s.wait_finished(&jid, std::time::Duration::from_secs(120));
-    let jp = format!("/v1/jobs/{jid}");
-    expect("get", &jp, &s.get(&jp), 200);
+    // One job of every kind: the request, the job, its result and its traces.
+    let mut cv = preset("cv-tracker");
+    cv["options"]["trace_points"] = json!(20);
+    let jobs = [
+        json!({"kind": "analysis", "model": preset("helicopter-range")}),
+        json!({"kind": "simulation", "model": cv, "runs": 20, "seed": 1,
+               "truth": "process", "model_error": "white", "trace_points": 10}),
+        json!({"kind": "synthesis", "model": cv,
+               "target": {"criterion": "yx", "set": "covariance", "threshold": 1.5},
+               "mode": {"grid": {"params": [{"name": "q", "values": [0.5, 2]}],
+                                 "cost_order": [{"name": "q", "cheaper": "higher"}]}}}),
+        json!({"kind": "synthesis", "model": cv,
+               "target": {"criterion": "yx", "set": "covariance", "threshold": 1.5},
+               "mode": {"bisect": {"param": "r", "low": 0.01, "high": 100}}}),
+    ];
+    let schemas = &spec["components"]["schemas"];
+    let mut kinds_run = BTreeSet::new();
+    let mut last = String::new();
+    for jb in jobs {
+        let kind = jb["kind"].as_str().unwrap().to_string();
+        v.expect(
+            request_schema(&spec, "post", "/v1/jobs"),
+            &jb,
+            &format!("{kind} job body"),
+        );
+        let job = s.post("/v1/jobs", &jb);
+        expect("post", "/v1/jobs", &job, 202);
+        let jid = job.json()["id"].as_str().unwrap().to_string();
+        let done = s.wait_finished(&jid, std::time::Duration::from_secs(120));
+        assert_eq!(done["status"], "succeeded", "{done}");
+        let jp = format!("/v1/jobs/{jid}");
+        expect("get", &jp, &s.get(&jp), 200);
+        let rp = format!("/v1/jobs/{jid}/result");
+        let result = s.get(&rp);
+        expect("get", &rp, &result, 200);
+        v.expect(
+            &schemas[format!("{}Result", camel(&kind))],
+            &result.json(),
+            &format!("the {kind} result"),
+        );
+        let tp = format!("/v1/jobs/{jid}/traces.csv");
+        let csv = s.get(&tp);
+        if kind == "synthesis" {
+            expect("get", &tp, &csv, 404);
+        } else {
+            expect("get", &tp, &csv, 200);
+            check_csv_header(&spec, &kind, csv.text.lines().next().unwrap());
+        }
+        kinds_run.insert(kind);
+        last = jid;
+    }
+    let kinds: BTreeSet<String> = kea_server::serve::jobs::registry()
+        .names()
+        .into_iter()
+        .map(String::from)
+        .collect();
+    assert_eq!(kinds_run, kinds, "a job of every kind");
     expect("get", "/v1/jobs", &s.get("/v1/jobs?status=succeeded"), 200);
     expect("get", "/v1/jobs", &s.get("/v1/jobs?status=nope"), 400);
-    let rp = format!("/v1/jobs/{jid}/result");
+    // A job still running, its cancel, a result that is not there yet.
+    let mut long = preset("cv-tracker");
+    long["time"]["steps"] = json!(20_000_000);
+    long["options"]["steady_state_shortcut"] = json!(false);
+    let running = s.post("/v1/jobs", &json!({"kind": "analysis", "model": long}));
+    let rid = running.json()["id"].as_str().unwrap().to_string();
+    let rp = format!("/v1/jobs/{rid}");
+    s.wait_job(&rid, std::time::Duration::from_secs(120), |j| {
+        j["status"] == "running"
+    });
     expect("get", &rp, &s.get(&rp), 200);
+    expect(
+        "get",
+        "/v1/jobs/{id}/result",
+        &s.get(&format!("{rp}/result")),
+        409,
+    );
+    expect("delete", &rp, &s.delete(&rp), 200);
+    s.wait_finished(&rid, std::time::Duration::from_secs(120));
+    let jp = format!("/v1/jobs/{last}");
     expect("delete", &jp, &s.delete(&jp), 409);
     expect("delete", &mp, &s.delete("/v1/models/gone"), 404);
-    let events = s.events(&format!("/v1/jobs/{jid}/events"));
-    check(
-        &spec,
-        &spec["components"]["schemas"]["Job"],
-        &events.last().unwrap().1,
-        "final event",
-    );
+    expect("get", "/v1/jobs/x", &s.get("/v1/jobs/x"), 404);
+    // A failed job carries its error (no measurement error and no initial error:
+    // the innovation covariance is singular at the first step).
+    let mut singular = preset("cv-tracker");
+    singular["measurement"]["psi"] = json!([0]);
+    singular["system"]["eta0"] = json!([0, 0]);
+    let failed = s.post("/v1/jobs", &json!({"kind": "analysis", "model": singular}));
+    expect("post", "/v1/jobs", &failed, 202);
+    let fid = failed.json()["id"].as_str().unwrap().to_string();
+    let done = s.wait_finished(&fid, std::time::Duration::from_secs(120));
+    assert_eq!(done["status"], "failed", "{done}");
+    let fp = format!("/v1/jobs/{fid}");
+    expect("get", &fp, &s.get(&fp), 200);
+    let events = s.events(&format!("/v1/jobs/{last}/events"));
+    v.expect(&schemas["Job"], &events.last().unwrap().1, "final event");
+    // Every schema a response can use was met by a real one.
+    let visited = v.visited.borrow();
+    let missed: Vec<String> = response_schemas(&spec)
+        .into_iter()
+        .filter(|r| !visited.contains(r))
+        .collect();
+    assert!(missed.is_empty(), "no real response used {missed:?}");
+}
+
+/// A traces CSV's header is the one the spec describes for its kind: `series:state`
+/// columns for an analysis, `state.series` (then `nees`, `nis`) for a simulation,
+/// each series named in the description.
+fn check_csv_header(spec: &Value, kind: &str, header: &str) {
+    let description =
+        spec["paths"]["/v1/jobs/{id}/traces.csv"]["get"]["responses"]["200"]["description"]
+            .as_str()
+            .unwrap();
+    let mut columns = header.split(',');
+    assert_eq!(columns.next(), Some("t"), "{header}");
+    let documented = |series: &str| description.contains(&format!("`{series}`"));
+    let mut checked = 0;
+    for c in columns {
+        let series = match kind {
+            "analysis" => {
+                assert!(description.contains("`series:state`"));
+                c.split_once(':').map(|(series, _)| series)
+            }
+            "simulation" if c == "nees" || c == "nis" => Some(c),
+            "simulation" => {
+                assert!(description.contains("`state.series`"));
+                c.split_once('.').map(|(_, series)| series)
+            }
+            other => panic!("{other} has no traces"),
+        };
+        let series = series.unwrap_or_else(|| panic!("column `{c}` of {kind}: {header}"));
+        assert!(
+            documented(series),
+            "`{series}` ({kind}) not in: {description}"
+        );
+        checked += 1;
+    }
+    assert!(checked > 0, "{header}");
 }

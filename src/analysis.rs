@@ -649,7 +649,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             })
             .collect();
         let zeta_state: Vec<f64> = inp.zeta.clone();
-        let final_ = Final {
+        let mut final_ = Final {
             covariance: to_rows(&big_r, n),
             gain: to_rows(&gain_rows(&joseph.gain_t, n, nm), nm),
             predicted_covariance: to_rows(&joseph.r_pred, n),
@@ -663,6 +663,21 @@ impl<'m, const N: usize> Engine<'m, N> {
             delta_z: zeta_state.iter().map(|x| lambda * x).collect(),
             delta_x: chi.iter().map(|x| lambda * x).collect(),
         };
+        // Past an overflow the last values are stale (the propagation stopped there):
+        // null, as the traces are.
+        if bound_why.is_some() {
+            for v in [
+                &mut final_.eta,
+                &mut final_.chi,
+                &mut final_.delta_y,
+                &mut final_.delta_x,
+            ] {
+                v.fill(f64::NAN);
+            }
+        }
+        if open_why.is_some() {
+            final_.open_loop_sko.fill(f64::NAN);
+        }
         let steady_state = steady_at.map(|k| {
             let (r, g) = steady_cov.clone().unwrap_or_default();
             SteadyState {

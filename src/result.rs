@@ -127,20 +127,33 @@ pub struct Final {
     pub gain: Vec<Vec<f64>>,
     /// r_D, the predicted covariance (2.1).
     pub predicted_covariance: Vec<Vec<f64>>,
-    /// Bound SKOs η_D, ζ_D, χ_D (3.16)–(3.19).
+    /// Bound SKOs η_D, ζ_D, χ_D (3.16)–(3.19); null (NaN) where the bound overflowed.
+    #[serde(deserialize_with = "nullable")]
     pub eta: Vec<f64>,
     pub zeta: Vec<f64>,
+    #[serde(deserialize_with = "nullable")]
     pub chi: Vec<f64>,
     /// sqrt(diag R_D): the potential accuracy.
     pub potential_sko: Vec<f64>,
-    /// sqrt(diag P^Y_D): open-loop (a-priori) SKO from exact covariance.
+    /// sqrt(diag P^Y_D): open-loop (a-priori) SKO from exact covariance; null (NaN)
+    /// where it overflowed.
+    #[serde(deserialize_with = "nullable")]
     pub open_loop_sko: Vec<f64>,
     /// sqrt(diag Rv_D): measured SKO from exact covariance.
     pub measured_sko: Vec<f64>,
     /// Absolute error bounds ΔY = λη, ΔZ = λζ, ΔX = λχ (3.14).
+    #[serde(deserialize_with = "nullable")]
     pub delta_y: Vec<f64>,
     pub delta_z: Vec<f64>,
+    #[serde(deserialize_with = "nullable")]
     pub delta_x: Vec<f64>,
+}
+
+/// Numbers where JSON may have null: serde_json writes a non-finite f64 as null, so a
+/// result read back (the browser's CSV, a stored job) gets NaN there again.
+fn nullable<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+    let v: Vec<Option<f64>> = Deserialize::deserialize(d)?;
+    Ok(v.into_iter().map(|x| x.unwrap_or(f64::NAN)).collect())
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

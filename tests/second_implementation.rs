@@ -418,6 +418,14 @@ fn an_overflowed_bound_leaves_null_traces() {
         "{:?}",
         r.warnings
     );
+    // The final bound values are stale past the overflow: null (NaN) too, and a result
+    // read back from its JSON (the browser's CSV, a stored job) keeps them so.
+    assert!(r.final_.chi.iter().chain(&r.final_.eta).all(|x| x.is_nan()));
+    assert!(r.final_.potential_sko.iter().all(|x| x.is_finite()));
+    let text = serde_json::to_string(&r).unwrap();
+    let back: AnalysisResult = serde_json::from_str(&text).expect("the result reads back");
+    assert!(back.final_.delta_x.iter().all(|x| x.is_nan()));
+    assert_eq!(back.traces, r.traces);
     let last = r.traces.t.len() - 1;
     for st in &r.traces.states {
         assert_eq!(st.chi[last], None, "{}", st.state);

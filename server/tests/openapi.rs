@@ -133,15 +133,15 @@ impl<'a> Validator<'a> {
                 return;
             }
         }
-        if let Some(c) = schema.get("const") {
-            if c != v {
-                errors.push(format!("{path}: expected {c}, got {v}"));
-            }
+        if let Some(c) = schema.get("const")
+            && c != v
+        {
+            errors.push(format!("{path}: expected {c}, got {v}"));
         }
-        if let Some(e) = schema.get("enum").and_then(Value::as_array) {
-            if !e.contains(v) {
-                errors.push(format!("{path}: {v} not in {e:?}"));
-            }
+        if let Some(e) = schema.get("enum").and_then(Value::as_array)
+            && !e.contains(v)
+        {
+            errors.push(format!("{path}: {v} not in {e:?}"));
         }
         if let Some(x) = v.as_f64() {
             let bound = |k: &str| schema.get(k).and_then(Value::as_f64);

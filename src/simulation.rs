@@ -70,8 +70,9 @@ pub enum ModelError {
 pub struct SimulationRequest {
     /// Number of runs R.
     pub runs: u64,
-    /// Seed of the random streams; the same seed gives bit-identical results.
-    #[serde(default)]
+    /// Seed of the random streams; the same seed gives bit-identical results. Default
+    /// 1, as `kea simulate` and the browser form.
+    #[serde(default = "default_seed")]
     pub seed: u64,
     #[serde(default = "default_truth")]
     pub truth: Truth,
@@ -80,6 +81,10 @@ pub struct SimulationRequest {
     /// Rows of the traces (each row: bucket averages); the model's option when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub trace_points: Option<usize>,
+}
+
+fn default_seed() -> u64 {
+    1
 }
 
 fn default_truth() -> Truth {

@@ -142,8 +142,9 @@ pub fn parse_override(arg: &str) -> Result<(String, f64), String> {
 #[derive(Debug, clap::Args)]
 pub struct WorkLimit {
     /// Refuse a run whose estimated work is above this. A unit is about a nanosecond
-    /// of one core (the server's estimate: steps × (N³ + 16N² + 200) for an
-    /// analysis), so the default is ≈ 17 minutes; `--max-work inf` lifts the limit.
+    /// of one core (the server's estimate, openapi.yaml "Work": for an analysis, steps
+    /// × (N³ + 16N² + 200 + what varying inputs and expressions in t cost)), so the
+    /// default is ≈ 17 minutes; `--max-work inf` lifts the limit.
     #[arg(long, env = "KEA_MAX_WORK", default_value_t = 1e12, value_name = "UNITS",
           value_parser = parse_limit)]
     pub max_work: f64,

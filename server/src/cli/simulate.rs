@@ -88,7 +88,7 @@ impl Run for Args {
         };
         let set: Overrides = self.set.into_iter().collect();
         let work = kea_core::validate::compile(&model, &set)
-            .map(|c| crate::serve::jobs::simulation::work(&c, &req));
+            .map(|c| crate::serve::jobs::simulation::work_of(&c, Some(&model), &req));
         if let Err(code) = self.limit.check(work) {
             return code;
         }

@@ -135,12 +135,6 @@ impl JobKind for Simulation {
     }
 }
 
-/// The work of `sim` on a compiled model, each time-dependent entry counted as a
-/// distinct expression (see [`work_of`], which reads their texts from the model).
-pub fn work(compiled: &CompiledModel, sim: &SimulationRequest) -> Work {
-    work_of(compiled, None, sim)
-}
-
 /// The work of `sim` on a compiled model (`model`: its expressions' texts): the
 /// analysis it starts with, then per step the plan (the inputs and a dense Riccati
 /// step, [`cost::simulation_plan_step`]) and every run's step

@@ -293,7 +293,7 @@ pub fn request_from_value(value: serde_json::Value) -> Result<SynthesisRequest, 
 }
 
 pub fn request_from_json(text: &str) -> Result<SynthesisRequest, Error> {
-    let value: serde_json::Value = serde_json::from_str(text)
+    let value = crate::parse_json(text.as_bytes())
         .map_err(|e| Error::invalid("", format!("not valid JSON: {e}")))?;
     request_from_value(value)
 }

@@ -778,3 +778,24 @@ fn an_unknown_override_does_not_hide_the_models_errors() {
     let paths: Vec<&str> = e.iter().map(|f| f.path.as_str()).collect();
     assert_eq!(paths, ["set.nope", "system.a[1][0]"], "{e:?}");
 }
+
+/// The same key twice in one object is refused with the key (serde_json keeps the last
+/// one silently); numbers read as serde_json reads them.
+#[test]
+fn a_key_given_twice_is_refused() {
+    let text = r#"{"kea_model": 1, "time": {"t0": 0, "t_end": 1, "steps": 10, "t0": 0.5}}"#;
+    let e = kea_core::model_from_json(text).unwrap_err().field_errors();
+    assert!(
+        e[0].message
+            .contains("the key \"t0\" appears twice in one object"),
+        "{e:?}"
+    );
+    let good = good().to_string();
+    let strict = kea_core::parse_json(good.as_bytes()).unwrap();
+    assert_eq!(strict, serde_json::from_str::<Value>(&good).unwrap());
+    let numbers = r#"[0.1, 1e-300, 18446744073709551615, -9223372036854775808, 2.5e300]"#;
+    assert_eq!(
+        kea_core::parse_json(numbers.as_bytes()).unwrap(),
+        serde_json::from_str::<Value>(numbers).unwrap()
+    );
+}

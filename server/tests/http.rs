@@ -526,6 +526,11 @@ fn bad_request_corpus() {
         r.text
     );
     assert_eq!(r.json()["type"], "urn:kea:problem:malformed-json");
+    // A key twice: refused, not the last one run silently.
+    let twice = format!("{{\"model\": {cv}, \"model\": {cv}}}");
+    let r = s.post_raw("/v1/analyze", "application/json", &twice);
+    assert_eq!(r.status, 400, "{}", r.text);
+    assert!(r.text.contains("appears twice"), "{}", r.text);
     let r = s.post_raw("/v1/jobs", "text/plain", "{}");
     assert_eq!(r.status, 415, "{}", r.text);
     let big = format!("{{\"pad\": \"{}\"}}", "x".repeat(200_000));

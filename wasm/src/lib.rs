@@ -128,12 +128,14 @@ struct SimulateIn {
 #[wasm_bindgen]
 pub fn simulate(request_json: &str, progress: &js_sys::Function) -> Result<String, JsValue> {
     let start = js_sys::Date::now();
-    let input: SimulateIn = serde_json::from_str(request_json).map_err(|e| {
-        to_js(&Error::invalid(
-            "",
-            format!("not a simulation request: {e}"),
-        ))
-    })?;
+    let input: SimulateIn = kea_core::parse_json(request_json.as_bytes())
+        .and_then(serde_json::from_value)
+        .map_err(|e| {
+            to_js(&Error::invalid(
+                "",
+                format!("not a simulation request: {e}"),
+            ))
+        })?;
     let model =
         kea_core::model_from_value(input.model).map_err(|e| to_js(&e.with_prefix("model")))?;
     let request: kea_core::simulation::SimulationRequest =

@@ -61,14 +61,14 @@ pub fn read_json(arg: &str) -> Result<serde_json::Value, ExitCode> {
     };
     if let Some(name) = arg.strip_prefix("preset:") {
         let text = kea_core::presets::get_json(name).ok_or_else(|| invalid(no_preset(name)))?;
-        return serde_json::from_str(text)
+        return kea_core::parse_json(text.as_bytes())
             .map_err(|e| invalid(format!("preset {name}: not valid JSON: {e}")));
     }
     if arg == "-" {
         let mut text = String::new();
         std::io::Read::read_to_string(&mut std::io::stdin(), &mut text)
             .map_err(|e| invalid(format!("cannot read stdin: {e}")))?;
-        return serde_json::from_str(&text)
+        return kea_core::parse_json(text.as_bytes())
             .map_err(|e| invalid(format!("stdin: not valid JSON: {e}")));
     }
     let text = std::fs::read_to_string(arg).map_err(|e| {
@@ -79,7 +79,8 @@ pub fn read_json(arg: &str) -> Result<serde_json::Value, ExitCode> {
         };
         invalid(format!("cannot read {arg}: {e}{hint}"))
     })?;
-    serde_json::from_str(&text).map_err(|e| invalid(format!("{arg}: not valid JSON: {e}")))
+    kea_core::parse_json(text.as_bytes())
+        .map_err(|e| invalid(format!("{arg}: not valid JSON: {e}")))
 }
 
 /// The one wording of an unknown preset, with the list.

@@ -40,7 +40,7 @@ impl FromRequest<AppState> for JsonBody {
         }
         let limit = state.config.limits.max_body_bytes;
         let bytes = read_limited(req, limit).await?;
-        serde_json::from_slice(&bytes).map(JsonBody).map_err(|e| {
+        kea_core::parse_json(&bytes).map(JsonBody).map_err(|e| {
             Problem::new(
                 StatusCode::BAD_REQUEST,
                 kind::MALFORMED,

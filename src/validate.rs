@@ -542,6 +542,15 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
                                 &format!("measurement.pairs[{k}].measurement"),
                                 format!("measurement \"{}\" is paired twice", p.measurement),
                             );
+                        } else if c.get(mi * n + si) == Some(&0.0) {
+                            // (ZX and YZ compare a state with a measurement of it.)
+                            errs.at(
+                                &format!("measurement.pairs[{k}]"),
+                                format!(
+                                    "measurement \"{}\" does not measure state \"{}\" (measurement.c[{mi}][{si}] = 0); pair a state with a measurement of it",
+                                    p.measurement, p.state
+                                ),
+                            );
                         } else {
                             pair_of_state[si] = Some(mi);
                             used_m[mi] = true;

@@ -343,6 +343,13 @@ fn names_pairs_and_overrides() {
         "measurement.pairs[0].state",
         "no state named \"q\"",
     );
+    // zx measures x (c = [[1, 0]]), not v: a pair of them would compare unrelated SKOs.
+    expect(
+        |v| v["measurement"]["pairs"] = json!([{"state": "v", "measurement": "zx"}]),
+        &[],
+        "measurement.pairs[0]",
+        "does not measure state \"v\" (measurement.c[0][1] = 0)",
+    );
     expect(
         |_| {},
         &[("mass", 1.0)],

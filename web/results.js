@@ -2,6 +2,7 @@
 // weighted), the final values, and plots of the SKO traces (uPlot).
 
 import uPlot from './vendor/uplot/uPlot.esm.js';
+import { tick, valueAxis } from './plot.js';
 
 const CRITERIA = [
   ['yz', 'F_YZ', 'measured vs a-priori: > 1 when the measurements beat the model’s prediction'],
@@ -38,15 +39,6 @@ export function fmt(x) {
   const a = Math.abs(x);
   if (a >= 1e-3 && a < 1e6) return Number(x.toPrecision(5)).toString();
   return x.toExponential(4);
-}
-
-/** An axis tick: short, exponent form outside [1e-3, 1e5). */
-function tick(x) {
-  if (x === null || x === undefined) return '';
-  if (x === 0) return '0';
-  const a = Math.abs(x);
-  if (a >= 1e-3 && a < 1e5) return String(Number(x.toPrecision(4)));
-  return x.toExponential(2).replace(/\.?0+e/, 'e');
 }
 
 /** One criterion cell: the full-precision value in data-value, highlighted when > 1. */
@@ -125,6 +117,11 @@ export function finalTable(result) {
   return table;
 }
 
+/** In place of a chart when the run kept no trace rows (trace points = 0). */
+export function noTraces(text = 'No trace points requested (trace points = 0): there are no SKO traces to plot.') {
+  return el('p', { class: 'no-traces', text });
+}
+
 /** The SKO-trace chart with a state selector and a log-scale toggle. */
 export class TraceChart {
   constructor(root) {
@@ -152,32 +149,36 @@ export class TraceChart {
   draw() {
     const r = this.result;
     if (!r) return;
+    this.plot?.destroy();
+    this.plot = null;
+    if (!r.traces.t.length) {
+      this.root.replaceChildren(noTraces());
+      return;
+    }
     const i = Number(this.controls.state.value) || 0;
     const log = this.controls.log.checked;
     const trace = r.traces.states[i];
-    const clean = (v) => (v === null || (log && !(v > 0)) ? null : v);
-    const data = [r.traces.t];
-    const series = [{ label: 't' }];
-    for (const [key, label, stroke] of SERIES) {
-      const values = trace[key];
-      if (!values) continue;
-      data.push(values.map(clean));
-      series.push({ label, stroke, width: 1.5, value: (_, v) => (v === null ? '—' : fmt(v)) });
-    }
-    this.plot?.destroy();
+    const columns = SERIES.filter(([key]) => trace[key]).map(([key, label, stroke]) => ({ values: trace[key], label, stroke }));
+    const x = valueAxis([r.traces.t]);
+    const y = valueAxis(columns.map((c) => c.values), { log });
+    const shown = (axis) => (_, v) => (v === null || v === undefined ? '—' : fmt(axis.value(v)));
+    const data = [x.data(r.traces.t), ...columns.map((c) => y.data(c.values))];
+    const series = [{ label: 't', value: shown(x) }, ...columns.map(({ label, stroke }) => ({ label, stroke, width: 1.5, value: shown(y) }))];
     this.root.replaceChildren();
     this.plot = new uPlot(
       {
         title: `SKOs of ${trace.state} over time`,
         width: this.width(),
         height: 320,
-        scales: { x: { time: false }, y: log ? { distr: 3 } : {} },
+        scales: { x: { time: false, ...x.scale }, y: y.scale },
         axes: [
-          { label: 't', values: (_, ticks) => ticks.map(tick) },
-          { label: 'SKO', size: 70, values: (_, ticks) => ticks.map(tick) },
+          { label: 't', ...x.axis },
+          { label: 'SKO', size: 70, ...y.axis },
         ],
         series,
         legend: { live: true },
+        // The tick labels drawn, for a reader of the page's text (and its tests).
+        hooks: { draw: [() => (this.root.dataset.yTicks = y.ticks().join(' | '))] },
       },
       data,
       this.root,

@@ -78,11 +78,13 @@ function modelPaths(problem) {
   return {
     kind: problem.kind ?? problem.type ?? 'server',
     title: problem.title ?? problem.detail ?? 'the server refused the request',
+    detail: problem.detail,
     status: problem.status,
     errors,
   };
 }
 
+/** A refused request's problem+json body (or its status when it has none). */
 async function problemOf(response) {
   let body = {};
   try {
@@ -90,39 +92,58 @@ async function problemOf(response) {
   } catch {
     // not JSON: keep the status line
   }
-  return modelPaths({
+  return {
+    type: body.type,
     title: body.title ?? `${response.status} ${response.statusText}`,
     detail: body.detail,
     status: response.status,
-    errors: body.errors,
-  });
+    errors: body.errors ?? [],
+  };
 }
+
+const CANCELLED = { kind: 'cancelled', title: 'cancelled', errors: [] };
 
 /** Runs on the server: POST a job, follow its events, fetch the result. */
 export class ServerRunner {
   constructor(base = '') {
     this.base = base;
     this.job = null;
+    this.cancelRequested = false;
   }
 
-  async run(modelJson, onProgress) {
-    const response = await api(`${this.base}/v1/jobs`, {
-      method: 'POST',
-      headers: { 'content-type': 'application/json' },
-      body: `{"kind":"analysis","model":${modelJson}}`,
-    });
-    if (!response.ok) throw await problemOf(response);
-    const job = await response.json();
-    this.job = job.id;
-    const final = await this.follow(job.id, onProgress);
-    this.job = null;
-    if (final.status === 'cancelled') throw { kind: 'cancelled', title: 'cancelled', errors: [] };
-    if (final.status !== 'succeeded') {
-      throw modelPaths({ title: final.error?.title ?? `job ${final.status}`, ...(final.error ?? {}) });
+  run(modelJson, onProgress) {
+    return this.runJob(`{"kind":"analysis","model":${modelJson}}`, onProgress, modelPaths);
+  }
+
+  /**
+   * POST the job `body`, follow it, fetch its result: {result, job}. Errors are thrown
+   * as `located(problem)`. A cancel that comes before the server has answered the POST
+   * is remembered, and the job deleted as soon as its id is known.
+   */
+  async runJob(body, onProgress, located) {
+    this.cancelRequested = false;
+    try {
+      const response = await api(`${this.base}/v1/jobs`, {
+        method: 'POST',
+        headers: { 'content-type': 'application/json' },
+        body,
+      });
+      if (!response.ok) throw located(await problemOf(response));
+      const job = await response.json();
+      this.job = job.id;
+      if (this.cancelRequested) await this.deleteJob(job.id);
+      const final = await this.follow(job.id, onProgress);
+      if (final.status === 'cancelled') throw CANCELLED;
+      if (final.status !== 'succeeded') {
+        throw located({ title: final.error?.title ?? `job ${final.status}`, ...(final.error ?? {}) });
+      }
+      const result = await api(`${this.base}/v1/jobs/${job.id}/result`);
+      if (!result.ok) throw located(await problemOf(result));
+      return { result: await result.json(), job: job.id };
+    } finally {
+      this.job = null;
+      this.cancelRequested = false;
     }
-    const result = await api(`${this.base}/v1/jobs/${job.id}/result`);
-    if (!result.ok) throw await problemOf(result);
-    return { result: await result.json(), job: job.id };
   }
 
   /**
@@ -158,9 +179,13 @@ export class ServerRunner {
     }
   }
 
+  /** Cancel the job: now, or as soon as the server has said its id. */
   async cancel() {
-    const id = this.job;
-    if (!id) return;
-    await api(`${this.base}/v1/jobs/${id}`, { method: 'DELETE' }).catch(() => {});
+    this.cancelRequested = true;
+    if (this.job) await this.deleteJob(this.job);
+  }
+
+  deleteJob(id) {
+    return api(`${this.base}/v1/jobs/${id}`, { method: 'DELETE' }).catch(() => {});
   }
 }

@@ -2,7 +2,7 @@
 // wasm worker or server job) and the results. The model lives in the URL (#model=…,
 // deflated and base64url-encoded) so any state can be shared as a link.
 
-import { ModelEditor } from './editor.js';
+import { ModelEditor, modelProblem } from './editor.js';
 import { api } from './api.js';
 import { BrowserRunner, ServerRunner, WasmWorker } from './runner.js';
 import { TraceChart, criteriaTable, finalTable, fmt } from './results.js';
@@ -12,7 +12,9 @@ const $ = (id) => document.getElementById(id);
 
 const service = new WasmWorker(); // presets, validation, CSV: never blocked by a run
 const runners = { browser: new BrowserRunner(), server: new ServerRunner() };
-const state = { preset: null, result: null, job: null, running: null, checkSeq: 0 };
+// keepUrl: the address names a model that could not be loaded; it stays as it is
+// (for the person to see or fix) until the model is changed here.
+const state = { preset: null, result: null, job: null, running: null, checkSeq: 0, keepUrl: false };
 
 // ------------------------------------------------------------------ URL
 
@@ -52,6 +54,7 @@ async function linkHash() {
 let urlTimer = null;
 function saveToUrl() {
   clearTimeout(urlTimer);
+  if (state.keepUrl) return;
   urlTimer = setTimeout(async () => {
     const hash = await linkHash();
     if (location.hash !== hash) history.replaceState(null, '', hash);
@@ -65,6 +68,8 @@ const editor = new ModelEditor($('editor'), () => {
     state.preset = null;
     $('preset').value = '';
   }
+  state.keepUrl = false;
+  setPageStatus('');
   saveToUrl();
   scheduleCheck();
   markStale();
@@ -93,7 +98,10 @@ async function check() {
   return errors;
 }
 
-function loadModel(model, presetName = null) {
+/** Load a model (or a preset's) into the editor; `keepUrl` leaves the address as it is. */
+function loadModel(model, presetName = null, { keepUrl = false } = {}) {
+  state.keepUrl = keepUrl;
+  setPageStatus('');
   state.preset = presetName;
   $('preset').value = presetName ?? '';
   editor.load(model);
@@ -102,22 +110,42 @@ function loadModel(model, presetName = null) {
   return check();
 }
 
-async function loadPreset(name) {
+async function loadPreset(name, options) {
   const model = await service.call('preset', { name });
-  if (!model) throw new Error(`no preset named ${name}`);
-  return loadModel(model, name);
+  if (!model) throw new Error(`no preset named “${name}”`);
+  return loadModel(model, name, options);
 }
 
+/**
+ * The link's model (`#model=…`) or preset (`#preset=NAME`). A link that cannot be read
+ * is said to be broken; the seed example is shown and the address kept as it is.
+ */
 async function loadFromUrl() {
   const params = new URLSearchParams(location.hash.slice(1));
+  let problem;
   if (params.has('model')) {
     try {
-      return await loadModel(await decodeModel(params.get('model')));
+      const model = await decodeModel(params.get('model'));
+      problem = modelProblem(model);
+      if (!problem) return await loadModel(model);
     } catch (e) {
-      setStatus(`The link's model could not be read (${e.message}); showing a preset.`, true);
+      problem = e.message || String(e);
     }
+  } else if (params.has('preset')) {
+    try {
+      return await loadPreset(params.get('preset'));
+    } catch (e) {
+      problem = e.message || String(e);
+    }
+  } else {
+    return loadPreset('seed-example');
   }
-  return loadPreset(params.get('preset') ?? 'seed-example');
+  const errors = await loadPreset('seed-example', { keepUrl: true });
+  setPageStatus(
+    `This link's model could not be read (${problem}). Showing the seed example instead; the address is kept until you change the model.`,
+    true,
+  );
+  return errors;
 }
 
 function download(name, type, text) {
@@ -135,9 +163,16 @@ function fileStem() {
 
 // ------------------------------------------------------------------ running
 
+/** The analysis's run status (the Analysis tab's run bar). */
 function setStatus(text, error = false) {
   $('status').textContent = text;
   $('status').classList.toggle('error', error);
+}
+
+/** Messages about the page and the model (import, link), shown on every tab. */
+function setPageStatus(text, error = false) {
+  $('page-status').textContent = text;
+  $('page-status').classList.toggle('error', error);
 }
 
 function mode() {
@@ -148,6 +183,11 @@ async function run() {
   if (state.running) return;
   const where = mode();
   const runner = runners[where];
+  if (editor.localErrors().length) {
+    editor.mark();
+    setStatus('The model has fields to fix first (see the marked fields).', true);
+    return;
+  }
   state.running = runner;
   $('run').disabled = true;
   $('cancel').disabled = false;
@@ -247,11 +287,17 @@ async function main() {
   $('import-model').addEventListener('change', async (e) => {
     const file = e.target.files[0];
     if (!file) return;
+    let model;
     try {
-      await loadModel(JSON.parse(await file.text()));
-      setStatus(`Imported ${file.name}.`);
+      model = JSON.parse(await file.text());
     } catch (err) {
-      setStatus(`${file.name} is not JSON: ${err.message}`, true);
+      setPageStatus(`${file.name} is not JSON (${err.message}); the model is unchanged.`, true);
+    }
+    const problem = model === undefined ? null : modelProblem(model);
+    if (problem) setPageStatus(`${file.name} is not a kea model: ${problem}; the model is unchanged.`, true);
+    else if (model !== undefined) {
+      await loadModel(model);
+      setPageStatus(`Imported ${file.name}.`);
     }
     e.target.value = '';
   });
@@ -259,10 +305,11 @@ async function main() {
     const link = `${location.origin}${location.pathname}#model=${await encodeModel(modelJson())}${tabParam()}`;
     try {
       await navigator.clipboard.writeText(link);
-      setStatus('Link copied.');
+      setPageStatus('Link copied.');
     } catch {
+      state.keepUrl = false;
       history.replaceState(null, '', link);
-      setStatus('Link is in the address bar.');
+      setPageStatus('The link is in the address bar (the clipboard is not available here).');
     }
   });
   $('run').addEventListener('click', run);
@@ -289,6 +336,7 @@ async function main() {
   }
   const tabs = mountTabs({
     model: () => editor.model,
+    pendingModelErrors: () => editor.localErrors(),
     showModelErrors: (errors) => editor.showErrors(errors),
     download,
     fileStem,
@@ -301,4 +349,4 @@ async function main() {
   document.body.dataset.ready = 'true';
 }
 
-main().catch((e) => setStatus(`Could not start: ${e.title ?? e.message ?? e}`, true));
+main().catch((e) => setPageStatus(`Could not start: ${e.title ?? e.message ?? e}`, true));

@@ -1,15 +1,13 @@
 // The model editor: params, time, dimensions, and every matrix as a grid of cells
 // that accept a number or an expression in t and the params. Edits change the model
 // object in place (fields the editor does not show are kept), and the core's
-// validation messages are shown at the cell their path names.
+// validation messages are shown at the cell their path names. Fields that take only a
+// number (params, t₀, t_E, P, …) are also checked here, so their messages say what to
+// type rather than what the JSON parser expected.
 
-const NUMBER = /^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$/;
+import { numberProblem, parseCell } from './numbers.js';
 
-/** A cell's text as a model value: a number when it reads as one, else an expression. */
-export function parseCell(text) {
-  const s = text.trim();
-  return NUMBER.test(s) ? Number(s) : s;
-}
+export { parseCell };
 
 function showValue(v) {
   return v === undefined || v === null ? '' : String(v);
@@ -57,12 +55,39 @@ export function resize(model, { N, n, L, M }) {
   for (const k of ['u', 'y0', 'eta0']) if (s[k]) s[k] = resizeVec(s[k], N);
   if (s.W) s.W = resizeMat(s.W, L, L);
   else s.phi = resizeVec(s.phi, L);
+  const measured = m.names?.length ?? 0;
   m.names = resizeVec(m.names, n, (j) => `z${j + 1}`);
   m.c = resizeMat(m.c, n, N);
+  // A new measurement measures the first state no row of C measures yet (an all-zero
+  // row with no noise would make the innovation covariance singular).
+  for (let j = measured; j < n && N > 0; j++) m.c[j][firstUnmeasured(m.c.slice(0, j), N)] = 1;
   if (m.g) m.g = resizeMat(m.g, N, M);
   else m.gamma = resizeMat(m.gamma, n, M);
   if (m.V) m.V = resizeMat(m.V, M, M);
   else m.psi = resizeVec(m.psi, M);
+}
+
+/** The first column of `rows` (C's rows) that is 0 in every row; 0 when none is. */
+function firstUnmeasured(rows, N) {
+  const zero = (x) => x === undefined || x === null || x === 0 || x === '0' || x === '';
+  for (let k = 0; k < N; k++) if (rows.every((row) => zero(row?.[k]))) return k;
+  return 0;
+}
+
+/**
+ * Why `value` cannot be loaded as a model, or null when it can: it must be a JSON
+ * object with at least one of a model's parts (the core's validation names the rest).
+ */
+export function modelProblem(value) {
+  if (value === null || typeof value !== 'object' || Array.isArray(value)) {
+    const what = Array.isArray(value) ? 'an array' : value === null ? 'null' : `a ${typeof value}`;
+    return `it is ${what}, not a model (a JSON object with system, measurement, time, …)`;
+  }
+  const parts = ['system', 'measurement', 'time', 'params'];
+  if (!parts.some((k) => k in value)) return `it has none of a model's parts (${parts.join(', ')})`;
+  const notObject = parts.find((k) => k in value && (value[k] === null || typeof value[k] !== 'object' || Array.isArray(value[k])));
+  if (notObject) return `its ${notObject} is not a JSON object`;
+  return null;
 }
 
 /** Parse `system.a[1][2]` into ['system', 'a', 1, 2]. */
@@ -87,18 +112,33 @@ function parentPath(path) {
   return dot < 0 ? '' : path.slice(0, dot);
 }
 
+/** A core error at `params.X` that is about the name X (not its value) belongs to the name cell. */
+function namePath(error) {
+  const path = error.path ?? '';
+  if (/^params\.[^.[]+$/.test(path) && /parameter name|cannot be a parameter/.test(error.message)) return `${path}.name`;
+  return path;
+}
+
+/** A number field's check (null: fine). */
+const aNumber = (text) => numberProblem(text);
+const wholeAtLeast = (min) => (text) => numberProblem(text, { integer: true, min });
+
 export class ModelEditor {
   /** `onChange()` is called after every edit of the model. */
   constructor(root, onChange) {
     this.root = root;
     this.onChange = onChange;
     this.model = null;
-    this.fields = new Map(); // path → {input?, holder}
+    this.fields = new Map(); // path → {input, holder}
+    this.local = new Map(); // path → message: this editor's own checks of the shown texts
+    this.core = []; // the core's last validation errors, kept across redraws
     this.general = el('ul', { class: 'general-errors', 'aria-live': 'polite' });
+    new ResizeObserver(() => this.updateScrollHints()).observe(root);
   }
 
   load(model) {
     this.model = model;
+    this.core = [];
     this.render();
   }
 
@@ -106,11 +146,18 @@ export class ModelEditor {
     this.onChange?.();
   }
 
+  /** Messages of this editor's own checks (unreadable numbers, a refused rename). */
+  localErrors() {
+    return [...this.local].map(([path, message]) => ({ path, message }));
+  }
+
   // ------------------------------------------------------------ rendering
 
   render() {
-    const focused = document.activeElement?.dataset?.path;
+    const active = document.activeElement;
+    const focused = this.root.contains(active) ? active.dataset?.path : undefined;
     this.fields.clear();
+    this.local.clear();
     const m = this.model;
     m.system ??= {};
     m.measurement ??= {};
@@ -125,6 +172,8 @@ export class ModelEditor {
       this.sectionMeasurement(dims),
       this.sectionCriteria(),
     );
+    this.mark();
+    this.updateScrollHints();
     if (focused) this.root.querySelector(`[data-path="${CSS.escape(focused)}"]`)?.focus();
   }
 
@@ -132,22 +181,38 @@ export class ModelEditor {
     this.fields.set(path, { input, holder: holder ?? input.parentElement });
   }
 
-  /** A labelled input bound to obj[key]; `parse` turns its text into the value. */
-  field(label, path, obj, key, { type = 'text', parse = parseCell, rerender = false, help } = {}) {
+  /** Record this editor's check of `path` (a message, or null when fine) and re-mark. */
+  setLocal(path, message, markNow = true) {
+    if (message) this.local.set(path, message);
+    else this.local.delete(path);
+    if (markNow) this.mark();
+  }
+
+  /**
+   * A labelled input bound to obj[key]; `parse` turns its text into the value, `check`
+   * says what is wrong with a text (null: fine); with `optional`, an empty text removes
+   * the key (the core's default applies).
+   */
+  field(label, path, obj, key, { type = 'text', parse = parseCell, check, optional = false, placeholder, help } = {}) {
     const id = `f-${path.replace(/[^a-zA-Z0-9]/g, '-')}`;
     const input = el('input', {
       id,
       type,
       'data-path': path,
       value: showValue(obj[key]),
+      placeholder,
       'aria-describedby': help ? `${id}-help` : undefined,
     });
     if (type === 'checkbox') input.checked = !!obj[key];
-    input.addEventListener(rerender ? 'change' : 'input', () => {
-      obj[key] = type === 'checkbox' ? input.checked : parse(input.value);
-      if (rerender) this.render();
+    const problem = (text) => (optional && text.trim() === '' ? null : check?.(text) ?? null);
+    input.addEventListener('input', () => {
+      if (type === 'checkbox') obj[key] = input.checked;
+      else if (optional && input.value.trim() === '') delete obj[key];
+      else obj[key] = parse(input.value);
+      if (check) this.setLocal(path, problem(input.value));
       this.changed();
     });
+    if (check) this.setLocal(path, problem(input.value), false);
     const wrap = el('div', { class: 'field' }, el('label', { for: id, text: label }), input);
     if (help) wrap.append(el('small', { id: `${id}-help`, class: 'help', text: help }));
     this.register(path, input, wrap);
@@ -173,53 +238,85 @@ export class ModelEditor {
     return fs;
   }
 
+  /**
+   * One parameter's row. A rename changes the row in place (no redraw: focus, a click
+   * under way and the marks stay); a name that is taken or empty is refused at the cell.
+   */
+  paramRow(initial) {
+    const m = this.model;
+    let name = initial;
+    const nameInput = el('input', { value: name, class: 'name', spellcheck: 'false', autocomplete: 'off' });
+    const valueInput = el('input', { value: showValue(m.params[name]), inputmode: 'decimal', spellcheck: 'false', autocomplete: 'off' });
+    const remove = el('button', { type: 'button', class: 'icon', text: '×' });
+    const nameCell = el('td', {}, nameInput);
+    const valueCell = el('td', {}, valueInput);
+    const label = () => {
+      nameInput.dataset.path = `params.${name}.name`;
+      nameInput.setAttribute('aria-label', `parameter name ${name}`);
+      valueInput.dataset.path = `params.${name}`;
+      valueInput.setAttribute('aria-label', `value of ${name}`);
+      remove.setAttribute('aria-label', `remove parameter ${name}`);
+      remove.title = `Remove ${name}`;
+      this.register(`params.${name}.name`, nameInput, nameCell);
+      this.register(`params.${name}`, valueInput, valueCell);
+    };
+    label();
+    this.setLocal(`params.${name}`, aNumber(valueInput.value), false);
+
+    nameInput.addEventListener('change', () => {
+      const wanted = nameInput.value.trim();
+      const old = name;
+      let problem = null;
+      if (wanted === old) nameInput.value = old;
+      else if (!wanted) problem = `a parameter needs a name (× removes ${old})`;
+      else if (Object.hasOwn(m.params, wanted)) {
+        problem = `“${wanted}” is already a parameter: renaming ${old} to it would replace it; choose another name`;
+      }
+      if (problem || wanted === old) {
+        this.setLocal(`params.${old}.name`, problem);
+        return;
+      }
+      // Keep the order: rebuild the object with the new key in place.
+      m.params = Object.fromEntries(Object.entries(m.params).map(([k, v]) => [k === old ? wanted : k, v]));
+      const valueProblem = this.local.get(`params.${old}`);
+      for (const p of [`params.${old}`, `params.${old}.name`]) {
+        this.local.delete(p);
+        this.fields.delete(p);
+      }
+      // The core's marks at the old name are stale until the next check.
+      this.core = this.core.filter((e) => !(e.path === `params.${old}` || e.path?.startsWith(`params.${old}.`)));
+      name = wanted;
+      label();
+      this.setLocal(`params.${name}`, valueProblem ?? null);
+      this.changed();
+    });
+    nameInput.addEventListener('keydown', (e) => {
+      if (e.key !== 'Enter') return;
+      e.preventDefault();
+      nameInput.dispatchEvent(new Event('change')); // commit, then on to the value
+      if (!this.local.has(`params.${name}.name`)) {
+        valueInput.focus();
+        valueInput.select();
+      }
+    });
+    valueInput.addEventListener('input', () => {
+      m.params[name] = parseCell(valueInput.value);
+      this.setLocal(`params.${name}`, aNumber(valueInput.value));
+      this.changed();
+    });
+    remove.addEventListener('click', () => {
+      delete m.params[name];
+      this.render();
+      this.changed();
+    });
+    return el('tr', {}, nameCell, valueCell, el('td', {}, remove));
+  }
+
   sectionParams() {
     const m = this.model;
-    m.params ??= {};
+    if (m.params === null || typeof m.params !== 'object' || Array.isArray(m.params)) m.params = {};
     const body = el('tbody');
-    for (const name of Object.keys(m.params)) {
-      const nameInput = el('input', {
-        value: name,
-        'aria-label': `parameter name ${name}`,
-        'data-path': `params.${name}.name`,
-        class: 'name',
-      });
-      nameInput.addEventListener('change', () => {
-        const renamed = nameInput.value.trim();
-        if (!renamed || renamed === name) return;
-        // Keep the order: rebuild the object with the new key in place.
-        m.params = Object.fromEntries(
-          Object.entries(m.params).map(([k, v]) => [k === name ? renamed : k, v]),
-        );
-        this.render();
-        this.changed();
-      });
-      const valueInput = el('input', {
-        value: showValue(m.params[name]),
-        'aria-label': `value of ${name}`,
-        'data-path': `params.${name}`,
-        inputmode: 'decimal',
-      });
-      valueInput.addEventListener('input', () => {
-        m.params[name] = parseCell(valueInput.value);
-        this.changed();
-      });
-      const remove = el('button', {
-        type: 'button',
-        class: 'icon',
-        'aria-label': `remove parameter ${name}`,
-        title: `Remove ${name}`,
-        text: '×',
-        onclick: () => {
-          delete m.params[name];
-          this.render();
-          this.changed();
-        },
-      });
-      const cell = el('td', {}, valueInput);
-      this.register(`params.${name}`, valueInput, cell);
-      body.append(el('tr', {}, el('td', {}, nameInput), cell, el('td', {}, remove)));
-    }
+    for (const name of Object.keys(m.params)) body.append(this.paramRow(name));
     const add = el('button', {
       type: 'button',
       text: 'Add parameter',
@@ -264,6 +361,10 @@ export class ModelEditor {
       return el('div', { class: 'field' }, el('label', { for: id, text: label, title: help }), input);
     };
     const steps = (s) => (s.trim() === 'auto' ? 'auto' : parseCell(s));
+    const stepsProblem = (s) => {
+      const problem = s.trim() === 'auto' ? null : numberProblem(s, { integer: true, min: 1 });
+      return problem && `${problem}; D is a whole number ≥ 1 or auto`;
+    };
     return el(
       'fieldset',
       { class: 'section' },
@@ -271,9 +372,9 @@ export class ModelEditor {
       el(
         'div',
         { class: 'row' },
-        this.field('t₀', 'time.t0', m.time, 't0'),
-        this.field('t_E', 'time.t_end', m.time, 't_end'),
-        this.field('Steps D (or auto)', 'time.steps', m.time, 'steps', { parse: steps }),
+        this.field('t₀', 'time.t0', m.time, 't0', { check: aNumber }),
+        this.field('t_E', 'time.t_end', m.time, 't_end', { check: aNumber }),
+        this.field('Steps D (or auto)', 'time.steps', m.time, 'steps', { parse: steps, check: stepsProblem }),
       ),
       el(
         'div',
@@ -288,28 +389,34 @@ export class ModelEditor {
 
   /**
    * A grid of cells for a matrix (`rows`×`cols`) or a vector (`cols` = 0) at `path`
-   * inside `obj[key]`; absent optional vectors show 0 and are created on first edit.
+   * inside `obj[key]`; absent optional vectors show 0 and are created on first edit, as
+   * are rows and entries a ragged matrix lacks. `rowNames`/`colNames` are the paths of
+   * the name vectors that label the rows/columns (kept current as the names are typed).
    */
-  grid({ title, path, obj, key, rows, cols, rowLabels, colLabels, create, text = false }) {
+  grid({ title, path, obj, key, rows, cols, rowLabels, colLabels, rowNames, colNames, create, text = false }) {
     const table = el('table', { class: 'grid', 'data-grid': path });
-    const caption = el('caption', {}, title);
+    const caption = el('caption', {}, title, el('span', { class: 'scroll-hint', text: ' — scroll sideways for more ↔' }));
     table.append(caption);
     const vector = cols === 0;
     if (colLabels) {
       table.append(
-        el('thead', {}, el('tr', {}, el('th'), ...colLabels.map((c) => el('th', { scope: 'col', text: c })))),
+        el(
+          'thead',
+          {},
+          el('tr', {}, el('th'), ...colLabels.map((c, j) => el('th', { scope: 'col', 'data-label-of': colNames && `${colNames}[${j}]`, text: c }))),
+        ),
       );
     }
     const body = el('tbody');
     for (let i = 0; i < rows; i++) {
-      const tr = el('tr', {}, el('th', { scope: 'row', text: rowLabels?.[i] ?? String(i + 1) }));
+      const tr = el('tr', {}, el('th', { scope: 'row', 'data-label-of': rowNames && `${rowNames}[${i}]`, text: rowLabels?.[i] ?? String(i + 1) }));
       for (let j = 0; j < (vector ? 1 : cols); j++) {
         const cellPath = vector ? `${path}[${i}]` : `${path}[${i}][${j}]`;
         const current = vector ? obj[key]?.[i] : obj[key]?.[i]?.[j];
         const label = `${title} ${vector ? `[${i + 1}]` : `[${i + 1}, ${j + 1}]`}`;
         const input = el('input', {
           value: showValue(current),
-          placeholder: current === undefined ? '0' : undefined,
+          placeholder: current === undefined ? (text ? undefined : '0') : undefined,
           'data-path': cellPath,
           'data-row': i,
           'data-col': j,
@@ -318,15 +425,26 @@ export class ModelEditor {
           autocomplete: 'off',
         });
         input.addEventListener('input', () => {
-          if (!obj[key]) obj[key] = create();
+          if (!Array.isArray(obj[key])) obj[key] = create();
           const value = text ? input.value : parseCell(input.value);
-          if (vector) obj[key][i] = value;
-          else obj[key][i][j] = value;
+          const target = obj[key];
+          if (vector) {
+            while (target.length < i) target.push(text ? '' : 0);
+            target[i] = value;
+          } else {
+            // A ragged matrix (imported, linked) gets the rows and entries it lacks.
+            while (target.length <= i) target.push([]);
+            if (!Array.isArray(target[i])) target[i] = [];
+            while (target[i].length < cols) target[i].push(0);
+            target[i][j] = value;
+          }
+          if (text) {
+            for (const th of this.root.querySelectorAll(`[data-label-of="${CSS.escape(cellPath)}"]`)) {
+              th.textContent = input.value;
+            }
+          }
           this.changed();
         });
-        if (text) {
-          input.addEventListener('change', () => this.render());
-        }
         input.addEventListener('keydown', (e) => this.gridKey(e, table));
         const td = el('td', { 'data-path': cellPath }, input);
         this.register(cellPath, input, td);
@@ -336,7 +454,21 @@ export class ModelEditor {
     }
     table.append(body);
     this.register(path, table, caption);
-    return table;
+    const wrap = el('div', { class: 'grid-wrap' }, table);
+    wrap.addEventListener('scroll', () => this.scrollHint(wrap), { passive: true });
+    return wrap;
+  }
+
+  /** Mark the grids wider than their box: a caption hint and a faded edge per side with more. */
+  scrollHint(wrap) {
+    const more = wrap.scrollWidth - wrap.clientWidth;
+    wrap.classList.toggle('overflows', more > 1);
+    wrap.classList.toggle('more-left', wrap.scrollLeft > 1);
+    wrap.classList.toggle('more-right', more - wrap.scrollLeft > 1);
+  }
+
+  updateScrollHints() {
+    for (const wrap of this.root.querySelectorAll('.grid-wrap')) this.scrollHint(wrap);
   }
 
   /** Arrow keys and Enter move between the cells of a grid. */
@@ -391,11 +523,11 @@ export class ModelEditor {
         'div',
         { class: 'grids' },
         this.grid({ title: 'State names', path: 'system.states', obj: s, key: 'states', rows: N, cols: 0, text: true, create: () => [] }),
-        this.grid({ title: 'a (N×N)', path: 'system.a', obj: s, key: 'a', rows: N, cols: N, rowLabels: states, colLabels: states, create: () => resizeMat([], N, N) }),
-        this.grid({ title: 'b (N×L)', path: 'system.b', obj: s, key: 'b', rows: N, cols: L, rowLabels: states, colLabels: lcols, create: () => resizeMat([], N, L) }),
-        this.grid({ title: 'u (N)', path: 'system.u', obj: s, key: 'u', rows: N, cols: 0, rowLabels: states, create: () => zeros(N) }),
-        this.grid({ title: 'y₀ (N)', path: 'system.y0', obj: s, key: 'y0', rows: N, cols: 0, rowLabels: states, create: () => zeros(N) }),
-        this.grid({ title: 'η₀ initial SKOs (N)', path: 'system.eta0', obj: s, key: 'eta0', rows: N, cols: 0, rowLabels: states, create: () => zeros(N) }),
+        this.grid({ title: 'a (N×N)', path: 'system.a', obj: s, key: 'a', rows: N, cols: N, rowLabels: states, colLabels: states, rowNames: 'system.states', colNames: 'system.states', create: () => resizeMat([], N, N) }),
+        this.grid({ title: 'b (N×L)', path: 'system.b', obj: s, key: 'b', rows: N, cols: L, rowLabels: states, colLabels: lcols, rowNames: 'system.states', create: () => resizeMat([], N, L) }),
+        this.grid({ title: 'u (N)', path: 'system.u', obj: s, key: 'u', rows: N, cols: 0, rowLabels: states, rowNames: 'system.states', create: () => zeros(N) }),
+        this.grid({ title: 'y₀ (N)', path: 'system.y0', obj: s, key: 'y0', rows: N, cols: 0, rowLabels: states, rowNames: 'system.states', create: () => zeros(N) }),
+        this.grid({ title: 'η₀ initial SKOs (N)', path: 'system.eta0', obj: s, key: 'eta0', rows: N, cols: 0, rowLabels: states, rowNames: 'system.states', create: () => zeros(N) }),
         el(
           'div',
           { class: 'stack' },
@@ -424,8 +556,8 @@ export class ModelEditor {
     const errorForm = m.V ? 'V' : 'psi';
     const noiseGrid =
       noiseForm === 'g'
-        ? this.grid({ title: 'g (N×M), Γ = C g', path: 'measurement.g', obj: m, key: 'g', rows: N, cols: M, rowLabels: states, colLabels: mcols, create: () => resizeMat([], N, M) })
-        : this.grid({ title: 'Γ (n×M)', path: 'measurement.gamma', obj: m, key: 'gamma', rows: n, cols: M, rowLabels: names, colLabels: mcols, create: () => resizeMat([], n, M) });
+        ? this.grid({ title: 'g (N×M), Γ = C g', path: 'measurement.g', obj: m, key: 'g', rows: N, cols: M, rowLabels: states, colLabels: mcols, rowNames: 'system.states', create: () => resizeMat([], N, M) })
+        : this.grid({ title: 'Γ (n×M)', path: 'measurement.gamma', obj: m, key: 'gamma', rows: n, cols: M, rowLabels: names, colLabels: mcols, rowNames: 'measurement.names', create: () => resizeMat([], n, M) });
     const errorsGrid =
       errorForm === 'V'
         ? this.grid({ title: 'V (M×M)', path: 'measurement.V', obj: m, key: 'V', rows: M, cols: M, rowLabels: mcols, colLabels: mcols, create: () => resizeMat([], M, M) })
@@ -438,7 +570,7 @@ export class ModelEditor {
         'div',
         { class: 'grids' },
         this.grid({ title: 'Measurement names', path: 'measurement.names', obj: m, key: 'names', rows: n, cols: 0, text: true, create: () => [] }),
-        this.grid({ title: 'C (n×N)', path: 'measurement.c', obj: m, key: 'c', rows: n, cols: N, rowLabels: names, colLabels: states, create: () => resizeMat([], n, N) }),
+        this.grid({ title: 'C (n×N)', path: 'measurement.c', obj: m, key: 'c', rows: n, cols: N, rowLabels: names, colLabels: states, rowNames: 'measurement.names', colNames: 'system.states', create: () => resizeMat([], n, N) }),
         el(
           'div',
           { class: 'stack' },
@@ -484,8 +616,8 @@ export class ModelEditor {
       el(
         'div',
         { class: 'row' },
-        this.field('Confidence P', 'criteria.confidence', m.criteria, 'confidence'),
-        this.field('Trace points', 'options.trace_points', m.options, 'trace_points'),
+        this.field('Confidence P', 'criteria.confidence', m.criteria, 'confidence', { check: aNumber, optional: true, placeholder: '0.95' }),
+        this.field('Trace points', 'options.trace_points', m.options, 'trace_points', { check: wholeAtLeast(0), optional: true, placeholder: '1000' }),
         this.field('Steady-state shortcut', 'options.steady_state_shortcut', m.options, 'steady_state_shortcut', { type: 'checkbox' }),
       ),
     );
@@ -493,15 +625,28 @@ export class ModelEditor {
 
   // ------------------------------------------------------------ validation
 
-  /** Show the core's errors at their cells; the rest at the top. Returns the count. */
+  /**
+   * Show the core's errors at their cells (kept across redraws until the next call),
+   * with this editor's own messages, which replace the core's at the same field; the
+   * rest at the top. Returns the count.
+   */
   showErrors(errors) {
+    this.core = errors ?? [];
+    this.mark();
+    return this.core.length;
+  }
+
+  mark() {
     for (const e of this.root.querySelectorAll('.cell-error')) e.remove();
     for (const e of this.root.querySelectorAll('[aria-invalid="true"]')) {
       e.removeAttribute('aria-invalid');
       e.classList.remove('invalid');
     }
     this.general.replaceChildren();
-    for (const error of errors) {
+    const own = this.localErrors();
+    const ownPaths = new Set(own.map((e) => e.path));
+    const core = this.core.map((e) => ({ ...e, path: namePath(e) })).filter((e) => !ownPaths.has(e.path));
+    for (const error of [...own, ...core]) {
       let path = error.path ?? '';
       let target = this.fields.get(path);
       while (!target && path) {
@@ -523,6 +668,5 @@ export class ModelEditor {
       });
       target.holder.append(msg);
     }
-    return errors.length;
   }
 }

@@ -290,6 +290,223 @@ test('a long run is cancelled, in the browser and on the server', async () => {
   assert.ok((await criteria())['bound.yx.weighted'] > 1);
 });
 
+/** Load a preset and wait for its link. */
+async function preset(name) {
+  await page.selectOption('#preset', name);
+  await page.waitForFunction((n) => location.hash.startsWith(`#preset=${n}`), name);
+}
+
+/** The messages shown at the editor cell or field `path` names (the input's holder). */
+function messagesAt(path) {
+  return page.$$eval(`[data-error-path="${path}"]`, (es) => es.map((e) => e.textContent));
+}
+
+test('a parameter rename to a taken name is refused at its name cell; a bad name is marked there too', async () => {
+  await preset('seed-example');
+  await page.fill('input[data-path="params.w.name"]', 's');
+  await page.press('input[data-path="params.w.name"]', 'Tab');
+  const refused = await messagesAt('params.w.name');
+  assert.equal(refused.length, 1, 'one message at the name cell');
+  assert.match(refused[0], /“s” is already a parameter/);
+  assert.equal(await page.getAttribute('input[data-path="params.w.name"]', 'aria-invalid'), 'true');
+  // Both parameters are still there, with their values.
+  assert.equal(await page.inputValue('input[data-path="params.s"]'), '37.17');
+  assert.equal(await page.inputValue('input[data-path="params.w"]'), '9.81');
+  // A name the core refuses ("t" is the time variable) is marked at the name, not the value.
+  await page.fill('input[data-path="params.w.name"]', 't');
+  await page.press('input[data-path="params.w.name"]', 'Tab');
+  await page.waitForSelector('[data-error-path="params.t.name"]', { timeout: 10000 });
+  assert.match((await messagesAt('params.t.name'))[0], /time variable/);
+  assert.equal(await page.getAttribute('input[data-path="params.t"]', 'aria-invalid'), null, 'the value cell is not marked');
+  await screenshot(page, '05-param-name-errors');
+  await preset('seed-example');
+});
+
+test('a rename keeps the marks, the click that follows it and the focus', async () => {
+  await preset('seed-example');
+  await page.fill('input[data-path="system.a[0][0]"]', 's/m +* 1');
+  await page.waitForSelector('td[data-path="system.a[0][0]"] .cell-error', { timeout: 10000 });
+  const rows = () => page.$$eval('table.params tbody tr', (trs) => trs.length);
+  const before = await rows();
+  // Rename m_g, then click "Add parameter" straight away: one click adds one parameter.
+  await page.fill('input[data-path="params.m_g.name"]', 'mg');
+  await page.click('text=Add parameter');
+  assert.equal(await rows(), before + 1, 'the click after the rename was not lost');
+  assert.ok(await page.$('input[data-path="params.mg"]'), 'm_g is now mg');
+  assert.ok(await page.$('input[data-path="params.p1"]'), 'the added parameter');
+  // The invalid expression is still marked after the redraw and the rename.
+  await page.waitForTimeout(400);
+  assert.equal((await messagesAt('system.a[0][0]')).length, 1, 'the mark at a[0][0] stayed');
+  // Enter in a name cell commits the name and moves to its value, not to the page body.
+  await page.fill('input[data-path="params.p1.name"]', 'q');
+  await page.press('input[data-path="params.p1.name"]', 'Enter');
+  assert.equal(await page.evaluate(() => document.activeElement.dataset.path), 'params.q');
+  // Enter in a state name keeps the focus in the editor (the last row: no cell below).
+  await page.fill('input[data-path="system.states[0]"]', 'Y2');
+  await page.press('input[data-path="system.states[0]"]', 'Enter');
+  assert.equal(await page.evaluate(() => document.activeElement.dataset.path), 'system.states[0]');
+  assert.equal(await page.textContent('table[data-grid="system.a"] tbody th'), 'Y2', 'the row label follows the name');
+  // × right after a name edit removes on the first click.
+  const remove = await page.$('button[aria-label="remove parameter q"]');
+  await page.fill('input[data-path="params.q.name"]', 'q2');
+  await remove.click();
+  assert.equal(await rows(), before);
+  await preset('seed-example');
+});
+
+test('numbers typed into the form are checked at their field, in words', async () => {
+  await preset('seed-example');
+  const cases = [
+    ['params.w', 'abc', /“abc” is not a number/],
+    ['time.t_end', '0,5', /use a decimal point: 0\.5/],
+    ['criteria.confidence', 'abc', /“abc” is not a number/],
+    ['options.trace_points', '1.5', /“1\.5” is not a whole number/],
+  ];
+  for (const [path, text, expected] of cases) {
+    await page.fill(`input[data-path="${path}"]`, text);
+    await page.waitForTimeout(300); // the core's check has answered
+    const shown = await messagesAt(path);
+    assert.equal(shown.length, 1, `${path}: ${shown}`);
+    assert.match(shown[0], expected);
+    assert.doesNotMatch(shown[0], /invalid type|expected (f64|usize)/);
+    await page.fill(`input[data-path="${path}"]`, path === 'params.w' ? '9.81' : path === 'time.t_end' ? '10' : path === 'criteria.confidence' ? '0.95' : '1000');
+  }
+  await page.waitForTimeout(300);
+  assert.deepEqual(await page.$$eval('#editor .cell-error', (es) => es.map((e) => e.textContent)), []);
+});
+
+test('a ragged matrix from a file can be completed in the grid', async () => {
+  const model = JSON.parse(kea('preset', 'cv-tracker'));
+  model.system.a = [[0, 1]]; // N = 2, one row
+  await page.setInputFiles('#import-model', { name: 'ragged.json', mimeType: 'application/json', buffer: Buffer.from(JSON.stringify(model)) });
+  await page.waitForFunction(() => document.getElementById('page-status').textContent.includes('ragged.json'));
+  await page.fill('input[data-path="system.a[1][1]"]', '-0.5');
+  const [exported] = await Promise.all([page.waitForEvent('download'), page.click('#export-model')]);
+  const saved = JSON.parse(readFileSync(await exported.path(), 'utf8'));
+  assert.deepEqual(saved.system.a, [[0, 1], [0, -0.5]]);
+  await page.waitForTimeout(300);
+  assert.deepEqual(await page.$$eval('#editor .cell-error', (es) => es.map((e) => e.textContent)), []);
+});
+
+test('a new measurement measures the first unmeasured state, and the model runs', async () => {
+  await preset('cv-tracker'); // C = [1, 0]: position measured
+  await page.fill('#dim-n', '2');
+  await page.press('#dim-n', 'Tab');
+  assert.equal(await page.inputValue('input[data-path="measurement.c[1][0]"]'), '0');
+  assert.equal(await page.inputValue('input[data-path="measurement.c[1][1]"]'), '1');
+  await forgetResult();
+  await runIn('browser');
+  assert.doesNotMatch(await page.textContent('#status'), /singular/);
+});
+
+test('files that are not models are refused, and page messages show on every tab', async () => {
+  await preset('seed-example');
+  await page.click('#tab-simulation');
+  for (const [name, text] of [['empty.json', '{}'], ['list.json', '[1,2]'], ['text.json', 'not json']]) {
+    await page.setInputFiles('#import-model', { name, mimeType: 'application/json', buffer: Buffer.from(text) });
+    await page.waitForFunction((n) => document.getElementById('page-status').textContent.startsWith(n), name);
+    assert.ok(await page.isVisible('#page-status'), 'the message is visible on the Monte Carlo tab');
+    assert.match(await page.textContent('#page-status'), /not (a kea model|JSON).*the model is unchanged/);
+    assert.equal(await page.inputValue('input[data-path=name]'), 'Seed 000 worked example (section 5)');
+  }
+  await screenshot(page, '06-import-refused-on-monte-carlo');
+  await page.click('#copy-link');
+  await page.waitForFunction(() => /Link copied|address bar/.test(document.getElementById('page-status').textContent));
+  assert.ok(await page.isVisible('#page-status'));
+  await page.click('#tab-analysis');
+});
+
+test('a broken link says so, on its tab, and keeps the address', async () => {
+  const errors = [];
+  const other = await newPage(browser, errors);
+  const link = `${server.url}/#model=bm90IGEgbW9kZWw&tab=synthesis`;
+  await other.goto(link);
+  await other.waitForSelector('body[data-ready=true]', { timeout: 30000 });
+  assert.ok(await other.isVisible('#page-status'), 'the message is visible on the Synthesis tab');
+  assert.match(await other.textContent('#page-status'), /link's model could not be read.*address is kept/);
+  await other.waitForTimeout(600); // past the address's save delay
+  assert.equal(other.url(), link, 'the address is kept');
+  // The first edit replaces it.
+  await other.fill('input[data-path="params.w"]', '9.8');
+  await other.waitForFunction(() => location.hash.startsWith('#model=') && !location.hash.startsWith('#model=bm90'));
+  await other.context().close();
+  assert.deepEqual(errors, []);
+});
+
+test('chart axes are labelled for values near 1e50, on linear and log scales', async () => {
+  await preset('helicopter-range');
+  await forgetResult();
+  await runIn('browser');
+  const ticks = async () => (await page.getAttribute('#chart', 'data-y-ticks')).split(' | ').filter((t) => t !== '');
+  await page.selectOption('#trace-state', { label: 'D_b' });
+  for (const log of [false, true]) {
+    await page.setChecked('#trace-log', log);
+    const shown = await ticks();
+    assert.ok(shown.length >= 3 && shown.length <= 12, `${log ? 'log' : 'linear'}: ${shown}`);
+    const values = shown.map(Number);
+    assert.ok(values.every(Number.isFinite), `ticks are numbers: ${shown}`);
+    assert.ok(Math.max(...values) >= 1e30, `the top tick reaches the data: ${shown}`);
+    if (log) assert.ok(values.every((v) => /^1(e\+?\d+)?$|^0\.\d*1$/.test(String(v)) || Number.isInteger(Math.log10(v))), `decades: ${shown}`);
+    await screenshot(page, `07-chart-large-${log ? 'log' : 'linear'}`);
+  }
+  await page.setChecked('#trace-log', false);
+});
+
+test('no trace points: the chart says so', async () => {
+  await preset('seed-example');
+  await page.fill('input[data-path="options.trace_points"]', '0');
+  await forgetResult();
+  await runIn('browser');
+  assert.match(await page.textContent('#chart'), /No trace points requested/);
+});
+
+test('a server run cancelled before its job exists is cancelled on the server', async () => {
+  await makeLong();
+  // Hold the job's creation back, so Cancel comes before its id is known.
+  let release;
+  const held = new Promise((r) => (release = r));
+  await page.route('**/v1/jobs', async (route) => {
+    if (route.request().method() !== 'POST') return route.continue();
+    await held;
+    return route.continue();
+  });
+  await page.check('input[name=mode][value=server]');
+  await page.click('#run');
+  await page.waitForTimeout(200);
+  await page.click('#cancel');
+  release();
+  await page.waitForFunction(() => document.querySelector('#status').textContent === 'Cancelled.', null, { timeout: 10000 });
+  await page.unroute('**/v1/jobs');
+  const jobs = await (await fetch(`${server.url}/v1/jobs`)).json();
+  const items = jobs.items ?? jobs.jobs ?? jobs;
+  assert.ok(!items.some((j) => ['queued', 'running'].includes(j.status)), JSON.stringify(items).slice(0, 500));
+  await preset('seed-example');
+});
+
+test('at 390 px wide the page does not overflow sideways, on every tab', async () => {
+  await page.setViewportSize({ width: 390, height: 800 });
+  try {
+    await preset('helicopter-range');
+    const overflow = () => page.evaluate(() => document.documentElement.scrollWidth - document.documentElement.clientWidth);
+    for (const tab of ['analysis', 'synthesis', 'simulation']) {
+      await page.click(`#tab-${tab}`);
+      assert.equal(await overflow(), 0, `${tab}: no sideways overflow`);
+    }
+    // The synthesis grid's cost column is all there.
+    await page.click('#tab-synthesis');
+    await page.selectOption('#syn-mode', 'grid');
+    const cost = await page.$eval('#syn-grid-cheaper-0', (s) => [s.getBoundingClientRect().right, s.closest('fieldset').getBoundingClientRect().right]);
+    assert.ok(cost[0] <= cost[1], `the cost select ends inside its box: ${cost}`);
+    // A matrix wider than the screen says that it scrolls.
+    assert.ok(await page.isVisible('table[data-grid="system.a"] .scroll-hint'), 'the N×N grid has a scroll hint');
+    assert.equal(await page.isVisible('table[data-grid="system.states"] .scroll-hint'), false);
+    await screenshot(page, '08-narrow');
+  } finally {
+    await page.setViewportSize({ width: 1440, height: 900 });
+    await page.click('#tab-analysis');
+  }
+});
+
 test('the page logged no console errors', () => {
   assert.deepEqual(consoleErrors, []);
 });

@@ -5,7 +5,10 @@
 // consistency verdicts (NEES, NIS, per state), and the criteria sets side by side.
 
 import uPlot from './vendor/uplot/uPlot.esm.js';
-import { RunBar, checkModel, el, field, fmt, input, markControls, num, routeErrors, runError, select, wasmCall } from './views.js';
+import { MAX_SAFE, numberProblem, toNumber } from './numbers.js';
+import { valueAxis } from './plot.js';
+import { noTraces } from './results.js';
+import { RunBar, checkModel, el, field, fmt, input, markControls, routeErrors, runError, select, wasmCall } from './views.js';
 
 const SETS = ['bound', 'covariance', 'monte_carlo'];
 const CRITERIA = [
@@ -18,14 +21,6 @@ const SERIES = [
   ['filtered_sko', 'real: sample SKO of X − truth', '#d62728', []],
   ['chi', 'bound χ', '#2ca02c', [6, 4]],
 ];
-
-function tick(x) {
-  if (x === null || x === undefined) return '';
-  if (x === 0) return '0';
-  const a = Math.abs(x);
-  if (a >= 1e-3 && a < 1e5) return String(Number(x.toPrecision(4)));
-  return x.toExponential(2).replace(/\.?0+e/, 'e');
-}
 
 export class SimulationView {
   /** `ctx`: {model(), showModelErrors(errors), download(name, type, text), fileStem()}. */
@@ -75,22 +70,26 @@ export class SimulationView {
     this.root.append(this.form, this.bar.root, this.out);
   }
 
+  /** The request for the current model and form; throws {errors} for unreadable inputs. */
   request() {
     const errors = [];
-    const integer = (control, path, optional = false) => {
+    const whole = (control, path, { optional = false, min = 0, seed = false } = {}) => {
       if (optional && control.value.trim() === '') return undefined;
-      const x = num(control.value);
-      if (!Number.isInteger(x) || x < 0) errors.push({ path, message: `“${control.value}” is not a whole number ≥ 0` });
-      return x;
+      const problem = numberProblem(control.value, { integer: true, min });
+      if (problem) {
+        const why = seed && /2\^53/.test(problem) ? problem : seed ? `${problem}; a seed is a whole number from 0 to 2^53 − 1 = ${MAX_SAFE}` : problem;
+        errors.push({ path, message: why });
+      }
+      return toNumber(control.value);
     };
     const request = {
       model: this.ctx.model(),
-      runs: integer(this.runs, 'runs'),
-      seed: integer(this.seed, 'seed'),
+      runs: whole(this.runs, 'runs'),
+      seed: whole(this.seed, 'seed', { seed: true }),
       truth: this.truth.value,
       model_error: this.modelError.value,
     };
-    const tp = integer(this.tracePoints, 'trace_points', true);
+    const tp = whole(this.tracePoints, 'trace_points', { optional: true });
     if (tp !== undefined) request.trace_points = tp;
     if (errors.length) throw { kind: 'invalid', title: 'Invalid Monte Carlo request', errors };
     return request;
@@ -100,7 +99,7 @@ export class SimulationView {
     try {
       const request = this.request();
       markControls(this.form, []);
-      const invalid = await checkModel(request.model);
+      const invalid = await checkModel(request.model, this.ctx.pendingModelErrors?.() ?? []);
       if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
       const { result, job } = await exec(request);
       this.ctx.showModelErrors([]);
@@ -108,8 +107,8 @@ export class SimulationView {
       return job;
     } catch (e) {
       const own = routeErrors(e?.errors, this.ctx.showModelErrors);
-      markControls(this.form, own);
-      throw runError(e, own, (e?.errors?.length ?? 0) - own.length);
+      const unplaced = markControls(this.form, own);
+      throw runError(e, own, (e?.errors?.length ?? 0) - own.length, unplaced);
     }
   }
 
@@ -245,38 +244,48 @@ export class SimulationView {
   draw() {
     const r = this.result;
     if (!r) return;
+    this.plot?.destroy();
+    this.plot = null;
+    // The model's trace points = 0 leave the final row alone: nothing to draw over time.
+    if (r.traces.t.length < 2) {
+      this.chart.replaceChildren(
+        noTraces('No trace points requested: the model’s trace points are 0 (give Trace points above to plot the runs over time).'),
+      );
+      return;
+    }
     const i = Number(this.stateSelect.value) || 0;
     const log = this.log.checked;
     const trace = r.traces.states[i];
-    const clean = (v) => (v === null || v === undefined || (log && !(v > 0)) ? null : v);
     // On a linear scale the axis fits potential and real; a much larger χ (|A| makes it
     // grow fast for oscillating blocks) runs off the top instead of flattening them.
     const top = (key) => Math.max(0, ...(trace[key] ?? []).filter((v) => v !== null && Number.isFinite(v)));
     const fitted = Math.max(top('potential_sko'), top('filtered_sko'));
     const clipChi = !log && fitted > 0 && top('chi') > 3 * fitted;
-    const data = [r.traces.t];
-    const series = [{ label: 't' }];
-    for (const [key, label, stroke, dash] of SERIES) {
-      if (!trace[key]) continue;
-      data.push(trace[key].map(clean));
-      const shown = key === 'chi' && clipChi ? `${label} (beyond the top)` : label;
-      series.push({ label: shown, stroke, width: key === 'filtered_sko' ? 1.2 : 2, dash, value: (_, v) => (v === null ? '—' : fmt(v)) });
+    const columns = SERIES.filter(([key]) => trace[key]).map(([key, label, stroke, dash]) => ({ key, values: trace[key], label, stroke, dash }));
+    const x = valueAxis([r.traces.t]);
+    const y = valueAxis(columns.map((c) => c.values), { log, top: clipChi ? fitted * 1.15 : null });
+    const shown = (axis) => (_, v) => (v === null || v === undefined ? '—' : fmt(axis.value(v)));
+    const data = [x.data(r.traces.t), ...columns.map((c) => y.data(c.values))];
+    const series = [{ label: 't', value: shown(x) }];
+    for (const { key, label, stroke, dash } of columns) {
+      const text = key === 'chi' && clipChi ? `${label} (beyond the top)` : label;
+      series.push({ label: text, stroke, width: key === 'filtered_sko' ? 1.2 : 2, dash, value: shown(y) });
     }
-    const y = log ? { distr: 3 } : clipChi ? { range: () => [0, fitted * 1.15] } : {};
-    this.plot?.destroy();
     this.chart.replaceChildren();
     this.plot = new uPlot(
       {
         title: `${trace.state}: potential SKO √R_ii against the real one (R = ${r.request.runs} runs)`,
         width: this.width(),
         height: 320,
-        scales: { x: { time: false }, y },
+        scales: { x: { time: false, ...x.scale }, y: y.scale },
         axes: [
-          { label: 't', values: (_, ticks) => ticks.map(tick) },
-          { label: 'SKO', size: 70, values: (_, ticks) => ticks.map(tick) },
+          { label: 't', ...x.axis },
+          { label: 'SKO', size: 70, ...y.axis },
         ],
         series,
         legend: { live: true },
+        // The tick labels drawn, for a reader of the page's text (and its tests).
+        hooks: { draw: [() => (this.chart.dataset.yTicks = y.ticks().join(' | '))] },
       },
       data,
       this.chart,

@@ -3,7 +3,8 @@
 // this browser (wasm, the core's Sequential executor) or as a server job of kind
 // `synthesis`; the result as grid tables or as the answer with its verification.
 
-import { RunBar, checkModel, el, field, fmt, input, markControls, num, routeErrors, runError, select } from './views.js';
+import { numberProblem, toNumber } from './numbers.js';
+import { RunBar, checkModel, checkOverrides, el, field, fmt, input, markControls, routeErrors, runError, select, uiWords } from './views.js';
 
 const CRITERIA = [
   ['yz', 'F_YZ (measured vs a-priori)'],
@@ -247,10 +248,10 @@ export class SynthesisView {
   /** The request for the current model and form; throws {errors} for unreadable inputs. */
   request() {
     const errors = [];
-    const number = (control, path) => {
-      const x = num(control.value);
-      if (!Number.isFinite(x)) errors.push({ path, message: `“${control.value}” is not a number` });
-      return x;
+    const number = (control, path, options) => {
+      const problem = numberProblem(control.value, options);
+      if (problem) errors.push({ path, message: problem });
+      return toNumber(control.value);
     };
     const target = {
       criterion: this.criterion.value,
@@ -267,7 +268,7 @@ export class SynthesisView {
           low: number(b.low, 'mode.bisect.low'),
           high: number(b.high, 'mode.bisect.high'),
           rel_tol: number(b.rel_tol, 'mode.bisect.rel_tol'),
-          probes: number(b.probes, 'mode.bisect.probes'),
+          probes: number(b.probes, 'mode.bisect.probes', { integer: true, min: 1 }),
         },
       };
     } else if (this.mode.value === 'grid') {
@@ -283,9 +284,9 @@ export class SynthesisView {
           .split(/[,;\s]+/)
           .filter((s) => s !== '')
           .map((s) => {
-            const x = num(s);
-            if (!Number.isFinite(x)) errors.push({ path: `mode.grid.params[${k}].values`, message: `“${s}” is not a number` });
-            return x;
+            const problem = numberProblem(s);
+            if (problem) errors.push({ path: `mode.grid.params[${k}].values`, message: problem });
+            return toNumber(s);
           });
         params.push({ name: row.param.value, values });
         if (row.cheaper.value) cost.push({ name: row.param.value, cheaper: row.cheaper.value });
@@ -306,26 +307,49 @@ export class SynthesisView {
           shrink: number(row.shrink, `${base}.shrink`),
         });
       }
-      mode = { seed_search: { params, batch: number(this.batch, 'mode.seed_search.batch') } };
+      mode = { seed_search: { params, batch: number(this.batch, 'mode.seed_search.batch', { integer: true, min: 1 }) } };
     }
     if (errors.length) throw { kind: 'invalid', title: 'Invalid synthesis request', errors };
     return { model: this.ctx.model(), target, mode };
+  }
+
+  /**
+   * The values the request gives each param, with the control that gives them: a value
+   * that makes the model invalid (a negative SKO) is reported there, not at the model
+   * cell it reaches.
+   */
+  overrides(request) {
+    const m = request.mode;
+    if (m.bisect) {
+      const b = m.bisect;
+      return [
+        { name: b.param, values: [b.low], path: 'mode.bisect.low' },
+        { name: b.param, values: [b.high], path: 'mode.bisect.high' },
+      ];
+    }
+    if (m.grid) return m.grid.params.map((p, k) => ({ name: p.name, values: p.values, path: `mode.grid.params[${k}].values` }));
+    return m.seed_search.params.flatMap((p, k) => [
+      { name: p.name, values: [p.high], path: `mode.seed_search.params[${k}].high` },
+      { name: p.name, values: [p.low], path: `mode.seed_search.params[${k}].low` },
+    ]);
   }
 
   async run(where, exec) {
     try {
       const request = this.request();
       markControls(this.form, []);
-      const invalid = await checkModel(request.model);
+      const invalid = await checkModel(request.model, this.ctx.pendingModelErrors?.() ?? []);
       if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
+      const overridden = await checkOverrides(request.model, this.overrides(request));
+      if (overridden.length) throw { kind: 'invalid', title: 'Invalid synthesis request', errors: overridden };
       const { result, job } = await exec(request);
       this.ctx.showModelErrors([]);
       this.show(result, where);
       return job;
     } catch (e) {
       const own = routeErrors(e?.errors, this.ctx.showModelErrors);
-      markControls(this.form, own);
-      throw runError(e, own, (e?.errors?.length ?? 0) - own.length);
+      const unplaced = markControls(this.form, own);
+      throw runError(e, own, (e?.errors?.length ?? 0) - own.length, unplaced);
     }
   }
 
@@ -340,7 +364,7 @@ export class SynthesisView {
     const t = r.target;
     const what = `${LABEL[t.criterion]} (${t.set}${t.state ? `, state ${t.state}` : ', weighted'}) ≥ ${fmt(t.threshold)}`;
     const parts = [
-      el('p', { class: `syn-status status-${r.status}`, id: 'syn-message' }, el('strong', { text: `${r.status.replaceAll('_', ' ')}: ` }), r.message),
+      el('p', { class: `syn-status status-${r.status}`, id: 'syn-message' }, el('strong', { text: `${r.status.replaceAll('_', ' ')}: ` }), uiWords(r.message)),
       el('p', { class: 'syn-summary', id: 'syn-summary' }, `Target ${what} · `, el('span', { id: 'syn-analyses', 'data-value': String(r.analyses), text: `${r.analyses} analyses` }), ` of D = ${r.steps.toLocaleString('en')} steps · ${fmt(r.timing.wall_ms)} ms on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`),
       el('p', { class: 'stale-note', text: 'The model has changed since this run: run again to update.' }),
     ];
@@ -456,7 +480,8 @@ export class SynthesisView {
       body.append(el('tr', {}, el('td', { class: 'num', text: fmt(p.params[b.param]) }), el('td', { class: 'num', text: fmt(p.value) }), el('td', { text: p.meets ? '✓' : '' })));
     }
     list.append(body);
-    const bracket = b.bracket ? `bracket [${fmt(b.bracket[0])}, ${fmt(b.bracket[1])}], ` : '';
+    const [lo, hi] = b.bracket ? [...b.bracket].sort((x, y) => x - y) : [];
+    const bracket = b.bracket ? `bracket [${fmt(lo)}, ${fmt(hi)}], ` : '';
     return el('details', { class: 'syn-details' }, el('summary', { text: `${b.evaluations.length} evaluations of ${b.param} (${bracket}${b.iterations} bisection steps)` }), list);
   }
 

@@ -3,7 +3,6 @@
 // browser (the wasm worker) or as a server job of the same kind (progress over SSE) —
 // and the run bar (where, Run, Cancel, progress, status).
 
-import { api } from './api.js';
 import { ServerRunner, WasmWorker } from './runner.js';
 import { fmt } from './results.js';
 
@@ -42,28 +41,6 @@ export function input(id, value, attrs = {}) {
   return el('input', { id, value: value ?? '', spellcheck: 'false', autocomplete: 'off', ...attrs });
 }
 
-/** A number typed by a person: the value, or NaN (never silently 0). */
-export function num(text) {
-  const s = String(text).trim();
-  return s === '' ? NaN : Number(s);
-}
-
-async function problemOf(response) {
-  let body = {};
-  try {
-    body = await response.json();
-  } catch {
-    // not JSON: keep the status line
-  }
-  return {
-    kind: body.type ?? 'server',
-    title: body.title ?? `${response.status} ${response.statusText}`,
-    detail: body.detail,
-    status: response.status,
-    errors: body.errors ?? [],
-  };
-}
-
 /** A server job of one kind (`synthesis`, `simulation`): POST, follow SSE, fetch the result. */
 class JobRunner extends ServerRunner {
   constructor(kind) {
@@ -71,25 +48,9 @@ class JobRunner extends ServerRunner {
     this.kind = kind;
   }
 
-  async run(request, onProgress) {
-    const response = await api(`${this.base}/v1/jobs`, {
-      method: 'POST',
-      headers: { 'content-type': 'application/json' },
-      body: JSON.stringify({ kind: this.kind, ...request }),
-    });
-    if (!response.ok) throw await problemOf(response);
-    const job = await response.json();
-    this.job = job.id;
-    const final = await this.follow(job.id, onProgress);
-    this.job = null;
-    if (final.status === 'cancelled') throw { kind: 'cancelled', title: 'cancelled', errors: [] };
-    if (final.status !== 'succeeded') {
-      const e = final.error ?? {};
-      throw { kind: e.type ?? 'server', title: e.title ?? `job ${final.status}`, detail: e.detail, errors: e.errors ?? [] };
-    }
-    const result = await api(`${this.base}/v1/jobs/${job.id}/result`);
-    if (!result.ok) throw await problemOf(result);
-    return { result: await result.json(), job: job.id };
+  run(request, onProgress) {
+    const located = (p) => ({ kind: p.type ?? p.kind ?? 'server', title: p.title, detail: p.detail, status: p.status, errors: p.errors ?? [] });
+    return this.runJob(JSON.stringify({ kind: this.kind, ...request }), onProgress, located);
   }
 }
 
@@ -199,13 +160,57 @@ export function wasmCall(op, args) {
   return helper.call(op, args);
 }
 
+const inModel = (e) => ({ path: e.path ? `model${e.path.startsWith('[') ? '' : '.'}${e.path}` : 'model', message: e.message });
+
 /**
- * The core's validation of a model, as errors at `model.…` paths: a server run of an
- * invalid model is refused here, without a request.
+ * The core's validation of a model, with the editor's own (`pending`: fields it could
+ * not read), as errors at `model.…` paths: a run of an invalid model is refused here,
+ * without a request.
  */
-export async function checkModel(model) {
+export async function checkModel(model, pending = []) {
   const errors = await wasmCall('check', { model: JSON.stringify(model), set: '' });
-  return errors.map((e) => ({ path: e.path ? `model${e.path.startsWith('[') ? '' : '.'}${e.path}` : 'model', message: e.message }));
+  const own = new Set(pending.map((e) => e.path));
+  return [...pending, ...errors.filter((e) => !own.has(e.path))].map(inModel);
+}
+
+/**
+ * What each value a synthesis gives a param does to the model (the model itself being
+ * valid): `checks` is [{name, values, path}] (path: the control that set them); returns
+ * errors at those paths, as “name = value: <the model's error>”.
+ */
+export async function checkOverrides(model, checks) {
+  const json = JSON.stringify(model);
+  const out = [];
+  for (const { name, values, path } of checks) {
+    for (const value of values.slice(0, 64)) {
+      if (!Number.isFinite(value)) continue;
+      const errors = await wasmCall('check', { model: json, set: JSON.stringify({ [name]: value }) });
+      if (errors.length) {
+        const first = errors[0];
+        out.push({ path, message: `${name} = ${value} makes the model invalid: ${modelPlace(first.path)}${first.message}` });
+        break;
+      }
+    }
+  }
+  return out;
+}
+
+/** A model path as the editor names it: `system.phi[0]` → “φ [1]: ”. */
+export function modelPlace(path) {
+  const names = {
+    'system.a': 'a', 'system.b': 'b', 'system.u': 'u', 'system.y0': 'y₀', 'system.eta0': 'η₀',
+    'system.phi': 'φ', 'system.W': 'W', 'measurement.c': 'C', 'measurement.gamma': 'Γ',
+    'measurement.g': 'g', 'measurement.psi': 'ψ', 'measurement.V': 'V',
+  };
+  const m = (path ?? '').match(/^([a-z]+\.[A-Za-z0-9_]+)((\[\d+\])*)$/);
+  if (!m || !names[m[1]]) return path ? `${path}: ` : '';
+  const idx = [...m[2].matchAll(/\[(\d+)\]/g)].map((x) => Number(x[1]) + 1);
+  return `${names[m[1]]}${idx.length ? ` [${idx.join(', ')}]` : ''}: `;
+}
+
+/** The core's words for the view's: API names become the controls' labels. */
+export function uiWords(text) {
+  return String(text ?? '').replaceAll('give `cost_order`', 'choose a cost order (the “cost” column)').replaceAll('`cost_order`', 'the cost order');
 }
 
 /**
@@ -225,33 +230,53 @@ export function routeErrors(errors, showModelErrors) {
   return own;
 }
 
-/** A failed run as an Error whose message names the problem (and where to look). */
-export function runError(e, ownErrors, modelCount) {
+/**
+ * A failed run as an Error whose message names the problem and where to look.
+ * `unplaced`: the view's errors no control shows (said here, with their paths).
+ */
+export function runError(e, ownErrors, modelCount, unplaced = []) {
   if (e?.kind === 'cancelled') return e;
   const parts = [];
-  if (ownErrors.length) parts.push(`Invalid request: ${ownErrors.map((x) => (x.path ? `${x.path}: ${x.message}` : x.message)).join('; ')}`);
-  else if (!modelCount) parts.push(e?.title ?? String(e), e?.detail && e.detail !== e.title ? e.detail : null);
+  if (ownErrors.length) {
+    parts.push(
+      unplaced.length
+        ? `Invalid request: ${unplaced.map((x) => uiWords(x.path ? `${x.path}: ${x.message}` : x.message)).join('; ')}`
+        : 'Invalid request',
+    );
+    if (ownErrors.length > unplaced.length) parts.push('see the marked fields of this tab');
+  } else if (!modelCount) parts.push(uiWords(e?.title ?? String(e)), e?.detail && e.detail !== e.title ? uiWords(e.detail) : null);
   else parts.push(e?.title && !e.title.includes(': ') ? e.title : 'Invalid model');
   if (modelCount) parts.push('see the marked model fields');
   return new Error(parts.filter(Boolean).join(' — '));
 }
 
-/** Mark the view's controls named by error paths (data-request-path) as invalid. */
+/**
+ * Mark the view's controls named by error paths (data-request-path) as invalid, with
+ * the message under the control. Returns the errors no control was found for.
+ */
 export function markControls(root, errors) {
+  for (const m of root.querySelectorAll('.control-error')) m.remove();
   for (const c of root.querySelectorAll('[aria-invalid="true"]')) {
     c.removeAttribute('aria-invalid');
     c.classList.remove('invalid');
   }
+  const unplaced = [];
   for (const e of errors) {
     let path = e.path ?? '';
-    while (path) {
-      const c = root.querySelector(`[data-request-path="${CSS.escape(path)}"]`);
-      if (c) {
-        c.setAttribute('aria-invalid', 'true');
-        c.classList.add('invalid');
-        break;
-      }
-      path = path.endsWith(']') ? path.slice(0, path.lastIndexOf('[')) : path.slice(0, Math.max(0, path.lastIndexOf('.')));
+    let control = null;
+    while (path && !control) {
+      control = root.querySelector(`[data-request-path="${CSS.escape(path)}"]`);
+      if (!control) path = path.endsWith(']') ? path.slice(0, path.lastIndexOf('[')) : path.slice(0, Math.max(0, path.lastIndexOf('.')));
     }
+    if (!control) {
+      unplaced.push(e);
+      continue;
+    }
+    control.setAttribute('aria-invalid', 'true');
+    control.classList.add('invalid');
+    control.parentElement.append(
+      el('div', { class: 'cell-error control-error', role: 'alert', 'data-error-path': e.path ?? '', text: uiWords(e.message) }),
+    );
   }
+  return unplaced;
 }

@@ -222,6 +222,9 @@ test('a bisection gives the same answer and verification in the browser and on t
   ]);
   const shownF = await page.$eval('#syn-points tr[data-point=answer] td[data-param=f]', (td) => Number(td.dataset.value));
   assertClose(shownF, onServer.answer.params.f, 'shown f*');
+  // The bracket reads low → high, whichever side meets.
+  const [, lo, hi] = (await page.textContent('.syn-details summary')).match(/bracket \[([^,]+), ([^\]]+)\]/);
+  assert.ok(Number(lo) < Number(hi), `bracket [${lo}, ${hi}]`);
 });
 
 /** Every value of the Monte Carlo criteria table: {`set.criterion.row`: value|null}. */
@@ -298,9 +301,19 @@ test('an invalid request is marked at its control; a model error at its cell', a
   await page.check('input[name=mc-where][value=browser]');
   await page.click('#mc-run');
   await page.waitForFunction(() => document.querySelector('#mc-status').classList.contains('error'), null, { timeout: 30000 });
-  assert.match(await page.textContent('#mc-status'), /runs: at least 2 runs/);
+  // The message is at the field, without the request's path; the status points there.
+  assert.match(await page.textContent('#mc-runs + .control-error'), /at least 2 runs/);
   assert.equal(await page.getAttribute('#mc-runs', 'aria-invalid'), 'true');
+  assert.match(await page.textContent('#mc-status'), /see the marked fields/);
+  assert.doesNotMatch(await page.textContent('#mc-status'), /runs:/);
   await page.fill('#mc-runs', '200');
+  // A seed above 2^53 − 1 is refused at the field, in words (not serde's "expected u64").
+  await page.fill('#mc-seed', '1e20');
+  await page.click('#mc-run');
+  await page.waitForSelector('#mc-seed + .control-error');
+  assert.match(await page.textContent('#mc-seed + .control-error'), /2\^53 − 1 = 9007199254740991/);
+  assert.match(await page.textContent('#mc-status'), /see the marked fields/);
+  await page.fill('#mc-seed', '7');
 
   await page.click('#tab-synthesis');
   await page.fill('input[data-path="system.a[0][0]"]', 's/m +* 1');
@@ -313,6 +326,61 @@ test('an invalid request is marked at its control; a model error at its cell', a
   assert.ok(await page.$eval('#syn-result', (e) => e.classList.contains('stale')), 'the shown result is marked stale');
   await page.selectOption('#preset', 'seed-example');
   await page.waitForSelector('td[data-path="system.a[0][0]"] .cell-error', { state: 'detached', timeout: 10000 });
+});
+
+test('synthesis inputs are refused at their control, in words', async () => {
+  await smallSeedExample();
+  await page.click('#tab-synthesis');
+  const status = () => page.textContent('#syn-status');
+  const runRefused = async () => {
+    await page.evaluate(() => document.getElementById('syn-status').classList.remove('error'));
+    await page.click('#syn-run');
+    await page.waitForFunction(() => document.querySelector('#syn-status').classList.contains('error'), null, { timeout: 30000 });
+  };
+  // Unreadable, then refused by the core (low > high): at the field, no internal path.
+  await page.check('input[name=syn-where][value=browser]'); // the server's refusal would log a 422
+  await page.selectOption('#syn-mode', 'bisect');
+  await page.selectOption('#syn-bisect-param', 'f');
+  await page.fill('#syn-bisect-low', 'abc');
+  await runRefused();
+  assert.match(await page.textContent('#syn-bisect-low + .control-error'), /“abc” is not a number/);
+  await page.fill('#syn-bisect-low', '20');
+  await page.fill('#syn-bisect-high', '10');
+  await runRefused();
+  const shown = await page.$$eval('#synthesis-panel .control-error', (es) => es.map((e) => e.textContent));
+  assert.equal(shown.length, 1, shown.join(' | '));
+  assert.doesNotMatch(await status(), /mode\.bisect/);
+  assert.match(await status(), /see the marked fields/);
+  // A grid value that makes the model invalid (f = −1: a negative φ) is marked at the
+  // grid's values, not at the model's φ cell.
+  await page.selectOption('#syn-mode', 'grid');
+  await page.selectOption('#syn-grid-param-0', 'f');
+  await page.fill('#syn-grid-values-0', '2, -1');
+  await page.selectOption('#syn-grid-param-1', '');
+  await page.selectOption('#syn-grid-param-2', '');
+  await page.selectOption('#syn-grid-cheaper-0', '');
+  await runRefused();
+  assert.match(await page.textContent('#syn-grid-values-0 + .control-error'), /f = -1 makes the model invalid: φ \[1\]: an SKO must be ≥ 0/);
+  assert.equal(await page.$$eval('#editor .cell-error', (es) => es.length), 0, 'no model cell is marked');
+  assert.doesNotMatch(await status(), /Invalid model/);
+  await screenshot(page, '16-synthesis-override-error');
+  // Without a cost order, the table's message names the control, not the API member.
+  await page.fill('#syn-grid-values-0', '2, 4');
+  await runView('syn', 'browser');
+  assert.equal(await page.$$eval('#synthesis-panel .control-error', (es) => es.length), 0, 'the marks went');
+  const message = await page.textContent('#syn-message');
+  assert.match(message, /cost order/);
+  assert.doesNotMatch(message, /cost_order/);
+});
+
+test('a Monte Carlo of a model with no trace points says so instead of a chart', async () => {
+  await page.click('#tab-simulation');
+  await page.fill('#mc-runs', '50');
+  await page.fill('#mc-trace-points', '');
+  await page.fill('input[data-path="options.trace_points"]', '0');
+  await runView('mc', 'browser');
+  assert.match(await page.textContent('#mc-chart'), /No trace points requested/);
+  await page.fill('input[data-path="options.trace_points"]', '1000');
 });
 
 test('a long Monte Carlo run is cancelled, in the browser and on the server', async () => {

@@ -437,9 +437,10 @@ impl<'m, const N: usize> Engine<'m, N> {
                     pot[i] = big_r[i * n + i];
                 }
                 if !all_finite(&pot[..n]) {
-                    return Err(match not_positive(&inp, &big_r, k, t_k) {
-                        e @ Error::Numerical { .. } if inputs_overflowed(&inp) => e,
-                        _ => overflowed("the filtered covariance", "system", k, t_k),
+                    return Err(if inputs_overflowed(&inp) {
+                        not_positive(&inp, &big_r, k, t_k)
+                    } else {
+                        overflowed("the filtered covariance", "system", k, t_k)
                     });
                 }
                 for p in &mut pot[..n] {

@@ -47,10 +47,6 @@ async fn load(state: &AppState, id: &str) -> Result<JobRecord, Problem> {
         .ok_or_else(|| Problem::not_found("job", id))
 }
 
-fn view(state: &AppState, job: &JobRecord) -> Value {
-    job_view(job, state.pool.live(&job.id).map(|l| l.snapshot()))
-}
-
 /// A job's view, its live progress read *before* its record: the worker writes the
 /// final record before it drops the live job, so a job that ends between the two reads
 /// is seen with its final record. (Record first, then live, could pair a stale record
@@ -168,10 +164,16 @@ pub async fn list(
             )])
         })?),
     };
+    // Live progress first, then the records (see `load_view`).
+    let live = state.pool.live_snapshots();
     let page = state
         .db(move |s| s.list_jobs(status, q.cursor.as_deref(), q.limit))
         .await?;
-    let items: Vec<Value> = page.items.iter().map(|j| view(&state, j)).collect();
+    let items: Vec<Value> = page
+        .items
+        .iter()
+        .map(|j| job_view(j, live.get(&j.id).copied()))
+        .collect();
     Ok(Json(
         json!({ "items": items, "next_cursor": page.next_cursor }),
     ))

@@ -160,6 +160,17 @@ impl Pool {
         self.live.lock().unwrap().get(id).cloned()
     }
 
+    /// Every live job's snapshot at once (for a list: taken before its records are
+    /// read, as [`Self::live`] is for one job).
+    pub fn live_snapshots(&self) -> std::collections::HashMap<String, Snapshot> {
+        self.live
+            .lock()
+            .unwrap()
+            .iter()
+            .map(|(id, job)| (id.clone(), job.snapshot()))
+            .collect()
+    }
+
     pub fn cancel(&self, id: &str) -> Result<CancelOutcome, super::store::StoreError> {
         let mut live = self.live.lock().unwrap();
         if self.store.cancel_queued(id, &now_rfc3339())? {

@@ -28,12 +28,7 @@ fn cell(x: Option<f64>) -> String {
 /// A time for reading: 12 significant digits, so t0 + kΔt's rounding does not show
 /// (15.600000000000001 → 15.6).
 fn short(t: f64) -> String {
-    let r: f64 = format!("{t:.11e}").parse().unwrap_or(t);
-    if r == 0.0 || (1e-4..1e15).contains(&r.abs()) {
-        format!("{r}")
-    } else {
-        format!("{r:e}")
-    }
+    crate::validate::num(format!("{t:.11e}").parse().unwrap_or(t))
 }
 
 /// The seed's layout: per state and weighted, bound and covariance side by side.

@@ -12,7 +12,7 @@ use std::collections::BTreeMap;
 pub enum Availability {
     Always,
     Never,
-    /// Available at steps k with k ≡ offset (mod every).
+    /// Available at steps k with k ≡ offset (mod every), 0 ≤ offset < every.
     Every {
         every: u64,
         offset: u64,
@@ -38,7 +38,7 @@ impl Schedules {
             *o = match a {
                 Availability::Always => true,
                 Availability::Never => false,
-                Availability::Every { every, offset } => k % *every == *offset % *every,
+                Availability::Every { every, offset } => k % *every == *offset,
                 Availability::When(f, path) => {
                     let v = f.eval(t);
                     if !v.is_finite() {
@@ -105,10 +105,18 @@ pub fn compile(
                 ));
                 items.push(Availability::Always);
             } else {
-                items.push(Availability::Every {
-                    every,
-                    offset: s.offset.unwrap_or(0),
-                });
+                let offset = s.offset.unwrap_or(0);
+                if offset >= every {
+                    // A phase: offset 6 with every 4 would measure at steps 2, 6, 10, …
+                    // where the reader expects the first measurement at step 6.
+                    errs.push(FieldError::new(
+                        format!("{path}.offset"),
+                        format!(
+                            "must be below every ({every}): the measurement is taken at the steps k with k mod {every} = offset, got {offset}"
+                        ),
+                    ));
+                }
+                items.push(Availability::Every { every, offset });
             }
         } else if let Some(when) = &s.when {
             let p = format!("{path}.when");

@@ -358,6 +358,57 @@ fn schedule_every_second_step_skips_updates_exactly() {
     assert_eq!(alone.covariance, r.final_.covariance);
 }
 
+/// `{"every": 4, "offset": 2}` measures at steps 2, 6, 10 (k mod 4 = 2, k = 1…D); an
+/// offset of `every` or more is refused (it would read as a phase: offset 6 measuring
+/// first at step 2).
+#[test]
+fn schedule_offset_is_the_first_measured_step() {
+    let model = |offset: u64| {
+        json!({
+            "time": {"t0": 0.0, "t_end": 1.0, "steps": 10},
+            "system": {"states": ["x"], "a": [[-1.0]], "b": [[1.0]], "phi": [2.0], "y0": [1.0], "eta0": [1.0]},
+            "measurement": {"names": ["z"], "c": [[1.0]], "gamma": [[1.0]], "psi": [0.5],
+                            "schedule": [{"every": 4, "offset": offset}]},
+            "options": {"trace_points": 100}
+        })
+    };
+    let r = analyze(
+        &model_from_value(model(2)).unwrap(),
+        &Default::default(),
+        &mut NoProgress,
+    )
+    .unwrap();
+    let (a, bb, rv) = (1.0 - 0.1, (0.1f64 * 2.0).powi(2), 0.25);
+    let mut big_r: f64 = 1.0;
+    for (k, x) in (1..=10).zip(&r.traces.states[0].potential_sko) {
+        let rp = a * a * big_r + bb;
+        big_r = if [2, 6, 10].contains(&k) {
+            rp * rv / (rp + rv)
+        } else {
+            rp
+        };
+        let x = x.expect("a value at every step");
+        assert!(
+            (x / big_r.sqrt() - 1.0).abs() < 1e-13,
+            "step {k}: {x} vs {}",
+            big_r.sqrt()
+        );
+    }
+    let Err(kea_core::Error::Invalid(errors)) = analyze(
+        &model_from_value(model(4)).unwrap(),
+        &Default::default(),
+        &mut NoProgress,
+    ) else {
+        panic!("offset = every must be refused");
+    };
+    assert_eq!(errors[0].path, "measurement.schedule[0].offset");
+    assert!(
+        errors[0].message.contains("must be below every (4)"),
+        "{}",
+        errors[0].message
+    );
+}
+
 /// A schedule makes the model time-varying for the filter: the steady-state shortcut
 /// must not freeze the recursion before a late outage (regression: it did).
 #[test]

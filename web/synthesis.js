@@ -19,6 +19,11 @@ const MODES = [
 ];
 const ROWS = 3; // grid params and seed-search params
 
+/** The items of a values field: separated by commas, semicolons or spaces. */
+function listItems(text) {
+  return text.split(/[,;\s]+/).filter((s) => s !== '');
+}
+
 /** Numbers for an input: short and exact enough (`1e-05`, `0.25`). */
 function show(x) {
   return Number.isFinite(x) ? String(Number(x.toPrecision(6))) : '';
@@ -103,7 +108,11 @@ export class SynthesisView {
       };
       row.param.dataset.requestPath = `mode.grid.params[${i}].name`;
       row.cheaper.dataset.requestPath = `mode.grid.cost_order[${i}]`;
-      row.param.addEventListener('change', () => this.defaultsGrid(i));
+      row.param.addEventListener('change', () => {
+        this.defaultsGrid(i);
+        this.gridSummary();
+      });
+      row.values.addEventListener('input', () => this.gridSummary());
       const label = ['rows', 'columns', 'pages'][i];
       row.param.setAttribute('aria-label', `Grid ${label}: param`);
       row.values.setAttribute('aria-label', `Grid ${label}: values, comma-separated`);
@@ -123,6 +132,9 @@ export class SynthesisView {
       ),
       el('p', { class: 'help', text: 'Rows × columns × pages, every cell re-analysed. With a cost order (top row most important) the cheapest cell meeting the target is the answer.' }),
     );
+    // What the values fields read as, while they are typed: `0,5` is two values here.
+    this.gridCount = el('p', { class: 'help', id: id('grid-count'), 'aria-live': 'polite' });
+    gridPanel.append(this.gridCount);
 
     // seed_search
     this.seed = [];
@@ -211,9 +223,28 @@ export class SynthesisView {
     this.grid.forEach((row, i) => {
       if (fill(row.param, i === 0 ? ps : [['', '(none)'], ...ps], i < 2 ? preferred[i] ?? '' : '')) this.defaultsGrid(i);
     });
+    this.gridSummary();
     this.seed.forEach((row, i) => {
       if (fill(row.param, i === 0 ? ps : [['', '(none)'], ...ps], i === 0 ? preferred[0] : '')) this.defaultsSeed(i);
     });
+  }
+
+  /** The grid's cells as the values fields read now: "f: 3 values (2, 4, 8) × … = 6 cells". */
+  gridSummary() {
+    const parts = [];
+    let cells = 1;
+    for (const row of this.grid) {
+      if (!row.param.value) continue;
+      const items = listItems(row.values.value);
+      if (items.some((s) => numberProblem(s))) {
+        this.gridCount.textContent = '';
+        return;
+      }
+      cells *= items.length;
+      const word = items.length === 1 ? 'value' : 'values';
+      parts.push(`${row.param.value}: ${items.length} ${word} (${items.map(toNumber).join(', ')})`);
+    }
+    this.gridCount.textContent = parts.length ? `${parts.join(' × ')} = ${cells} ${cells === 1 ? 'cell' : 'cells'}` : '';
   }
 
   defaultsBisect() {
@@ -280,14 +311,11 @@ export class SynthesisView {
         row.param.dataset.requestPath = `mode.grid.params[${k}].name`;
         row.values.dataset.requestPath = `mode.grid.params[${k}].values`;
         if (!row.param.value) return;
-        const values = row.values.value
-          .split(/[,;\s]+/)
-          .filter((s) => s !== '')
-          .map((s) => {
-            const problem = numberProblem(s);
-            if (problem) errors.push({ path: `mode.grid.params[${k}].values`, message: problem });
-            return toNumber(s);
-          });
+        const values = listItems(row.values.value).map((s) => {
+          const problem = numberProblem(s);
+          if (problem) errors.push({ path: `mode.grid.params[${k}].values`, message: problem });
+          return toNumber(s);
+        });
         params.push({ name: row.param.value, values });
         if (row.cheaper.value) cost.push({ name: row.param.value, cheaper: row.cheaper.value });
       });

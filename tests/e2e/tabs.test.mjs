@@ -139,6 +139,13 @@ test('a synthesis grid gives the same table in the browser, on the server and in
   await page.fill('#syn-grid-values-1', '0.5, 0.25');
   await page.selectOption('#syn-grid-cheaper-1', '');
   await page.selectOption('#syn-grid-param-2', '');
+  // The fields' reading is shown as it is typed: a decimal comma is seen to be two values.
+  const count = () => page.textContent('#syn-grid-count');
+  assert.equal(await count(), 'f: 3 values (2, 4, 8) × c: 2 values (0.5, 0.25) = 6 cells');
+  await page.fill('#syn-grid-values-1', '0,5');
+  assert.equal(await count(), 'f: 3 values (2, 4, 8) × c: 2 values (0, 5) = 6 cells');
+  await page.fill('#syn-grid-values-1', '0.5; 0.25');
+  assert.equal(await count(), 'f: 3 values (2, 4, 8) × c: 2 values (0.5, 0.25) = 6 cells');
 
   const fromBrowser = await runView('syn', 'browser');
   const inBrowser = await gridCells();

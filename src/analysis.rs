@@ -385,6 +385,10 @@ impl<'m, const N: usize> Engine<'m, N> {
         let mut open_diverged: Option<(u64, f64)> = None;
         let mut steady_at: Option<u64> = None;
         let mut steady_cov: Option<(Vec<f64>, Vec<f64>)> = None;
+        // The first step (k, t_k, state) whose filtered variance is at rounding level,
+        // and how many steps had one.
+        let mut cancelled: Option<(u64, f64, usize)> = None;
+        let mut cancelled_steps = 0u64;
 
         for k in 1..=self.steps {
             let t_k = t0 + k as f64 * dt;
@@ -435,6 +439,15 @@ impl<'m, const N: usize> Engine<'m, N> {
                 }
                 for i in 0..n {
                     pot[i] = big_r[i * n + i];
+                }
+                // R_ii far below r_ii is the small difference of large terms (2.7):
+                // rounding error, not the filter (see ROUNDING_LEVEL).
+                if let Some(i) = (0..n).position(|i| {
+                    let r = joseph.r_pred[i * n + i];
+                    r > 0.0 && pot[i] <= ROUNDING_LEVEL * r
+                }) {
+                    cancelled.get_or_insert((k, t_k, i));
+                    cancelled_steps += 1;
                 }
                 if !all_finite(&pot[..n]) {
                     return Err(if inputs_overflowed(&inp) {
@@ -694,6 +707,14 @@ impl<'m, const N: usize> Engine<'m, N> {
         {
             warnings.push(w);
         }
+        if let Some((k, t, i)) = cancelled {
+            warnings.push(format!(
+                "the filtered variance of \"{}\" fell to ≤ {ROUNDING_LEVEL:e} of its predicted variance at step {k} (t = {}); {cancelled_steps} of the {} steps had a state's at that level: the update cancels it almost exactly (a measurement with no or very little noise, or an initial SKO far above the measurement's), so R's diagonal there keeps fewer than 4 correct digits and the covariance set's ZX and YX at those steps are ratios of rounding errors",
+                m.states[i],
+                crate::validate::num(t),
+                self.steps
+            ));
+        }
         Ok(AnalysisResult {
             steps: self.steps,
             dt,
@@ -721,6 +742,14 @@ impl<'m, const N: usize> Engine<'m, N> {
         })
     }
 }
+
+/// A filtered variance R_ii at or below this fraction of the predicted r_ii is
+/// reported: the Joseph update (2.7) forms it as r − (k sᵀ + s kᵀ) + q k kᵀ, terms of
+/// size r_ii, so its rounding error is ≈ 1e-16 r_ii — at R_ii = 1e-12 r_ii, 1e-4 of
+/// R_ii. Such steps come from a measurement without noise (R_ii is 0 in exact
+/// arithmetic) and make the covariance set's ZX = σ_Z/σ_X and YX ratios of rounding
+/// errors, which can dominate their averages.
+pub const ROUNDING_LEVEL: f64 = 1e-12;
 
 /// How many times the covariance's confidence half-width λσ the bound may be at t_end
 /// before a warning says the bound set describes |A|'s growth rather than the filter.

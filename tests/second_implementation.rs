@@ -409,6 +409,42 @@ fn schedule_offset_is_the_first_measured_step() {
     );
 }
 
+/// A measurement without noise makes the filtered variance of its state rounding error
+/// (0 in exact arithmetic): the result says so, naming the state; with a little noise
+/// (R_vv ≈ ψ² = 1e-6 r_vv) it does not.
+#[test]
+fn a_noise_free_measurement_is_reported_as_rounding_level() {
+    let model = |psi_v: f64| {
+        json!({
+            "time": {"t0": 0.0, "t_end": 1.0, "steps": 100},
+            "system": {"states": ["x", "v"], "a": [[0.0, 1.0], [0.0, 0.0]], "b": [[0.0], [1.0]],
+                       "phi": [1.0], "y0": [0.0, 1.0], "eta0": [1.0, 1.0]},
+            "measurement": {"names": ["zx", "zv"], "c": [[1.0, 0.0], [0.0, 1.0]],
+                            "gamma": [[1.0, 0.0], [0.0, 1.0]], "psi": [0.1, psi_v]}
+        })
+    };
+    let warned = |psi_v: f64| {
+        let r = analyze(
+            &model_from_value(model(psi_v)).unwrap(),
+            &Default::default(),
+            &mut NoProgress,
+        )
+        .unwrap();
+        r.warnings
+            .into_iter()
+            .find(|w| w.contains("rounding errors"))
+    };
+    let w = warned(0.0).expect("a noise-free measurement is reported");
+    assert!(
+        w.starts_with(
+            "the filtered variance of \"v\" fell to ≤ 1e-12 of its predicted variance at step 1 "
+        ),
+        "{w}"
+    );
+    assert!(w.contains("; 100 of the 100 steps"), "{w}");
+    assert_eq!(warned(1e-3), None);
+}
+
 /// A schedule makes the model time-varying for the filter: the steady-state shortcut
 /// must not freeze the recursion before a late outage (regression: it did).
 #[test]

@@ -648,3 +648,74 @@ fn check_csv_header(spec: &Value, kind: &str, header: &str) {
     }
     assert!(checked > 0, "{header}");
 }
+
+/// A Monte Carlo run of an unstable model: its sample SKOs and the bound overflow f64
+/// and are null in the result (with a warning). The spec said `Numbers` for them, so a
+/// client validating the result refused it.
+#[test]
+fn an_overflowing_simulation_validates_against_the_spec() {
+    let spec = spec();
+    let v = Validator::new(&spec);
+    let dir = tempfile::tempdir().unwrap();
+    let s = Server::start(dir.path(), &[]);
+    let mut m = preset("cv-tracker");
+    m["system"]["a"] = json!([[0, 1], [0, 10]]);
+    m["time"]["t_end"] = json!(100);
+    let job = s.post(
+        "/v1/jobs",
+        &json!({"kind": "simulation", "model": m, "runs": 10, "trace_points": 20}),
+    );
+    assert_eq!(job.status, 202, "{}", job.text);
+    let id = job.json()["id"].as_str().unwrap().to_string();
+    let done = s.wait_finished(&id, std::time::Duration::from_secs(120));
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let result = s.get(&format!("/v1/jobs/{id}/result")).json();
+    let fin = &result["final"];
+    for series in ["a_priori_sko", "filtered_sko", "chi"] {
+        assert!(
+            fin[series].as_array().unwrap().iter().any(Value::is_null),
+            "expected an overflowed (null) {series}: {fin}"
+        );
+    }
+    assert!(!result["warnings"].as_array().unwrap().is_empty());
+    v.expect(
+        &spec["components"]["schemas"]["SimulationResult"],
+        &result,
+        "the overflowing simulation's result",
+    );
+}
+
+/// max |dy/dt| and max |C y| of a model whose mean stays finite can overflow f64;
+/// they are null then, in the analysis and in the simulation. The spec said `Numbers`.
+#[test]
+fn an_overflowing_maximum_validates_against_the_spec() {
+    let spec = spec();
+    let v = Validator::new(&spec);
+    let schemas = &spec["components"]["schemas"];
+    let dir = tempfile::tempdir().unwrap();
+    let s = Server::start(dir.path(), &[]);
+    let mut m = preset("helicopter-range");
+    m["system"]["y0"][2] = json!(1e308);
+    m["measurement"]["c"][1][2] = json!(1e10);
+    let r = s.post("/v1/analyze", &json!({ "model": m }));
+    assert_eq!(r.status, 200, "{}", r.text);
+    let result = r.json();
+    assert!(result["ydot_max"][2].is_null(), "{}", result["ydot_max"]);
+    assert!(result["z_max"][1].is_null(), "{}", result["z_max"]);
+    v.expect(&schemas["AnalysisResult"], &result, "the analysis result");
+    let job = s.post(
+        "/v1/jobs",
+        &json!({"kind": "simulation", "model": m, "runs": 2, "trace_points": 10}),
+    );
+    assert_eq!(job.status, 202, "{}", job.text);
+    let id = job.json()["id"].as_str().unwrap().to_string();
+    let done = s.wait_finished(&id, std::time::Duration::from_secs(120));
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let result = s.get(&format!("/v1/jobs/{id}/result")).json();
+    assert!(result["z_max"][1].is_null(), "{}", result["z_max"]);
+    v.expect(
+        &schemas["SimulationResult"],
+        &result,
+        "the simulation result",
+    );
+}

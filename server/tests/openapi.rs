@@ -47,8 +47,8 @@ fn every_served_route_is_in_the_spec_and_vice_versa() {
 }
 
 /// A small JSON Schema validator for the subset openapi.yaml uses: type (or a list),
-/// required, properties, additionalProperties, items, enum, const, oneOf, allOf,
-/// minimum, maximum, exclusiveMinimum, exclusiveMaximum and local `$ref`s.
+/// required, properties, additionalProperties, items, minItems, maxItems, enum, const,
+/// oneOf, allOf, minimum, maximum, exclusiveMinimum, exclusiveMaximum and local `$ref`s.
 ///
 /// Stricter than JSON Schema in one way, on purpose: an object schema that lists
 /// `properties` and says nothing of `additionalProperties` is closed (with the
@@ -209,6 +209,18 @@ impl<'a> Validator<'a> {
                         _ => {}
                     },
                 }
+            }
+        }
+        if let Some(arr) = v.as_array() {
+            let bound = |k: &str| schema.get(k).and_then(Value::as_u64);
+            if bound("minItems").is_some_and(|b| (arr.len() as u64) < b) {
+                errors.push(format!(
+                    "{path}: fewer than minItems {}",
+                    schema["minItems"]
+                ));
+            }
+            if bound("maxItems").is_some_and(|b| (arr.len() as u64) > b) {
+                errors.push(format!("{path}: more than maxItems {}", schema["maxItems"]));
             }
         }
         if let (Some(items), Some(arr)) = (schema.get("items"), v.as_array()) {
@@ -717,5 +729,138 @@ fn an_overflowing_maximum_validates_against_the_spec() {
         &schemas["SimulationResult"],
         &result,
         "the simulation result",
+    );
+}
+
+/// Where a model rule fits a schema keyword, the spec states it: every one of these
+/// models is refused by the server (422, at the member) and by the `Model` schema.
+/// (The spec admitted them all: a client or a fuzzer generating from it sent models
+/// the server was bound to refuse.)
+#[test]
+fn the_model_schema_states_the_rules_a_keyword_can_state() {
+    let spec = spec();
+    let model_schema = &spec["components"]["schemas"]["Model"];
+    let dir = tempfile::tempdir().unwrap();
+    let s = Server::start(dir.path(), &[]);
+    let cv = preset("cv-tracker");
+    check(&spec, model_schema, &cv, "cv-tracker");
+    type Edit = fn(&mut Value);
+    let cases: &[(&str, Edit)] = &[
+        ("kea_model", |m| m["kea_model"] = json!(0)),
+        ("kea_model", |m| m["kea_model"] = json!(2)),
+        ("time.steps", |m| m["time"]["steps"] = json!(0)),
+        ("time.steps", |m| m["time"]["steps"] = json!(100_000_001u64)),
+        ("time.auto.tolerance", |m| {
+            m["time"]["steps"] = json!("auto");
+            m["time"]["auto"] = json!({"tolerance": 0});
+        }),
+        ("time.auto.initial_steps", |m| {
+            m["time"]["steps"] = json!("auto");
+            m["time"]["auto"] = json!({"initial_steps": 0});
+        }),
+        ("time.auto.max_steps", |m| {
+            m["time"]["steps"] = json!("auto");
+            m["time"]["auto"] = json!({"max_steps": 100_000_001u64});
+        }),
+        ("system.states", |m| m["system"]["states"] = json!([])),
+        ("system.states", |m| {
+            m["system"]["states"] = json!((0..201).map(|i| format!("s{i}")).collect::<Vec<_>>())
+        }),
+        ("measurement.names", |m| {
+            m["measurement"]["names"] = json!([])
+        }),
+        ("criteria.confidence", |m| {
+            m["criteria"]["confidence"] = json!(0)
+        }),
+        ("criteria.confidence", |m| {
+            m["criteria"]["confidence"] = json!(1)
+        }),
+    ];
+    let v = Validator::new(&spec);
+    for (path, edit) in cases {
+        let mut m = cv.clone();
+        edit(&mut m);
+        let r = s.post("/v1/models", &m);
+        assert_eq!(r.status, 422, "{path}: {}", r.text);
+        assert!(
+            r.error_paths().iter().any(|p| p == path),
+            "{path}: {}",
+            r.text
+        );
+        let mut errors = Vec::new();
+        v.check(model_schema, &m, "", &mut errors);
+        assert!(
+            !errors.is_empty(),
+            "the spec admits the model the server refuses at {path}: {}",
+            r.text
+        );
+    }
+}
+
+/// The ids that `POST /v1/models` and `POST /v1/jobs` return are linked to the
+/// operations that take them (OpenAPI links, which stateful clients and testers
+/// follow), and every link names a real operation and its real parameters.
+#[test]
+fn created_resources_link_to_the_operations_on_them() {
+    let spec = spec();
+    let mut operations = std::collections::BTreeMap::new();
+    for (path, item) in spec["paths"].as_object().unwrap() {
+        for m in METHODS {
+            if let Some(op) = item.get(*m) {
+                let mut params: BTreeSet<String> = BTreeSet::new();
+                for p in [&item["parameters"], &op["parameters"]] {
+                    for p in p.as_array().into_iter().flatten() {
+                        if let Some(n) = p["name"].as_str() {
+                            params.insert(n.to_string());
+                        }
+                    }
+                }
+                let id = op["operationId"].as_str().unwrap().to_string();
+                operations.insert(id, (path.clone(), params, op.clone()));
+            }
+        }
+    }
+    let links = |path: &str, status: &str| -> BTreeSet<String> {
+        let links = &spec["paths"][path]["post"]["responses"][status]["links"];
+        let links = links
+            .as_object()
+            .unwrap_or_else(|| panic!("no links on POST {path} {status}"));
+        for (name, link) in links {
+            let target = link["operationId"].as_str().unwrap();
+            let (_, params, op) = operations
+                .get(target)
+                .unwrap_or_else(|| panic!("link {name}: no operation {target}"));
+            for (p, expr) in link["parameters"].as_object().into_iter().flatten() {
+                assert!(params.contains(p), "link {name}: {target} has no `{p}`");
+                assert_eq!(expr, "$response.body#/id", "link {name}");
+            }
+            if let Some(body) = link.get("requestBody") {
+                check(
+                    &spec,
+                    &op["requestBody"]["content"]["application/json"]["schema"],
+                    &serde_json::from_str(&body.to_string().replace("$response.body#/id", "x"))
+                        .unwrap(),
+                    &format!("link {name}'s body"),
+                );
+            }
+        }
+        links
+            .values()
+            .map(|l| l["operationId"].as_str().unwrap().to_string())
+            .collect()
+    };
+    let by_id = |prefix: &str| -> BTreeSet<String> {
+        operations
+            .iter()
+            .filter(|(_, (path, params, _))| path.starts_with(prefix) && params.contains("id"))
+            .map(|(id, _)| id.clone())
+            .collect()
+    };
+    let jobs = links("/v1/jobs", "202");
+    assert_eq!(jobs, by_id("/v1/jobs/"), "POST /v1/jobs's links");
+    let models = links("/v1/models", "201");
+    assert!(
+        by_id("/v1/models/").is_subset(&models),
+        "POST /v1/models's links: {models:?}"
     );
 }

@@ -864,3 +864,73 @@ fn created_resources_link_to_the_operations_on_them() {
         "POST /v1/models's links: {models:?}"
     );
 }
+
+/// An optional model member sent as null is taken as left out, and a stored model is
+/// returned as it was sent: the request and `GET /v1/models/{id}`'s answer both
+/// validate. (The spec allowed no null there, so the answer broke its own schema.)
+#[test]
+fn null_optional_model_members_are_in_the_spec() {
+    let spec = spec();
+    let v = Validator::new(&spec);
+    let dir = tempfile::tempdir().unwrap();
+    let s = Server::start(dir.path(), &[]);
+    let mut m = preset("cv-tracker");
+    m["description"] = Value::Null;
+    m["time"]["auto"] = Value::Null;
+    for k in ["u", "y0", "eta0", "W"] {
+        m["system"][k] = Value::Null;
+    }
+    for k in ["g", "V", "schedule", "pairs"] {
+        m["measurement"][k] = Value::Null;
+    }
+    m["criteria"]["weights"] = json!({"yz": null, "zx": null, "yx": null});
+    v.expect(
+        request_schema(&spec, "post", "/v1/models"),
+        &m,
+        "the model with nulls",
+    );
+    let created = s.post("/v1/models", &m);
+    assert_eq!(created.status, 201, "{}", created.text);
+    let path = format!("/v1/models/{}", created.json()["id"].as_str().unwrap());
+    let got = s.get(&path);
+    assert_eq!(got.status, 200, "{}", got.text);
+    assert_eq!(got.json()["model"], m);
+    v.expect(
+        response_schema(&spec, "get", "/v1/models/{id}", 200, "application/json"),
+        &got.json(),
+        "the stored model with nulls",
+    );
+}
+
+/// Each server-sent event, `{event, data}`, validates against the spec's
+/// `text/event-stream` schema, and its data against the schema the spec names.
+/// (The schema was `type: string`, which no event is.)
+#[test]
+fn job_events_validate_against_the_spec() {
+    let spec = spec();
+    let v = Validator::new(&spec);
+    let dir = tempfile::tempdir().unwrap();
+    let s = Server::start(dir.path(), &[]);
+    let id = s.submit_analysis(common::long_model(2_000_000));
+    let events = s.events(&format!("/v1/jobs/{id}/events"));
+    assert!(events.len() >= 2, "{events:?}");
+    let schema = response_schema(
+        &spec,
+        "get",
+        "/v1/jobs/{id}/events",
+        200,
+        "text/event-stream",
+    );
+    for (event, data) in &events {
+        let e = json!({"event": event, "data": data.to_string()});
+        v.expect(schema, &e, &format!("event {e}"));
+        if event == "status" {
+            v.expect(
+                &spec["components"]["schemas"]["Job"],
+                data,
+                "the status event",
+            );
+        }
+    }
+    assert_eq!(events.last().unwrap().0, "status");
+}

@@ -114,6 +114,15 @@ impl Inputs {
             for i in 0..n {
                 self.b_phi[i] = (0..nl).map(|l| self.bd[i * nl + l].abs() * m.phi[l]).sum();
             }
+            // B (1.15) and |bΔt| φ (3.16) must be finite (noise levels too large).
+            if !finite(&self.big_b) {
+                let what = "the process-noise covariance B = bΔt W (bΔt)ᵀ overflowed f64 (a variance above 1.8e308)";
+                return Err(overflow("system", what, m, k, dt));
+            }
+            if !finite(&self.b_phi) {
+                let what = "the bound's model-error SKO |bΔt| φ overflowed f64 (above 1.8e308)";
+                return Err(overflow("system", what, m, k, dt));
+            }
         }
         if first || !self.u_fn.is_constant() {
             self.u_fn
@@ -143,6 +152,17 @@ impl Inputs {
                 self.inv_zeta[j] = 1.0 / self.zeta[j];
                 self.inv_meas[j] = 1.0 / self.meas_sko[j];
             }
+            // (Checked here, not only where the filter fails on it: a measurement that
+            // is never available would carry an infinite SKO into the result.)
+            if !finite(&self.rv) {
+                let what = "the measurement-noise covariance Γ V Γᵀ overflowed f64 (a variance above 1.8e308)";
+                return Err(overflow("measurement", what, m, k, dt));
+            }
+            if !finite(&self.zeta) {
+                let what =
+                    "the bound's measurement SKO ζ = |Γ| ψ (3.17) overflowed f64 (above 1.8e308)";
+                return Err(overflow("measurement", what, m, k, dt));
+            }
         }
         Ok(())
     }
@@ -164,6 +184,20 @@ impl Inputs {
         for &(i, j, v) in self.e.nonzeros() {
             a[i * n + j] += v;
         }
+    }
+}
+
+fn finite(v: &[f64]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+/// A step's noise input that left f64's range, at step k (t_k).
+fn overflow(path: &str, what: &str, m: &CompiledModel, k: u64, dt: f64) -> Error {
+    Error::Numerical {
+        step: k,
+        t: m.t0 + k as f64 * dt,
+        path: path.to_string(),
+        message: format!("{what}: the noise levels are too large"),
     }
 }
 

@@ -813,6 +813,16 @@ fn const_vector(
                     );
                     0.0
                 }
+                // A square below f64's normal range has lost its precision (1e-160
+                // squares to 1e-320, 3 significant digits; 1e-170 to 0), and its
+                // reciprocal overflows: the gain of such a measurement was NaN.
+                Ok(x) if non_negative && x > 0.0 && x * x < f64::MIN_POSITIVE => {
+                    errs.at(
+                        &p,
+                        format!("an SKO must be 0 or at least 1.5e-154 (its square, the variance, must be a normal f64, at least 2.2e-308), got {x:e}"),
+                    );
+                    0.0
+                }
                 Ok(x) => x,
                 Err(e) => {
                     errs.push(e);
@@ -879,6 +889,16 @@ fn noise_cov(
                 }
             }
             if errs.0.len() == before {
+                // Variances below f64's normal range, as for SKOs (const_vector).
+                for i in 0..dim {
+                    let x = cov[i * dim + i];
+                    if x > 0.0 && x < f64::MIN_POSITIVE {
+                        errs.at(
+                            &format!("{cov_path}[{i}][{i}]"),
+                            format!("a variance must be 0 or at least 2.2e-308 (a normal f64), got {x:e}"),
+                        );
+                    }
+                }
                 for i in 0..dim {
                     for j in 0..i {
                         let (x, y) = (cov[i * dim + j], cov[j * dim + i]);

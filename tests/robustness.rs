@@ -79,6 +79,50 @@ fn an_overflowing_noise_covariance_is_an_error_even_when_never_used() {
     assert!(e.to_string().contains("(at step 3, t = 0.03)"), "{e}");
 }
 
+/// An SKO whose square is below f64's normal range (psi = 1e-160: V = 1e-320, with
+/// three significant digits) was run: with phi = 0 the gain was NaN (`final.gain =
+/// [[NaN]]`, null in JSON), here the measured SKO came out as 9.99994e-161. eta0 and phi
+/// alike, and such a variance given directly in V or W. Now each is refused at its
+/// field, as a square above f64's range already was.
+#[test]
+fn variances_below_the_normal_range_are_refused_at_their_field() {
+    for (edit, path) in [
+        (
+            ("measurement", "psi", json!([1e-160])),
+            "measurement.psi[0]",
+        ),
+        (("system", "eta0", json!([1e-160])), "system.eta0[0]"),
+        (("system", "phi", json!([1e-155])), "system.phi[0]"),
+    ] {
+        let mut v = scalar();
+        v[edit.0][edit.1] = edit.2;
+        error_at(v, path, "an SKO must be 0 or at least 1.5e-154");
+    }
+    let mut v = scalar();
+    v["measurement"]["psi"] = Value::Null;
+    v["measurement"]["V"] = json!([[1e-320]]);
+    error_at(
+        v,
+        "measurement.V[0][0]",
+        "a variance must be 0 or at least 2.2e-308",
+    );
+    let mut v = scalar();
+    v["system"]["phi"] = Value::Null;
+    v["system"]["W"] = json!([[5e-324]]);
+    error_at(
+        v,
+        "system.W[0][0]",
+        "a variance must be 0 or at least 2.2e-308",
+    );
+    // The smallest accepted SKO, and 0, still run.
+    for psi in [1.5e-154, 0.0] {
+        let mut v = scalar();
+        v["measurement"]["psi"] = json!([psi]);
+        let r = run(v).unwrap();
+        assert!(r.final_.gain[0][0].is_finite(), "psi = {psi:e}");
+    }
+}
+
 // ------------------------------------------------------------ randomized regression
 
 /// Numbers, expressions and odd JSON values the mutations put into a model.

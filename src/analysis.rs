@@ -616,6 +616,9 @@ impl<'m, const N: usize> Engine<'m, N> {
         let z_max: Vec<f64> = (0..nm)
             .map(|j| (0..n).map(|i| m.c[j * n + i].abs() * y_max[i]).sum())
             .collect();
+        if let Some(w) = overflowed_maxima(m, &ydot_max, &z_max) {
+            warnings.push(w);
+        }
         let lambda = laplace_lambda(m.confidence);
         let (bound, cov) = running.into_sets(n);
         let bound_why = bound_diverged.map(|(k, t)| format!(
@@ -650,7 +653,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             "covariance",
             [open_why.as_deref(), None, open_why.as_deref()],
         );
-        let traces = build_traces(m, dec, &y_max, &z_max);
+        let traces = build_traces(m, dec, &y_max, &z_max, &mut warnings);
         let to_rows = |v: &[f64], cols: usize| -> Vec<Vec<f64>> {
             v.chunks_exact(cols.max(1)).map(|r| r.to_vec()).collect()
         };
@@ -741,6 +744,34 @@ impl<'m, const N: usize> Engine<'m, N> {
             warnings,
         })
     }
+}
+
+/// The warning for maxima that overflowed f64 (reported as null): ẏ_B where a y_k
+/// + u overflows with a finite y_k, z_B = Σ|C_ji| y_B,i (1.5) with large entries of C.
+fn overflowed_maxima(m: &CompiledModel, ydot_max: &[f64], z_max: &[f64]) -> Option<String> {
+    let names = |v: &[f64], of: &[String]| -> Vec<String> {
+        v.iter()
+            .zip(of)
+            .filter(|(x, _)| !x.is_finite())
+            .map(|(_, s)| format!("\"{s}\""))
+            .collect()
+    };
+    let mut parts = Vec::new();
+    let ydot = names(ydot_max, &m.states);
+    if !ydot.is_empty() {
+        parts.push(format!("ẏ_B of {}", ydot.join(", ")));
+    }
+    let z = names(z_max, &m.measurements);
+    if !z.is_empty() {
+        parts.push(format!("z_B of {}", z.join(", ")));
+    }
+    (!parts.is_empty()).then(|| {
+        format!(
+            "{} overflowed f64 (above 1.8e308) and {} null: the model's a·y + u or C·y_B is too large for double precision; rescale the states or the measurements",
+            parts.join("; "),
+            if ydot.len() + z.len() == 1 { "is" } else { "are" }
+        )
+    })
 }
 
 /// A filtered variance R_ii at or below this fraction of the predicted r_ii is
@@ -933,6 +964,7 @@ pub(crate) fn criteria_set(
         let mut undefined = BTreeMap::new();
         let pair = m.pair_of_state[i];
         let yb = y_max[i];
+        let zb = pair.map(|j| z_max[j]);
         let mut finish = |name: &str,
                           avg: &Avg,
                           factor: Option<f64>,
@@ -959,7 +991,26 @@ pub(crate) fn criteria_set(
                 );
                 return None;
             };
+            if !factor.is_finite() {
+                let why = if zb.is_some_and(f64::is_finite) {
+                    format!(
+                        "y_B/z_B or z_B/y_B overflowed f64 (y_B = {yb:e}, z_B = {:e}): the measurement's scale is out of all proportion to the state's",
+                        zb.unwrap_or(0.0)
+                    )
+                } else {
+                    "z_B = Σ|C_ji| y_B,i (1.5) overflowed f64, so relative errors (3.20) of the measurement are not numbers".to_string()
+                };
+                undefined.insert(name.to_string(), why);
+                return None;
+            }
             match avg.mean() {
+                Some(v) if !(v * factor).is_finite() => {
+                    undefined.insert(
+                        name.to_string(),
+                        format!("the {set} set's average (3.24) overflowed f64"),
+                    );
+                    None
+                }
                 Some(v) => Some(v * factor),
                 None => {
                     undefined.insert(
@@ -971,7 +1022,6 @@ pub(crate) fn criteria_set(
             }
         };
         // f^YZ = (η/y_B)/(ζ/z_B) = (η/ζ)(z_B/y_B); f^ZX = (ζ/χ)(y_B/z_B); f^YX = η/χ.
-        let zb = pair.map(|j| z_max[j]);
         let f_yz = zb.filter(|z| *z > 0.0).map(|z| z / yb);
         let f_zx = zb.filter(|z| *z > 0.0).map(|z| yb / z);
         let mut yz = finish("yz", &s.yz[i], f_yz, pair.is_some());
@@ -1088,7 +1138,13 @@ fn weighted_sum(
     }
 }
 
-fn build_traces(m: &CompiledModel, dec: Decimator, y_max: &[f64], z_max: &[f64]) -> Traces {
+fn build_traces(
+    m: &CompiledModel,
+    dec: Decimator,
+    y_max: &[f64],
+    z_max: &[f64],
+    warnings: &mut Vec<String>,
+) -> Traces {
     let n = m.n_states();
     let bucket_steps = dec.bucket_steps();
     let Decimator { t, mut columns, .. } = dec;
@@ -1101,16 +1157,26 @@ fn build_traces(m: &CompiledModel, dec: Decimator, y_max: &[f64], z_max: &[f64])
             .map(|x| x.unwrap_or(f64::NAN))
             .collect::<Vec<f64>>()
     };
+    // Relative errors and local criteria are values over y_B and z_B: with extreme
+    // scales (y_B = 1e-300) they can overflow f64; null then, counted for a warning.
+    let overflowed = std::cell::Cell::new(0u64);
+    let finite = |x: f64| {
+        if x.is_finite() {
+            Some(x)
+        } else {
+            overflowed.set(overflowed.get() + 1);
+            None
+        }
+    };
     let scale_opt = |v: Vec<Option<f64>>, f: Option<f64>| -> Vec<Option<f64>> {
         v.into_iter()
-            .map(|x| match (x, f) {
-                (Some(x), Some(f)) if (x * f).is_finite() => Some(x * f),
-                _ => None,
-            })
+            .map(|x| x.zip(f).and_then(|(x, f)| finite(x * f)))
             .collect()
     };
     let mut states = Vec::with_capacity(n);
+    let mut overflowing_states = Vec::new();
     for i in 0..n {
+        overflowed.set(0);
         let yb = y_max[i];
         let pair = m.pair_of_state[i];
         let zb = pair.map(|j| z_max[j]);
@@ -1122,7 +1188,9 @@ fn build_traces(m: &CompiledModel, dec: Decimator, y_max: &[f64], z_max: &[f64])
         let yb_ok = (yb > 0.0).then_some(yb);
         let zb_ok = zb.filter(|z| *z > 0.0);
         let rel = |v: &[Option<f64>], b: Option<f64>| -> Vec<Option<f64>> {
-            v.iter().map(|x| x.zip(b).map(|(x, b)| x / b)).collect()
+            v.iter()
+                .map(|x| x.zip(b).and_then(|(x, b)| finite(x / b)))
+                .collect()
         };
         let local_yz =
             pair.map(|_| scale_opt(take(i, S_RYZ), zb_ok.zip(yb_ok).map(|(z, y)| z / y)));
@@ -1145,6 +1213,15 @@ fn build_traces(m: &CompiledModel, dec: Decimator, y_max: &[f64], z_max: &[f64])
             local_zx,
             local_yx,
         });
+        if overflowed.get() > 0 {
+            overflowing_states.push(format!("\"{}\" ({} values)", m.states[i], overflowed.get()));
+        }
+    }
+    if !overflowing_states.is_empty() {
+        warnings.push(format!(
+            "trace values of {} overflowed f64 and are null: relative errors (3.20) and local criteria (3.23) are ratios to y_B and z_B, which this model's scales (y_B or z_B tiny against the SKOs, or far apart) put beyond 1.8e308",
+            overflowing_states.join(", ")
+        ));
     }
     Traces {
         bucket_steps,

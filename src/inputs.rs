@@ -163,6 +163,22 @@ impl Inputs {
                     "the bound's measurement SKO ζ = |Γ| ψ (3.17) overflowed f64 (above 1.8e308)";
                 return Err(overflow("measurement", what, m, k, dt));
             }
+            // A variance below f64's normal range keeps a few digits or none, and its
+            // whitening (1/√d) and the gain turn it into inf or NaN.
+            if let Some(j) = (0..nm)
+                .find(|&j| self.rv[j * nm + j] > 0.0 && self.rv[j * nm + j] < f64::MIN_POSITIVE)
+            {
+                return Err(Error::Numerical {
+                    step: k,
+                    t: m.t0 + k as f64 * dt,
+                    path: "measurement".to_string(),
+                    message: format!(
+                        "the measurement-noise variance (Γ V Γᵀ)[{j}][{j}] = {:e} of \"{}\" is below f64's normal range (2.2e-308): the noise levels are too small to square; give 0 for a noise-free measurement, or rescale",
+                        self.rv[j * nm + j],
+                        m.measurements[j]
+                    ),
+                });
+            }
         }
         Ok(())
     }

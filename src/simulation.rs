@@ -1219,6 +1219,16 @@ fn run_n<const N: usize, E: Executor>(
                 let vf = tot[sl.filt2 + i] / rf;
                 let mean_f = tot[sl.filt1 + i] / rf;
                 let p = pot[s * n + i];
+                // The filter's error is X − Y of two stored numbers of size |Y|: beyond
+                // PRECISION_RATIO times its SKO (the real one, or the potential one where
+                // the real one is smaller) it is rounding, not the filter.
+                let scale = va.sqrt().hypot(rec[lay.y + i]);
+                let err = vf.max(p).sqrt();
+                if !(scale.is_finite() && vf.is_finite())
+                    || (err > 0.0 && scale > PRECISION_RATIO * err)
+                {
+                    return Err(outgrown(&m.states[i], scale, err, k, t_k));
+                }
                 let base = i * T_SERIES;
                 rows.put(base + T_APRIORI, va);
                 rows.put(base + T_OPEN, open[s * n + i]);
@@ -1425,9 +1435,36 @@ fn run_n<const N: usize, E: Executor>(
     })
 }
 
-/// The `monte_carlo` criteria set (3.20)–(3.26) from the sample SKOs, with the
-/// analysis's y_B and z_B.
-/// Traces of a simulation as CSV: t, then per state the sample and potential SKOs.
+/// How many times the filter's error SKO (the sample one, or the potential one where
+/// that is larger) the simulated process (its sample RMS, sqrt(sample variance +
+/// mean²)) may grow before the run stops: the simulated error X − Y is the difference
+/// of two numbers of that size, so its rounding (≈ 2.2e-16 of them) would be ≈ 2e-4
+/// of the SKO being measured at 1e12 — and at 1e16 the noise vanishes into Y's last
+/// bit, and the sample SKO comes out 0 (an unstable model did).
+pub const PRECISION_RATIO: f64 = 1e12;
+
+fn outgrown(state: &str, scale: f64, sko: f64, k: u64, t: f64) -> Error {
+    let size = if scale.is_finite() {
+        format!(
+            "{scale:.1e}, {:.1e} times the filter's error SKO",
+            scale / sko
+        )
+    } else {
+        "beyond f64 (1.8e308)".to_string()
+    };
+    Error::Numerical {
+        step: k,
+        t,
+        path: "system".into(),
+        message: format!(
+            "the simulated process of \"{state}\" grew to {size}: the simulated filter errors, differences of numbers this large, are rounding rather than the filter (more than {PRECISION_RATIO:.0e} times the SKO); simulate a shorter span (t_end) or a model whose process stays bounded"
+        ),
+    }
+}
+
+/// Traces of a simulation as CSV: t, then per state the sample and potential SKOs; a
+/// value that is not a number (overflowed, or no measurement) is an empty cell, as in
+/// the analysis's CSV (`null` in the JSON).
 pub fn traces_csv(r: &SimulationResult) -> String {
     use std::fmt::Write;
     let mut s = String::from("t");
@@ -1440,21 +1477,26 @@ pub fn traces_csv(r: &SimulationResult) -> String {
         .unwrap();
     }
     s.push_str(",nees,nis\n");
-    let opt = |v: Option<f64>| v.map(|x| format!("{x:e}")).unwrap_or_default();
+    let opt = |v: Option<f64>| {
+        v.filter(|x| x.is_finite())
+            .map(|x| format!("{x:e}"))
+            .unwrap_or_default()
+    };
+    let num = |x: f64| opt(Some(x));
     for (row, t) in r.traces.t.iter().enumerate() {
         write!(s, "{t:e}").unwrap();
         for st in &r.traces.states {
             let meas = st.measured_sko.as_ref().and_then(|m| m[row]);
             write!(
                 s,
-                ",{:e},{:e},{},{:e},{:e},{:e},{:e}",
-                st.a_priori_sko[row],
-                st.open_loop_sko[row],
+                ",{},{},{},{},{},{},{}",
+                num(st.a_priori_sko[row]),
+                num(st.open_loop_sko[row]),
                 opt(meas),
-                st.filtered_sko[row],
-                st.filtered_mean[row],
-                st.potential_sko[row],
-                st.chi[row]
+                num(st.filtered_sko[row]),
+                num(st.filtered_mean[row]),
+                num(st.potential_sko[row]),
+                num(st.chi[row])
             )
             .unwrap();
         }

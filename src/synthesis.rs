@@ -609,9 +609,10 @@ fn bisect_iterations_max(b: &Bisect) -> u32 {
     if !(b.low > 0.0 && b.high > b.low && b.rel_tol > 0.0 && b.probes >= 2) {
         return 0;
     }
-    let width = (b.high / b.low).ln() / (b.probes - 1) as f64;
+    // (ln high − ln low: high/low itself overflows for low = 1e-300, high = 1e15.)
+    let width = (b.high.ln() - b.low.ln()) / (b.probes - 1) as f64;
     let goal = b.rel_tol.ln_1p();
-    (width / goal).log2().ceil().max(0.0) as u32 + 1
+    ((width / goal).log2().ceil().max(0.0) as u32).saturating_add(1)
 }
 
 // ---------------------------------------------------------------- evaluation
@@ -743,7 +744,7 @@ impl Ctx<'_> {
 fn describe(params: &[(String, f64)]) -> String {
     params
         .iter()
-        .map(|(k, v)| format!("{k} = {v}"))
+        .map(|(k, v)| format!("{k} = {}", crate::validate::num(*v)))
         .collect::<Vec<_>>()
         .join(", ")
 }
@@ -1084,7 +1085,11 @@ fn bisect<E: Executor>(
     };
     let mut iterations = 0u32;
     while good.max(bad) / good.min(bad) - 1.0 > b.rel_tol {
-        let mid = (good * bad).sqrt();
+        // The geometric mean; √good·√bad where good·bad leaves f64's range.
+        let mid = match (good * bad).sqrt() {
+            m if m.is_finite() && m > 0.0 => m,
+            _ => good.sqrt() * bad.sqrt(),
+        };
         let p = ctx.batch(exec, vec![at(mid)], progress)?.remove(0);
         iterations += 1;
         let pos = evals.partition_point(|(x, _)| *x < mid);

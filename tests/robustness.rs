@@ -123,6 +123,130 @@ fn variances_below_the_normal_range_are_refused_at_their_field() {
     }
 }
 
+/// Maxima, criteria and trace values that overflowed f64 became null without a word
+/// (ẏ_B with y0 = 1e308, z_B with c = 1e154, relative errors with y_B = 1e-300). Now
+/// each null carries a reason or a warning.
+#[test]
+fn overflowed_maxima_and_trace_values_are_named() {
+    let warning = |r: &AnalysisResult, fragment: &str| {
+        r.warnings
+            .iter()
+            .find(|w| w.contains(fragment))
+            .unwrap_or_else(|| panic!("no warning with \"{fragment}\" in {:#?}", r.warnings))
+            .clone()
+    };
+    // ẏ = a y = −2e308
+    let mut v = scalar();
+    v["system"]["y0"] = json!([1e308]);
+    v["system"]["a"] = json!([[-2]]);
+    let r = run(v).unwrap();
+    assert!(r.ydot_max[0].is_infinite());
+    warning(
+        &r,
+        "ẏ_B of \"x\" overflowed f64 (above 1.8e308) and is null",
+    );
+    // z_B = 1e154 · 1e200
+    let mut v = scalar();
+    v["system"]["y0"] = json!([1e200]);
+    v["system"]["a"] = json!([[0]]);
+    v["measurement"]["c"] = json!([[1e154]]);
+    let r = run(v).unwrap();
+    warning(&r, "z_B of \"z\" overflowed f64");
+    let yz = &r.criteria.covariance.per_state[0];
+    assert_eq!(yz.yz, None);
+    assert!(
+        yz.undefined["yz"].starts_with("z_B = Σ|C_ji| y_B,i (1.5) overflowed f64"),
+        "{:?}",
+        yz.undefined
+    );
+    // λη / y_B = 1e10 / 1e-300
+    let mut v = scalar();
+    v["system"]["y0"] = json!([1e-300]);
+    v["system"]["a"] = json!([[0]]);
+    v["system"]["eta0"] = json!([1e10]);
+    v["measurement"]["psi"] = json!([1e10]);
+    let r = run(v).unwrap();
+    let w = warning(&r, "trace values of \"x\"");
+    assert!(w.contains("overflowed f64 and are null"), "{w}");
+    assert!(r.traces.states[0].rel_y.iter().all(Option::is_none));
+}
+
+/// A measurement-noise variance Γ V Γᵀ below f64's normal range, reached through an
+/// expression for Γ (1e-160² = 1e-320) that validation cannot see: the gain came out
+/// NaN. Now an error at the step.
+#[test]
+fn a_subnormal_measurement_noise_variance_is_an_error_at_its_step() {
+    let mut v = scalar();
+    v["measurement"]["gamma"] = json!([["1e-160*(1 + t)"]]);
+    let e = error_at(v, "measurement", "is below f64's normal range (2.2e-308)");
+    assert!(e.to_string().contains("(Γ V Γᵀ)[0][0] = "), "{e}");
+    assert!(e.to_string().contains("(at step 1, t = 0.01)"), "{e}");
+}
+
+/// A Monte Carlo of a diverging model (ẏ = 10 v) went on until the simulated process
+/// was 1e65: X − Y, the filter's error, was then rounding, and the sample SKO came out
+/// exactly 0 — reported as the filter's real accuracy. Now the run stops with the state,
+/// the step and the size; the traces CSV has empty cells, never NaN or inf.
+#[test]
+fn a_simulated_process_that_outgrows_double_precision_stops_the_run() {
+    use kea_core::exec::Sequential;
+    use kea_core::simulation::{SimulationRequest, simulate, traces_csv};
+    let mut v: Value =
+        serde_json::from_str(kea_core::presets::get_json("cv-tracker").unwrap()).unwrap();
+    v["system"]["a"] = json!([[0, 1], [0, 10]]);
+    v["time"] = json!({"t0": 0, "t_end": 100, "steps": 1000});
+    let m = model_from_value(v).unwrap();
+    let req = SimulationRequest::new(10, 1);
+    let e = simulate(&m, &Overrides::new(), &req, &Sequential, &mut NoProgress).unwrap_err();
+    let text = e.to_string();
+    assert!(
+        text.starts_with("system: the simulated process of \"position\" grew to "),
+        "{text}"
+    );
+    assert!(text.contains("times the filter's error SKO"), "{text}");
+    // A model whose bound overflows (χ null in the result) writes empty cells.
+    let mut v: Value =
+        serde_json::from_str(kea_core::presets::get_json("cv-tracker").unwrap()).unwrap();
+    v["time"] = json!({"t0": 0, "t_end": 1000, "steps": 10000});
+    v["options"]["trace_points"] = json!(4);
+    let m = model_from_value(v).unwrap();
+    let r = simulate(&m, &Overrides::new(), &req, &Sequential, &mut NoProgress).unwrap();
+    assert!(
+        r.warnings
+            .iter()
+            .any(|w| w.contains("the bound (modulus procedure) overflowed")),
+        "{:?}",
+        r.warnings
+    );
+    let csv = traces_csv(&r);
+    assert!(!csv.contains("NaN") && !csv.contains("inf"), "{csv}");
+    assert!(
+        csv.contains(",,"),
+        "the overflowed χ is an empty cell: {csv}"
+    );
+}
+
+/// A bisection over [1e-300, 1e15]: high/low overflowed f64, and the planned number of
+/// halvings (u32::MAX) + 1 overflowed too — a panic in a debug build, 0 halvings
+/// planned in a release build. Now ln(high) − ln(low): 2 probes + 18 halvings + 2.
+#[test]
+fn a_bisection_over_an_extreme_bracket_is_planned_and_runs() {
+    use kea_core::exec::Sequential;
+    use kea_core::synthesis::{planned_analyses, request_from_value, synthesize};
+    let mut model = scalar();
+    model["params"] = json!({"p": 1});
+    model["system"]["y0"] = json!(["p"]);
+    let req = request_from_value(json!({
+        "model": model,
+        "target": {"criterion": "yx", "threshold": 1.0},
+        "mode": {"bisect": {"param": "p", "low": 1e-300, "high": 1e15, "rel_tol": 0.009, "probes": 2}}
+    }))
+    .unwrap();
+    // ⌈log2((ln 1e15 − ln 1e-300) / ln 1.009)⌉ + 1 = ⌈16.3⌉ + 1 = 18
+    assert_eq!(planned_analyses(&req), 2 + 18 + 2);
+    synthesize(&req, &Sequential, &mut NoProgress).unwrap();
+}
+
 // ------------------------------------------------------------ randomized regression
 
 /// Numbers, expressions and odd JSON values the mutations put into a model.

@@ -58,6 +58,7 @@ pub fn run(model: &CompiledModel, progress: &mut dyn Progress) -> Result<Analysi
     if let Some(w) = selection.as_ref().and_then(unconverged) {
         result.warnings.insert(0, w);
     }
+    result.warnings.splice(0..0, model.notes.iter().cloned());
     result.step_selection = selection;
     Ok(result)
 }

@@ -75,6 +75,9 @@ pub struct CompiledModel {
     pub confidence: f64,
     pub trace_points: usize,
     pub steady_state_shortcut: bool,
+    /// Parts of the model that were accepted but have no effect, said in the result's
+    /// warnings (`time.auto` with an integer `steps`).
+    pub notes: Vec<String>,
 }
 
 #[derive(Clone, Debug)]
@@ -225,6 +228,12 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
             "time.t_end",
             format!("t_end ({}) must be greater than t0 ({})", t.t_end, t.t0),
         );
+    }
+    let mut notes = Vec::new();
+    if let (Steps::Fixed(d), Some(_)) = (&t.steps, &t.auto) {
+        notes.push(format!(
+            "time.auto has no effect: steps is {d}, not \"auto\" (set steps to \"auto\" for the step-size selection, or leave time.auto out)"
+        ));
     }
     let steps = match &t.steps {
         Steps::Fixed(0) => {
@@ -656,6 +665,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         confidence: cr.confidence,
         trace_points: op.trace_points,
         steady_state_shortcut: op.steady_state_shortcut,
+        notes,
     })
 }
 

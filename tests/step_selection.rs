@@ -143,3 +143,23 @@ fn covariance_recursion_alone_refuses_auto_steps() {
         "{errors:#?}"
     );
 }
+
+/// `time.auto` beside an integer `steps` has no effect: the result says so (it used to
+/// be ignored without a word), and the run uses the integer.
+#[test]
+fn time_auto_with_integer_steps_is_reported_as_without_effect() {
+    let mut m = scalar(json!(-1.0), json!(1.0), json!({"tolerance": 1e-3}));
+    m["time"]["steps"] = json!(500);
+    let r = analyze(
+        &model_from_value(m).unwrap(),
+        &Overrides::new(),
+        &mut NoProgress,
+    )
+    .unwrap();
+    assert_eq!(r.steps, 500);
+    assert!(r.step_selection.is_none());
+    assert_eq!(
+        r.warnings[0],
+        "time.auto has no effect: steps is 500, not \"auto\" (set steps to \"auto\" for the step-size selection, or leave time.auto out)"
+    );
+}

@@ -661,6 +661,18 @@ fn check_csv_header(spec: &Value, kind: &str, header: &str) {
     assert!(checked > 0, "{header}");
 }
 
+/// Submit a simulation job of `m` and wait for its end: its id and final record.
+fn simulation_job(s: &Server, m: &Value, runs: u64, trace_points: u64) -> (String, Value) {
+    let job = s.post(
+        "/v1/jobs",
+        &json!({"kind": "simulation", "model": m, "runs": runs, "trace_points": trace_points}),
+    );
+    assert_eq!(job.status, 202, "{}", job.text);
+    let id = job.json()["id"].as_str().unwrap().to_string();
+    let done = s.wait_finished(&id, std::time::Duration::from_secs(120));
+    (id, done)
+}
+
 /// A Monte Carlo run whose bound overflows f64 (the textbook tracker over 1000 s): χ is
 /// null in the result (with a warning). The spec said `Numbers`, so a client validating
 /// the result refused it. (A model whose simulated process diverges stops with an error
@@ -673,13 +685,7 @@ fn an_overflowing_simulation_validates_against_the_spec() {
     let s = Server::start(dir.path(), &[]);
     let mut m = preset("cv-tracker");
     m["time"] = json!({"t0": 0, "t_end": 1000, "steps": 10000});
-    let job = s.post(
-        "/v1/jobs",
-        &json!({"kind": "simulation", "model": m, "runs": 10, "trace_points": 20}),
-    );
-    assert_eq!(job.status, 202, "{}", job.text);
-    let id = job.json()["id"].as_str().unwrap().to_string();
-    let done = s.wait_finished(&id, std::time::Duration::from_secs(120));
+    let (id, done) = simulation_job(&s, &m, 10, 20);
     assert_eq!(done["status"], "succeeded", "{done}");
     let result = s.get(&format!("/v1/jobs/{id}/result")).json();
     let fin = &result["final"];
@@ -696,12 +702,7 @@ fn an_overflowing_simulation_validates_against_the_spec() {
     // The diverging model: a failed job whose error names the state and the step.
     m["system"]["a"] = json!([[0, 1], [0, 10]]);
     m["time"] = json!({"t0": 0, "t_end": 100, "steps": 1000});
-    let job = s.post(
-        "/v1/jobs",
-        &json!({"kind": "simulation", "model": m, "runs": 10, "trace_points": 20}),
-    );
-    let id = job.json()["id"].as_str().unwrap().to_string();
-    let done = s.wait_finished(&id, std::time::Duration::from_secs(120));
+    let (_, done) = simulation_job(&s, &m, 10, 20);
     assert_eq!(done["status"], "failed", "{done}");
     let text = done["error"].to_string();
     assert!(
@@ -728,15 +729,9 @@ fn an_overflowing_maximum_validates_against_the_spec() {
     assert!(result["ydot_max"][2].is_null(), "{}", result["ydot_max"]);
     assert!(result["z_max"][1].is_null(), "{}", result["z_max"]);
     v.expect(&schemas["AnalysisResult"], &result, "the analysis result");
-    let job = s.post(
-        "/v1/jobs",
-        &json!({"kind": "simulation", "model": m, "runs": 2, "trace_points": 10}),
-    );
-    assert_eq!(job.status, 202, "{}", job.text);
     // Simulated, the state of size 1e308 leaves no digits for its filter errors: the
     // job fails, naming it.
-    let id = job.json()["id"].as_str().unwrap().to_string();
-    let done = s.wait_finished(&id, std::time::Duration::from_secs(120));
+    let (_, done) = simulation_job(&s, &m, 2, 10);
     assert_eq!(done["status"], "failed", "{done}");
     assert!(
         done["error"]

@@ -306,3 +306,77 @@ fn laplace_lambda_is_the_two_sided_normal_quantile() {
         laplace_lambda(p)
     );
 }
+
+/// The largest |x| of the numbers in `v`.
+fn largest(v: &Value) -> f64 {
+    match v {
+        Value::Number(x) => x.as_f64().unwrap_or(0.0).abs(),
+        Value::Array(a) => a.iter().map(largest).fold(0.0, f64::max),
+        Value::Object(o) => o.values().map(largest).fold(0.0, f64::max),
+        _ => 0.0,
+    }
+}
+
+/// Every member of `want` against the same member of `got`: nulls where nulls, numbers
+/// to `tol` relative (to the larger of the two, or to 1e-6 of the largest number in the
+/// enclosing array: an off-diagonal that cancels to 1e-17 is compared at its scale).
+fn agree(path: &str, want: &Value, got: &Value, scale: f64, tol: f64, worst: &mut (f64, String)) {
+    match (want, got) {
+        (Value::Null, Value::Null) => {}
+        (Value::Number(w), Value::Number(g)) => {
+            let (w, g) = (w.as_f64().unwrap(), g.as_f64().unwrap());
+            let e = (w - g).abs()
+                / w.abs()
+                    .max(g.abs())
+                    .max(1e-6 * scale)
+                    .max(f64::MIN_POSITIVE);
+            assert!(
+                e <= tol,
+                "{path}: numpy {w:e}, kea {g:e} (relative {e:.1e})"
+            );
+            if e > worst.0 {
+                *worst = (e, path.to_string());
+            }
+        }
+        (Value::Array(w), Value::Array(g)) => {
+            assert_eq!(w.len(), g.len(), "{path}: lengths");
+            let scale = largest(want);
+            for (i, (w, g)) in w.iter().zip(g).enumerate() {
+                agree(&format!("{path}[{i}]"), w, g, scale, tol, worst);
+            }
+        }
+        (Value::Object(w), Value::Object(g)) => {
+            for (k, w) in w {
+                let g = g
+                    .get(k)
+                    .unwrap_or_else(|| panic!("{path}.{k}: missing in kea's result"));
+                agree(&format!("{path}.{k}"), w, g, largest(w), tol, worst);
+            }
+        }
+        (Value::String(w), Value::String(g)) => assert_eq!(w, g, "{path}"),
+        _ => panic!("{path}: numpy {want}, kea {got}"),
+    }
+}
+
+/// kea against an independent implementation of METHOD §1 in numpy (tests/numpy/
+/// kearef.py, written from METHOD.md and the README alone; its output committed by
+/// tests/numpy/make_reference.py): the five presets at 2000 steps and fifteen random
+/// models (N ≤ 4, expressions in t, phi/W, psi/V, gamma/g, pairs, schedules, weights).
+/// y_B, ẏ_B, z_B, the final covariance, gain, η, χ and SKOs, and both criteria sets per
+/// state (with excluded steps) and weighted, to 1e-9 relative.
+#[test]
+fn an_independent_numpy_implementation_agrees() {
+    let text = include_str!("data/numpy_reference.json");
+    let cases: Vec<Value> = serde_json::from_str(text).unwrap();
+    assert_eq!(cases.len(), 20);
+    let mut worst = (0.0, String::new());
+    for case in &cases {
+        let name = case["name"].as_str().unwrap();
+        let model = model_from_value(case["model"].clone()).unwrap();
+        let r = analyze(&model, &Default::default(), &mut NoProgress)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let got = serde_json::to_value(&r).unwrap();
+        agree(name, &case["expected"], &got, 0.0, 1e-9, &mut worst);
+    }
+    eprintln!("largest difference {:.1e} at {}", worst.0, worst.1);
+}

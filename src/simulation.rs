@@ -1457,7 +1457,7 @@ fn outgrown(state: &str, scale: f64, sko: f64, k: u64, t: f64) -> Error {
         t,
         path: "system".into(),
         message: format!(
-            "the simulated process of \"{state}\" grew to {size}: the simulated filter errors, differences of numbers this large, are rounding rather than the filter (more than {PRECISION_RATIO:.0e} times the SKO); simulate a shorter span (t_end) or a model whose process stays bounded"
+            "the simulated process of \"{state}\" reached {size}: the simulated filter errors, differences of numbers this large, would be rounding rather than the filter (the limit is {PRECISION_RATIO:.0e} times the SKO); simulate a shorter span (t_end), a model whose process stays bounded, or states measured from a nearby reference (an offset of 1e13 with an SKO of 1 is beyond it)"
         ),
     }
 }

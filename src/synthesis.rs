@@ -741,6 +741,26 @@ impl Ctx<'_> {
     }
 }
 
+/// The end of a "no point meets the target" message: " (the best is 3.2100): widen the
+/// range or lower the target." — or, where no point has a value, why (a criterion
+/// undefined everywhere has no best: "-inf" was printed, with advice to widen).
+fn best_of<'a>(points: impl Iterator<Item = &'a Point> + Clone, range: &str) -> String {
+    match points.clone().filter_map(|p| p.value).reduce(f64::max) {
+        Some(best) => {
+            format!(" (the best is {best:.4}): widen the {range} or lower the target.")
+        }
+        None => {
+            let why = points
+                .filter_map(|p| p.note.as_deref())
+                .next()
+                .unwrap_or("no value");
+            format!(
+                ": the criterion has no value at any point ({why}); an analysis of the model says why (y_B = 0, no paired measurement, …)."
+            )
+        }
+    }
+}
+
 fn describe(params: &[(String, f64)]) -> String {
     params
         .iter()
@@ -1047,7 +1067,7 @@ fn bisect<E: Executor>(
         ));
     }
     if transitions.is_empty() {
-        let best = values.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        let best = best_of(evals.iter().map(|(_, p)| p), "range");
         return Ok(if meets[0] {
             (
                 Status::WholeRangeMeets,
@@ -1065,7 +1085,7 @@ fn bisect<E: Executor>(
             (
                 Status::NotFound,
                 format!(
-                    "No {name} in [{}, {}] reaches {crit} ≥ {thr} (the best is {best:.4}): widen the range or lower the target.",
+                    "No {name} in [{}, {}] reaches {crit} ≥ {thr}{best}",
                     fmt_num(b.low),
                     fmt_num(b.high)
                 ),
@@ -1251,16 +1271,10 @@ fn grid<E: Executor>(
             ))
         }
         _ if qualifying == 0 => {
-            let best = cells
-                .iter()
-                .filter_map(|c| c.point.value)
-                .fold(f64::NEG_INFINITY, f64::max);
+            let best = best_of(cells.iter().map(|c| &c.point), "ranges");
             Ok((
                 Status::NotFound,
-                format!(
-                    "No cell of {} meets {crit} ≥ {thr} (the best is {best:.4}): widen the ranges or lower the target.",
-                    cells.len()
-                ),
+                format!("No cell of {} meets {crit} ≥ {thr}{best}", cells.len()),
                 None,
                 None,
                 out(None, cells),

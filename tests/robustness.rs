@@ -200,7 +200,7 @@ fn a_simulated_process_that_outgrows_double_precision_stops_the_run() {
     let e = simulate(&m, &Overrides::new(), &req, &Sequential, &mut NoProgress).unwrap_err();
     let text = e.to_string();
     assert!(
-        text.starts_with("system: the simulated process of \"position\" grew to "),
+        text.starts_with("system: the simulated process of \"position\" reached "),
         "{text}"
     );
     assert!(text.contains("times the filter's error SKO"), "{text}");
@@ -245,6 +245,33 @@ fn a_bisection_over_an_extreme_bracket_is_planned_and_runs() {
     // ⌈log2((ln 1e15 − ln 1e-300) / ln 1.009)⌉ + 1 = ⌈16.3⌉ + 1 = 18
     assert_eq!(planned_analyses(&req), 2 + 18 + 2);
     synthesize(&req, &Sequential, &mut NoProgress).unwrap();
+}
+
+/// A grid where the criterion is undefined in every cell (y0 = 0: y_B = 0) said "the
+/// best is -inf" and advised widening the ranges; now it says there is no value.
+#[test]
+fn a_grid_with_no_value_anywhere_says_so() {
+    use kea_core::exec::Sequential;
+    use kea_core::synthesis::{request_from_value, synthesize};
+    let mut model = scalar();
+    model["params"] = json!({"q": 1});
+    model["system"]["phi"] = json!(["q"]);
+    model["system"]["y0"] = json!([0]);
+    let req = request_from_value(json!({
+        "model": model,
+        "target": {"criterion": "yz", "set": "bound", "threshold": 1},
+        "mode": {"grid": {"params": [{"name": "q", "values": [1, 2]}]}}
+    }))
+    .unwrap();
+    let r = synthesize(&req, &Sequential, &mut NoProgress).unwrap();
+    assert!(!r.message.contains("inf"), "{}", r.message);
+    assert!(
+        r.message.starts_with(
+            "No cell of 2 meets F_YZ (bound) ≥ 1: the criterion has no value at any point"
+        ),
+        "{}",
+        r.message
+    );
 }
 
 // ------------------------------------------------------------ randomized regression

@@ -706,7 +706,7 @@ fn an_overflowing_simulation_validates_against_the_spec() {
     assert_eq!(done["status"], "failed", "{done}");
     let text = done["error"].to_string();
     assert!(
-        text.contains("the simulated process of \\\"position\\\" grew to"),
+        text.contains("the simulated process of \\\"position\\\" reached"),
         "{text}"
     );
 }

@@ -1405,6 +1405,9 @@ fn run_n<const N: usize, E: Executor>(
     if req.truth == Truth::Mean {
         warnings.push("truth = \"mean\" (seed 000's reading): the filtered error excludes the model error, so it is not expected to match R_k".into());
     }
+    if nis_count == 0 {
+        warnings.push("no measurement is available at any step, so the NIS check is undefined (its band and average are null)".into());
+    }
     Ok(SimulationResult {
         request: req.clone(),
         steps,

@@ -226,6 +226,33 @@ fn a_simulated_process_that_outgrows_double_precision_stops_the_run() {
     );
 }
 
+/// A Monte Carlo in which no measurement is ever available: the NIS band was null
+/// without a word; a warning says why.
+#[test]
+fn a_simulation_without_measurements_says_why_nis_is_undefined() {
+    use kea_core::exec::Sequential;
+    use kea_core::simulation::{SimulationRequest, simulate};
+    let mut v = scalar();
+    v["measurement"]["schedule"] = json!([{"when": -1}]);
+    let m = model_from_value(v).unwrap();
+    let r = simulate(
+        &m,
+        &Overrides::new(),
+        &SimulationRequest::new(4, 1),
+        &Sequential,
+        &mut NoProgress,
+    )
+    .unwrap();
+    assert!(r.consistency.nis.time_average.is_none());
+    assert!(
+        r.warnings
+            .iter()
+            .any(|w| w.starts_with("no measurement is available at any step")),
+        "{:?}",
+        r.warnings
+    );
+}
+
 /// A bisection over [1e-300, 1e15]: high/low overflowed f64, and the planned number of
 /// halvings (u32::MAX) + 1 overflowed too — a panic in a debug build, 0 halvings
 /// planned in a release build. Now ln(high) − ln(low): 2 probes + 18 halvings + 2.

@@ -2,8 +2,8 @@
 models by kearef.py, an independent numpy implementation of METHOD.md §1, for
 tests/reference.rs::an_independent_numpy_implementation_agrees.
 
-    python3 -m venv /tmp/venv && /tmp/venv/bin/pip install numpy
-    /tmp/venv/bin/python tests/numpy/make_reference.py
+    python3 -m venv .venv && .venv/bin/pip install numpy
+    .venv/bin/python tests/numpy/make_reference.py
 
 The models: every preset at 2000 steps (shortcut off: every step is recursed), and
 random models (N 1–4 states, n ≤ N measurements, M ≥ n noise sources, expressions in t,

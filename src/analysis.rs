@@ -426,7 +426,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                 if k == 1 || inp.rv_changed || mask_changed {
                     let mask = (!all).then_some(&avail[..]);
                     prep.prepare(&m.c, &inp.rv, mask, n, nm)
-                        .map_err(|()| not_positive(&inp, &big_r, k, t_k))?;
+                        .map_err(|()| not_positive(&big_r, k, t_k))?;
                     avail_prev.copy_from_slice(&avail);
                     if k == 1 || mask_changed {
                         for (h, p) in has_meas.iter_mut().zip(pair) {
@@ -436,7 +436,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                     }
                 }
                 if !joseph.step::<N, L>(n, &mut big_r, &inp.e, &inp.big_b, &prep) {
-                    return Err(not_positive(&inp, &big_r, k, t_k));
+                    return Err(not_positive(&big_r, k, t_k));
                 }
                 for i in 0..n {
                     pot[i] = big_r[i * n + i];
@@ -451,11 +451,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                     cancelled_steps += 1;
                 }
                 if !all_finite(&pot[..n]) {
-                    return Err(if inputs_overflowed(&inp) {
-                        not_positive(&inp, &big_r, k, t_k)
-                    } else {
-                        overflowed("the filtered covariance", "system", k, t_k)
-                    });
+                    return Err(overflowed("the filtered covariance", "system", k, t_k));
                 }
                 for p in &mut pot[..n] {
                     *p = p.max(0.0).sqrt();
@@ -832,33 +828,19 @@ pub(crate) fn overflowed(what: &str, path: &str, k: u64, t: f64) -> Error {
     }
 }
 
-/// The error for an innovation covariance that is not positive definite: an
-/// overflow where a covariance left f64's range (a huge psi, V, Γ or φ: not a
-/// measurement without error), else singular.
-fn inputs_overflowed(inp: &Inputs) -> bool {
-    !(all_finite(&inp.rv) && all_finite(&inp.big_b))
-}
-
-fn not_positive(inp: &Inputs, big_r: &[f64], k: u64, t: f64) -> Error {
-    let what = if !all_finite(&inp.rv) {
-        Some(("the measurement-noise covariance Γ V Γᵀ", "measurement"))
-    } else if !all_finite(&inp.big_b) {
-        Some(("the process-noise covariance B = bΔt W (bΔt)ᵀ", "system"))
-    } else if !all_finite(big_r) {
-        Some(("the filter's covariance", "system"))
-    } else {
-        None
-    };
-    match what {
-        Some((what, path)) => Error::Numerical {
-            step: k,
-            t,
-            path: path.into(),
-            message: format!(
-                "{what} overflowed f64 (a variance above 1.8e308): the noise levels or the initial SKOs are too large to square"
-            ),
-        },
-        None => singular(k, t),
+/// The error for an innovation covariance that is not positive definite: an overflow
+/// where the filter's covariance left f64's range (huge initial SKOs), else singular.
+/// (Noise covariances that leave f64's range are refused where `Inputs::at` computes
+/// them, before the step.)
+fn not_positive(big_r: &[f64], k: u64, t: f64) -> Error {
+    if all_finite(big_r) {
+        return singular(k, t);
+    }
+    Error::Numerical {
+        step: k,
+        t,
+        path: "system".into(),
+        message: "the filter's covariance overflowed f64 (a variance above 1.8e308): the noise levels or the initial SKOs are too large to square".into(),
     }
 }
 

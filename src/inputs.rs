@@ -168,16 +168,12 @@ impl Inputs {
             if let Some(j) = (0..nm)
                 .find(|&j| self.rv[j * nm + j] > 0.0 && self.rv[j * nm + j] < f64::MIN_POSITIVE)
             {
-                return Err(Error::Numerical {
-                    step: k,
-                    t: m.t0 + k as f64 * dt,
-                    path: "measurement".to_string(),
-                    message: format!(
-                        "the measurement-noise variance (Γ V Γᵀ)[{j}][{j}] = {:e} of \"{}\" is below f64's normal range (2.2e-308): the noise levels are too small to square; give 0 for a noise-free measurement, or rescale",
-                        self.rv[j * nm + j],
-                        m.measurements[j]
-                    ),
-                });
+                let what = format!(
+                    "the measurement-noise variance (Γ V Γᵀ)[{j}][{j}] = {:e} of \"{}\" is below f64's normal range (2.2e-308): the noise levels are too small to square; give 0 for a noise-free measurement, or rescale",
+                    self.rv[j * nm + j],
+                    m.measurements[j]
+                );
+                return Err(at_step("measurement", what, m, k, dt));
             }
         }
         Ok(())
@@ -209,11 +205,22 @@ fn finite(v: &[f64]) -> bool {
 
 /// A step's noise input that left f64's range, at step k (t_k).
 fn overflow(path: &str, what: &str, m: &CompiledModel, k: u64, dt: f64) -> Error {
+    at_step(
+        path,
+        format!("{what}: the noise levels are too large"),
+        m,
+        k,
+        dt,
+    )
+}
+
+/// An error of step k's inputs (at t_k).
+fn at_step(path: &str, message: String, m: &CompiledModel, k: u64, dt: f64) -> Error {
     Error::Numerical {
         step: k,
         t: m.t0 + k as f64 * dt,
         path: path.to_string(),
-        message: format!("{what}: the noise levels are too large"),
+        message,
     }
 }
 

@@ -9,7 +9,7 @@ use crate::decimate::Decimator;
 use crate::error::Error;
 use crate::inputs::{Inputs, time_err};
 use crate::lanes::{Lanes, Scalar};
-use crate::linalg::{cov_rel_diff, predict_cov, predict_work};
+use crate::linalg::{SparseRows, arr, arr_mut, cov_rel_diff, mat, predict_cov, predict_work};
 use crate::result::*;
 use crate::riccati::{Prepared, SequentialJoseph};
 use crate::steps::select_steps;
@@ -252,15 +252,18 @@ impl Running {
 }
 
 /// Series kept in the traces for every state (in this order; a step's row holds
-/// series s of state i at s · n + i).
+/// series s of state i at s · n + i). The first three are constant once the Riccati
+/// recursion is frozen (the shortcut), the last three are the bound set's ratios —
+/// followed in the row by the covariance set's, so the six criteria are contiguous.
 pub(crate) const SERIES: usize = 10;
-const S_Y: usize = 0;
-const S_ETA: usize = 1;
-const S_ZETA: usize = 2;
-const S_CHI: usize = 3;
-const S_POT: usize = 4;
-const S_OPEN: usize = 5;
-const S_MEAS: usize = 6;
+const S_ZETA: usize = 0;
+const S_POT: usize = 1;
+const S_MEAS: usize = 2;
+/// The series from here on change every step.
+const S_Y: usize = 3;
+const S_ETA: usize = 4;
+const S_CHI: usize = 5;
+const S_OPEN: usize = 6;
 const S_RYZ: usize = 7;
 const S_RZX: usize = 8;
 const S_RYX: usize = 9;
@@ -372,12 +375,16 @@ impl<'m, const N: usize> Engine<'m, N> {
         let mut row = vec![f64::NAN; (SERIES + 3) * n];
         let mut part = vec![0u64; 6 * n];
         let mut part_for: Option<(bool, bool)> = None; // (bound_ok, open_ok) of `part`
-        // Per state: ζ, σ_Z and their reciprocals while its measurement is available
-        // (NaN when unpaired or unavailable, which makes every measured ratio NaN).
+        // Per state: ζ, σ_Z while its measurement is available (NaN when unpaired or
+        // unavailable, which makes every measured ratio NaN), and their reciprocals
+        // where positive (NaN otherwise: a ratio over them is then NaN, excluded).
         let (mut zeta_s, mut meas_s) = (vec![f64::NAN; n], vec![f64::NAN; n]);
         let (mut inv_zeta_s, mut inv_meas_s) = (vec![f64::NAN; n], vec![f64::NAN; n]);
         let mut has_meas = vec![false; n];
         let mut dec = Decimator::new(self.steps, n * SERIES, m.trace_points);
+        // Whether the row's constant series (before S_Y) and covariance ZX ratios
+        // are those of the previous step.
+        let mut constant_rows = false;
 
         let mut frozen_at: Option<u64> = None;
         // The bound (|A| element-wise) or the open-loop covariance can overflow while
@@ -398,7 +405,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             }
 
             // y_k = A y_{k−1} + uΔt (3.3), A = I + E; ẏ(t_{k−1}) = a y + u (1.4)
-            inp.e.mul_vec::<L>(&mut ey, &y, n);
+            mul_vec::<N, L>(&inp.e, &mut ey, &y, n);
             let ydot = &mut xi[..n]; // (xi as scratch: it is set again below)
             zip_into(ydot, &ey, &inp.u, |e, u| (e / dt + u).abs());
             zip_update(&mut ydot_max[..n], ydot, |m, d| if d > m { d } else { m });
@@ -456,7 +463,9 @@ impl<'m, const N: usize> Engine<'m, N> {
                 for p in &mut pot[..n] {
                     *p = p.max(0.0).sqrt();
                 }
-                zip_update(&mut inv_pot[..n], &pot, |_, p| 1.0 / p);
+                zip_update(&mut inv_pot[..n], &pot, |_, p| {
+                    if p > 0.0 { 1.0 / p } else { f64::NAN }
+                });
                 // |I − pC| and |p| ζ for the bound (3.19)
                 if !self.covariance_only {
                     zip_update(&mut abs_ht, &joseph.ht, |_, x| x.abs());
@@ -496,14 +505,25 @@ impl<'m, const N: usize> Engine<'m, N> {
 
             // Bound propagation (3.16)–(3.19): η = |A| η + |bΔt| φ, χ = |h| |A| χ + |p| ζ
             if bound_diverged.is_none() {
-                inp.abs_a.mul_vec::<L>(&mut xi, &eta, n);
+                mul_vec::<N, L>(&inp.abs_a, &mut xi, &eta, n);
                 zip_into(&mut eta[..n], &xi, &inp.b_phi, |x, b| x + b);
-                inp.abs_a.mul_vec::<L>(&mut xi, &chi, n);
+                mul_vec::<N, L>(&inp.abs_a, &mut xi, &chi, n);
                 // χ_c = (Σ_b |h_cb| ξ_b, b in order) + (|p| ζ)_c, as row operations on |h|ᵀ
-                chi.fill(0.0);
-                for (h, &x) in abs_ht.chunks_exact(n).zip(&xi) {
-                    for (c, h) in chi.iter_mut().zip(h) {
-                        *c += h * x;
+                if N > 0 {
+                    let (h, x, c) = (mat::<N>(&abs_ht), arr::<N>(&xi), arr_mut::<N>(&mut chi));
+                    let mut w = [0.0f64; N];
+                    for b in 0..N {
+                        for j in 0..N {
+                            w[j] += h[b][j] * x[b];
+                        }
+                    }
+                    *c = w;
+                } else {
+                    chi.fill(0.0);
+                    for (h, &x) in abs_ht.chunks_exact(n).zip(&xi) {
+                        for (c, h) in chi.iter_mut().zip(h) {
+                            *c += h * x;
+                        }
                     }
                 }
                 zip_update(&mut chi[..n], &pz, |c, p| c + p);
@@ -521,8 +541,10 @@ impl<'m, const N: usize> Engine<'m, N> {
                     let j = p.filter(|_| has_meas[i]);
                     zeta_s[i] = j.map_or(f64::NAN, |j| inp.zeta[j]);
                     meas_s[i] = j.map_or(f64::NAN, |j| inp.meas_sko[j]);
-                    inv_zeta_s[i] = j.map_or(f64::NAN, |j| inp.inv_zeta[j]);
-                    inv_meas_s[i] = j.map_or(f64::NAN, |j| inp.inv_meas[j]);
+                    let positive = |v: f64, inv: f64| if v > 0.0 { inv } else { f64::NAN };
+                    inv_zeta_s[i] = j.map_or(f64::NAN, |j| positive(inp.zeta[j], inp.inv_zeta[j]));
+                    inv_meas_s[i] =
+                        j.map_or(f64::NAN, |j| positive(inp.meas_sko[j], inp.inv_meas[j]));
                 }
             }
             if part_for != Some((bound_ok, open_ok)) {
@@ -541,16 +563,21 @@ impl<'m, const N: usize> Engine<'m, N> {
                     part[C_COV_YX * n + i] = p(open_ok);
                 }
                 part_for = Some((bound_ok, open_ok));
+                constant_rows = false;
             }
+            // Once frozen, ζ, R and σ_Z no longer change: the row keeps the first three
+            // series and the covariance ZX ratios the previous step wrote.
+            let constants = !constant_rows || inp.rv_changed;
+            constant_rows = frozen_at.is_some() && !inp.rv_changed;
             {
                 let nan = f64::NAN;
-                let (r_y, rest) = row.split_at_mut(n);
-                let (r_eta, rest) = rest.split_at_mut(n);
-                let (r_zeta, rest) = rest.split_at_mut(n);
-                let (r_chi, rest) = rest.split_at_mut(n);
+                let (r_zeta, rest) = row.split_at_mut(n);
                 let (r_pot, rest) = rest.split_at_mut(n);
-                let (r_open, rest) = rest.split_at_mut(n);
                 let (r_meas, rest) = rest.split_at_mut(n);
+                let (r_y, rest) = rest.split_at_mut(n);
+                let (r_eta, rest) = rest.split_at_mut(n);
+                let (r_chi, rest) = rest.split_at_mut(n);
+                let (r_open, rest) = rest.split_at_mut(n);
                 let (r_ryz, rest) = rest.split_at_mut(n);
                 let (r_rzx, rest) = rest.split_at_mut(n);
                 let (r_ryx, rest) = rest.split_at_mut(n);
@@ -562,26 +589,32 @@ impl<'m, const N: usize> Engine<'m, N> {
                 // (One loop rather than four copy_from_slice: each of those is a call
                 // to memcpy, dearer than the copy of N values.)
                 #[allow(clippy::manual_memcpy)]
+                if constants {
+                    for i in 0..n {
+                        r_pot[i] = pot[i];
+                        r_zeta[i] = zeta_s[i];
+                        r_meas[i] = meas_s[i];
+                        c_zx[i] = meas_s[i] * inv_pot[i];
+                    }
+                }
+                #[allow(clippy::manual_memcpy)]
                 for i in 0..n {
                     r_y[i] = y[i];
-                    r_pot[i] = pot[i];
-                    r_zeta[i] = zeta_s[i];
-                    r_meas[i] = meas_s[i];
                 }
                 for i in 0..n {
                     r_open[i] = p_y[i * n + i].max(0.0).sqrt();
                 }
+                // (A reciprocal is NaN where its value is not positive.)
                 for i in 0..n {
-                    let (open, zc, po) = (r_open[i], meas_s[i], pot[i]);
-                    c_yz[i] = if zc > 0.0 { open * inv_meas_s[i] } else { nan };
-                    c_zx[i] = if po > 0.0 { zc * inv_pot[i] } else { nan };
-                    c_yx[i] = if po > 0.0 { open * inv_pot[i] } else { nan };
+                    let open = r_open[i];
+                    c_yz[i] = open * inv_meas_s[i];
+                    c_yx[i] = open * inv_pot[i];
                 }
                 for i in 0..n {
                     let (e, c, zb) = (eta[i], chi[i], zeta_s[i]);
                     let inv_chi = 1.0 / c;
                     r_ryx[i] = if c > 0.0 { e * inv_chi } else { nan };
-                    r_ryz[i] = if zb > 0.0 { e * inv_zeta_s[i] } else { nan };
+                    r_ryz[i] = e * inv_zeta_s[i];
                     r_rzx[i] = if c > 0.0 { zb * inv_chi } else { nan };
                 }
                 r_eta.copy_from_slice(eta);
@@ -598,7 +631,11 @@ impl<'m, const N: usize> Engine<'m, N> {
                 row[S_OPEN * n..S_OPEN * n + n].fill(f64::NAN);
             }
             dec.begin(t_k);
-            dec.put_row(k, &row[..SERIES * n]);
+            if constants || dec.bucket_starts() {
+                dec.put_row(k, 0, &row[..SERIES * n]);
+            } else {
+                dec.put_row(k, S_Y * n, &row[S_Y * n..SERIES * n]);
+            }
             dec.end(k);
 
             checkpoint(progress, k, || k as f64 / self.steps as f64)?;
@@ -881,6 +918,16 @@ fn zip_update(out: &mut [f64], a: &[f64], f: impl Fn(f64, f64) -> f64) {
     let a = &a[..out.len()];
     for i in 0..out.len() {
         out[i] = f(out[i], a[i]);
+    }
+}
+
+/// y = M x (n = N when N > 0: the fixed-size build).
+#[inline(always)]
+fn mul_vec<const N: usize, L: Lanes>(m: &SparseRows, y: &mut [f64], x: &[f64], n: usize) {
+    if N > 0 {
+        m.mul_vec_fixed::<N>(arr_mut::<N>(y), arr::<N>(x));
+    } else {
+        m.mul_vec::<L>(y, x, n);
     }
 }
 

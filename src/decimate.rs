@@ -74,16 +74,31 @@ impl Decimator {
         self.last_t = t;
     }
 
-    /// Record step `k`'s value of every series (call between `begin` and `end`);
-    /// NaN: the series has no value at this step.
+    /// Whether the next step begins a bucket (then every series must be put).
+    #[inline]
+    pub fn bucket_starts(&self) -> bool {
+        self.in_bucket == 0
+    }
+
+    /// Record step `k`'s values of the series `from..from + row.len()` (call
+    /// between `begin` and `end`); NaN: the series has no value at this step. A
+    /// series left out keeps its extremes — as if it repeated a value it had in
+    /// this bucket (the comparisons are strict), so within a bucket a constant
+    /// series need not be put again.
     #[inline(always)]
-    pub fn put_row(&mut self, k: u64, row: &[f64]) {
+    pub fn put_row(&mut self, k: u64, from: usize, row: &[f64]) {
         if !self.enabled {
             return;
         }
-        let n = self.series;
-        let (row, min, min_at) = (&row[..n], &mut self.min[..n], &mut self.min_at[..n]);
-        let (max, max_at) = (&mut self.max[..n], &mut self.max_at[..n]);
+        let n = row.len();
+        let (min, min_at) = (
+            &mut self.min[from..from + n],
+            &mut self.min_at[from..from + n],
+        );
+        let (max, max_at) = (
+            &mut self.max[from..from + n],
+            &mut self.max_at[from..from + n],
+        );
         // Branch-free (NaN compares false, so it changes nothing).
         for s in 0..n {
             let v = row[s];
@@ -153,7 +168,7 @@ mod tests {
         for (i, v) in values.iter().enumerate() {
             let k = i as u64 + 1;
             d.begin(k as f64);
-            d.put_row(k, &[*v]);
+            d.put_row(k, 0, &[*v]);
             d.end(k);
         }
         d

@@ -178,6 +178,50 @@ impl SparseRows {
     }
 }
 
+impl SparseRows {
+    /// [`SparseRows::mul_vec`] on fixed-size arrays (N ≤ 12, every loop unrolled): the
+    /// same terms in the same order, so the same bits. With few diagonals, x padded
+    /// with zeros makes each diagonal one whole-row operation (as in
+    /// [`predict_cov`]): a row whose column falls outside adds 0·0.
+    #[inline(always)]
+    pub(crate) fn mul_vec_fixed<const N: usize>(&self, y: &mut [f64; N], x: &[f64; N]) {
+        match &self.diagonals {
+            Some(dia) => {
+                let mut pad = [0.0f64; 36];
+                pad[12..12 + N].copy_from_slice(x);
+                let mut w = [0.0f64; N];
+                for (&d, vals) in dia.offsets.iter().zip(dia.values.chunks_exact(N)) {
+                    let src: &[f64; N] = pad[(12 + d) as usize..][..N].try_into().expect("N");
+                    let vals: &[f64; N] = vals.try_into().expect("N");
+                    #[allow(clippy::needless_range_loop)]
+                    for j in 0..N {
+                        w[j] += vals[j] * src[j];
+                    }
+                }
+                *y = w;
+            }
+            None => {
+                *y = [0.0; N];
+                for &(i, j, v) in &self.nz {
+                    y[i] += v * x[j];
+                }
+            }
+        }
+    }
+}
+
+/// View the first N entries of a slice as an array (N > 0).
+#[inline(always)]
+pub fn arr<const N: usize>(v: &[f64]) -> &[f64; N] {
+    v[..N].try_into().expect("N")
+}
+
+/// Mutable [`arr`].
+#[inline(always)]
+pub fn arr_mut<const N: usize>(v: &mut [f64]) -> &mut [f64; N] {
+    (&mut v[..N]).try_into().expect("N")
+}
+
 /// A work buffer for [`predict_cov`] of an n-state model.
 pub(crate) fn predict_work(n: usize) -> Vec<f64> {
     vec![0.0; n * n]

@@ -210,6 +210,39 @@ mod tests {
         );
     }
 
+    /// A constant series put only at each bucket's first step (`put_row` from the
+    /// second series on otherwise, as the frozen phase does) gives the columns of
+    /// putting it every step — also when the constant is NaN or a bucket's extreme
+    /// of the other series falls on the bucket's first step.
+    #[test]
+    fn a_constant_series_put_once_per_bucket_is_the_same() {
+        for constant in [2.5, f64::NAN, -1e300] {
+            let steps = 1_003u64;
+            let value = |k: u64| ((k * 2_654_435_761) % 997) as f64 - 498.0;
+            let mut every = Decimator::new(steps, 2, 40);
+            let mut once = Decimator::new(steps, 2, 40);
+            for k in 1..=steps {
+                let row = [constant, value(k)];
+                every.begin(k as f64);
+                every.put_row(k, 0, &row);
+                every.end(k);
+                once.begin(k as f64);
+                if once.bucket_starts() {
+                    once.put_row(k, 0, &row);
+                } else {
+                    once.put_row(k, 1, &row[1..]);
+                }
+                once.end(k);
+            }
+            assert!(every.bucket_steps() > 1);
+            assert_eq!(
+                format!("{:?}", every.columns),
+                format!("{:?}", once.columns)
+            );
+            assert_eq!(every.t, once.t);
+        }
+    }
+
     #[test]
     fn zero_rows_records_nothing() {
         let d = run(&[1.0, 2.0, 3.0], 0);

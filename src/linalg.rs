@@ -326,18 +326,24 @@ fn predict_fixed<const N: usize>(
     b: &[[f64; N]; N],
     u: &mut [[f64; N]; N],
 ) {
-    // U = R, then + E_ik R_k for the non-zeros in order (sorted by row and column,
-    // so each row's terms are added as the row loop would): one flat loop, no
-    // per-row slicing.
-    *u = *r;
-    for &(i, k, v) in &e.nz {
-        let (ui, rk) = (&mut u[i], &r[k]);
-        #[allow(clippy::needless_range_loop)]
-        for j in 0..N {
-            ui[j] += v * rk[j];
-        }
-    }
     if let Some(dia) = &e.diagonals {
+        // U row by row: R_i + E_i,i+d R_i+d over the diagonals d ascending — the
+        // non-zeros' terms in column order, as below (an entry off the pattern adds
+        // 0·R, which leaves the sum) — built in registers, with no copy of R first.
+        for (i, ui) in u.iter_mut().enumerate() {
+            let mut w = r[i];
+            for (&d, vals) in dia.offsets.iter().zip(dia.values.chunks_exact(N)) {
+                let k = i as isize + d;
+                if (0..N as isize).contains(&k) {
+                    let (v, rk) = (vals[i], &r[k as usize]);
+                    #[allow(clippy::needless_range_loop)]
+                    for j in 0..N {
+                        w[j] += v * rk[j];
+                    }
+                }
+            }
+            *ui = w;
+        }
         // Row a of U Aᵀ directly: (U Aᵀ)_ab = U_ab + Σ_d E_b,b+d U_a,b+d over the
         // diagonals d ascending — the terms, in the order, of the transposing path
         // below; then + B and the upper triangle mirrored.
@@ -365,6 +371,17 @@ fn predict_fixed<const N: usize>(
             out[a] = w;
         }
         return mirror(out, true);
+    }
+    // U = R, then + E_ik R_k for the non-zeros in order (sorted by row and column,
+    // so each row's terms are added as the row loop would): one flat loop, no
+    // per-row slicing.
+    *u = *r;
+    for &(i, k, v) in &e.nz {
+        let (ui, rk) = (&mut u[i], &r[k]);
+        #[allow(clippy::needless_range_loop)]
+        for j in 0..N {
+            ui[j] += v * rk[j];
+        }
     }
     // As in `predict_cov`'s runtime branch: transpose, then row b of A·Uᵀ.
     for i in 0..N {

@@ -736,7 +736,7 @@ fn heavy_inputs_are_not_answered_synchronously() {
 /// cursor that no page gave (it was read as "from the start"), an empty one (it gave
 /// an empty page) and a repeated parameter (the last one silently won).
 #[test]
-fn list_queries_are_checked() {
+fn query_parameters_are_checked() {
     let dir = tmp();
     let s = Server::start(dir.path(), &[]);
     for name in ["cv-tracker", "seed-example"] {
@@ -786,6 +786,33 @@ fn list_queries_are_checked() {
     let m = refused("/v1/presets?limit=1", "limit");
     assert!(m.contains("takes none"), "{m}");
     assert_eq!(s.get("/v1/presets").status, 200);
+    // "+5" (%2B: a bare + is a space) is not the integer the spec asks for (Rust's
+    // parse would take it).
+    for list in ["/v1/models", "/v1/jobs"] {
+        let m = refused(&format!("{list}?limit=%2B5"), "limit");
+        assert!(m.contains("`+5`"), "{m}");
+    }
+    // Routes that read no query refuse one, as the lists refuse an unknown one;
+    // the health check ignores its query.
+    let model = s.post("/v1/models", &preset("cv-tracker"));
+    let id = model.json()["id"].as_str().unwrap().to_string();
+    let job = s.submit_analysis(preset("cv-tracker"));
+    s.wait_finished(&job, LONG);
+    for route in [
+        "/v1/presets/cv-tracker".to_string(),
+        format!("/v1/models/{id}"),
+        format!("/v1/jobs/{job}"),
+        format!("/v1/jobs/{job}/result"),
+        format!("/v1/jobs/{job}/traces.csv"),
+    ] {
+        let m = refused(&format!("{route}?fields=y"), "fields");
+        assert!(m.contains("takes none"), "{route}: {m}");
+        assert_eq!(s.get(&route).status, 200, "{route}");
+    }
+    let r = s.post("/v1/analyze?wait=1", &preset("cv-tracker"));
+    assert_eq!(r.status, 400, "{}", r.text);
+    assert_eq!(r.error_paths(), vec!["wait".to_string()]);
+    assert_eq!(s.get("/healthz?probe=1").status, 200);
 }
 
 /// Job requests' errors name the member and say what is expected, in the API's words:

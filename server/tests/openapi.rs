@@ -46,6 +46,34 @@ fn every_served_route_is_in_the_spec_and_vice_versa() {
     );
 }
 
+/// Each route reads exactly the query parameters the spec documents for it (the
+/// server refuses any other with a 400; the health check ignores its query).
+#[test]
+fn every_route_reads_the_query_parameters_the_spec_documents() {
+    let spec = spec();
+    for (method, path, served) in kea_server::serve::routes::route_queries() {
+        let item = &spec["paths"][&path];
+        let op = &item[method.to_lowercase().as_str()];
+        let mut documented = BTreeSet::new();
+        for p in [&item["parameters"], &op["parameters"]] {
+            for p in p.as_array().into_iter().flatten() {
+                let p = match p["$ref"].as_str() {
+                    Some(r) => {
+                        let name = r.strip_prefix("#/components/parameters/").unwrap();
+                        &spec["components"]["parameters"][name]
+                    }
+                    None => p,
+                };
+                if p["in"] == "query" {
+                    documented.insert(p["name"].as_str().unwrap().to_string());
+                }
+            }
+        }
+        let served: BTreeSet<String> = served.into_iter().collect();
+        assert_eq!(served, documented, "{method} {path}: read vs documented");
+    }
+}
+
 /// A small JSON Schema validator for the subset openapi.yaml uses: type (or a list),
 /// required, properties, additionalProperties, items, minItems, maxItems, enum, const,
 /// oneOf, allOf, minimum, maximum, exclusiveMinimum, exclusiveMaximum and local `$ref`s.

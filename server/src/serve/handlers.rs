@@ -19,9 +19,8 @@ pub async fn health() -> Json<Value> {
 }
 
 /// `GET /v1/presets`: every preset (one page; no query parameters).
-pub async fn list_presets(RawQuery(raw): RawQuery) -> Result<Json<Value>, Problem> {
-    request::no_query(raw)?;
-    Ok(Json(json!({ "items": kea_core::presets::list() })))
+pub async fn list_presets() -> Json<Value> {
+    Json(json!({ "items": kea_core::presets::list() }))
 }
 
 /// `GET /v1/presets/{name}`: the model JSON exactly as shipped.

@@ -381,8 +381,11 @@ pub fn list_query(raw: Option<String>, extra: &[&str]) -> Result<ListQuery, Prob
     let pairs = query_pairs(raw.as_deref(), &known, &mut errors);
     for (k, v) in pairs {
         match k.as_str() {
+            // (Digits only: `parse` would also take "+5".)
             "limit" => match v.parse::<usize>() {
-                Ok(n) if (1..=MAX_PAGE).contains(&n) => limit = n,
+                Ok(n) if (1..=MAX_PAGE).contains(&n) && v.bytes().all(|b| b.is_ascii_digit()) => {
+                    limit = n
+                }
                 _ => errors.push(FieldError::new(
                     "limit",
                     format!("expected an integer from 1 to {MAX_PAGE}, got `{v}`"),

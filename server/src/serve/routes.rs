@@ -3,10 +3,11 @@
 
 use super::problem::{Problem, kind};
 use super::state::AppState;
-use super::{auth, handlers, jobs_api};
+use super::{auth, handlers, jobs_api, request};
 use axum::Router;
 use axum::handler::Handler;
 use axum::http::{HeaderName, HeaderValue, Method, Request, StatusCode, header};
+use axum::response::IntoResponse;
 use axum::routing::{MethodFilter, MethodRouter, on};
 use std::time::Duration;
 use tower_http::compression::CompressionLayer;
@@ -28,20 +29,46 @@ pub struct Route {
     pub method: Method,
     pub path: &'static str,
     pub access: Access,
+    /// The query parameters the route reads (its handler checks their values); any
+    /// other is a 400 naming it. `None`: the query is ignored (the health check, so a
+    /// probe's cache-busting parameter does no harm).
+    pub query: Option<&'static [&'static str]>,
     router: MethodRouter<AppState>,
 }
 
-fn route<H, T>(method: Method, path: &'static str, access: Access, handler: H) -> Route
+fn route<H, T>(
+    method: Method,
+    path: &'static str,
+    access: Access,
+    query: Option<&'static [&'static str]>,
+    handler: H,
+) -> Route
 where
     H: Handler<T, AppState>,
     T: 'static,
 {
     let filter = MethodFilter::try_from(method.clone()).expect("a routable method");
+    let mut router = on(filter, handler);
+    if query == Some(&[]) {
+        router = router.layer(axum::middleware::from_fn(refuse_query));
+    }
     Route {
         method,
         path,
         access,
-        router: on(filter, handler),
+        query,
+        router,
+    }
+}
+
+/// A route that reads no query parameter refuses every one (400, naming each).
+async fn refuse_query(
+    req: Request<axum::body::Body>,
+    next: axum::middleware::Next,
+) -> axum::response::Response {
+    match request::no_query(req.uri().query().map(str::to_string)) {
+        Ok(()) => next.run(req).await,
+        Err(problem) => problem.into_response(),
     }
 }
 
@@ -49,22 +76,48 @@ where
 pub fn table() -> Vec<Route> {
     use Access::*;
     use Method as M;
+    const NONE: Option<&[&str]> = Some(&[]);
+    const PAGE: Option<&[&str]> = Some(&["limit", "cursor"]);
     vec![
-        route(M::GET, "/healthz", Public, handlers::health),
-        route(M::GET, "/v1/presets", Api, handlers::list_presets),
-        route(M::GET, "/v1/presets/{name}", Api, handlers::get_preset),
-        route(M::POST, "/v1/models", Api, handlers::create_model),
-        route(M::GET, "/v1/models", Api, handlers::list_models),
-        route(M::GET, "/v1/models/{id}", Api, handlers::get_model),
-        route(M::DELETE, "/v1/models/{id}", Api, handlers::delete_model),
-        route(M::POST, "/v1/analyze", Api, handlers::analyze),
-        route(M::POST, "/v1/jobs", Api, jobs_api::submit),
-        route(M::GET, "/v1/jobs", Api, jobs_api::list),
-        route(M::GET, "/v1/jobs/{id}", Api, jobs_api::get),
-        route(M::DELETE, "/v1/jobs/{id}", Api, jobs_api::cancel),
-        route(M::GET, "/v1/jobs/{id}/result", Api, jobs_api::result),
-        route(M::GET, "/v1/jobs/{id}/traces.csv", Api, jobs_api::traces),
-        route(M::GET, "/v1/jobs/{id}/events", Api, jobs_api::events),
+        route(M::GET, "/healthz", Public, None, handlers::health),
+        route(M::GET, "/v1/presets", Api, NONE, handlers::list_presets),
+        route(
+            M::GET,
+            "/v1/presets/{name}",
+            Api,
+            NONE,
+            handlers::get_preset,
+        ),
+        route(M::POST, "/v1/models", Api, NONE, handlers::create_model),
+        route(M::GET, "/v1/models", Api, PAGE, handlers::list_models),
+        route(M::GET, "/v1/models/{id}", Api, NONE, handlers::get_model),
+        route(
+            M::DELETE,
+            "/v1/models/{id}",
+            Api,
+            NONE,
+            handlers::delete_model,
+        ),
+        route(M::POST, "/v1/analyze", Api, NONE, handlers::analyze),
+        route(M::POST, "/v1/jobs", Api, NONE, jobs_api::submit),
+        route(
+            M::GET,
+            "/v1/jobs",
+            Api,
+            Some(&["status", "limit", "cursor"]),
+            jobs_api::list,
+        ),
+        route(M::GET, "/v1/jobs/{id}", Api, NONE, jobs_api::get),
+        route(M::DELETE, "/v1/jobs/{id}", Api, NONE, jobs_api::cancel),
+        route(M::GET, "/v1/jobs/{id}/result", Api, NONE, jobs_api::result),
+        route(
+            M::GET,
+            "/v1/jobs/{id}/traces.csv",
+            Api,
+            NONE,
+            jobs_api::traces,
+        ),
+        route(M::GET, "/v1/jobs/{id}/events", Api, NONE, jobs_api::events),
     ]
 }
 
@@ -73,6 +126,19 @@ pub fn route_list() -> Vec<(String, String)> {
     table()
         .into_iter()
         .map(|r| (r.method.to_string(), r.path.to_string()))
+        .collect()
+}
+
+/// (method, path, query parameters read) of every route; the query is empty where
+/// it is ignored (the health check) or refused.
+pub fn route_queries() -> Vec<(String, String, Vec<String>)> {
+    table()
+        .into_iter()
+        .map(|r| {
+            let q = r.query.unwrap_or_default();
+            let q = q.iter().map(|p| p.to_string()).collect();
+            (r.method.to_string(), r.path.to_string(), q)
+        })
         .collect()
 }
 

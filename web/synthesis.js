@@ -115,7 +115,7 @@ export class SynthesisView {
       row.values.addEventListener('input', () => this.gridSummary());
       const label = ['rows', 'columns', 'pages'][i];
       row.param.setAttribute('aria-label', `Grid ${label}: param`);
-      row.values.setAttribute('aria-label', `Grid ${label}: values, comma-separated`);
+      row.values.setAttribute('aria-label', `Grid ${label}: values, comma-separated, with a decimal point`);
       row.cheaper.setAttribute('aria-label', `Grid ${label}: cost order`);
       gridBody.append(el('tr', {}, el('th', { scope: 'row', text: label }), el('td', {}, row.param), el('td', {}, row.values), el('td', {}, row.cheaper)));
       this.grid.push(row);
@@ -127,7 +127,7 @@ export class SynthesisView {
         'table',
         { class: 'grid syn-rows' },
         el('caption', { text: 'Grid params (up to 3)' }),
-        el('thead', {}, el('tr', {}, el('th'), el('th', { scope: 'col', text: 'param' }), el('th', { scope: 'col', text: 'values (comma-separated)' }), el('th', { scope: 'col', text: 'cost' }))),
+        el('thead', {}, el('tr', {}, el('th'), el('th', { scope: 'col', text: 'param' }), el('th', { scope: 'col', text: 'values (comma-separated, decimal point)' }), el('th', { scope: 'col', text: 'cost' }))),
         gridBody,
       ),
       el('p', { class: 'help', text: 'Rows × columns × pages, every cell re-analysed. With a cost order (top row most important) the cheapest cell meeting the target is the answer.' }),

@@ -1,6 +1,8 @@
 //! Every kind of bad model gets a precise error: the field path and what was expected.
 //! No panic and no NaN for any of them.
 
+mod common;
+
 use kea_core::{Error, NoProgress, Overrides, analyze, model_from_value};
 use serde_json::{Value, json};
 
@@ -37,13 +39,7 @@ fn expect(edit: impl FnOnce(&mut Value), set: &[(&str, f64)], path: &str, fragme
             ),
         },
     };
-    let errors = err.field_errors();
-    assert!(
-        errors
-            .iter()
-            .any(|e| e.path == path && e.message.contains(fragment)),
-        "expected an error at `{path}` containing \"{fragment}\", got {errors:#?}"
-    );
+    common::assert_error_at(&err, path, fragment);
 }
 
 #[test]

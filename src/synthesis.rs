@@ -776,6 +776,10 @@ fn fmt_params(p: &BTreeMap<String, f64>) -> String {
         .join(", ")
 }
 
+/// A number in what a synthesis reports (notes, summaries, the bisection's
+/// findings): rounded to 6 decimals or 5 significant digits, for reading. Where a
+/// point's parameters must be quoted exactly — the point an analysis failed at
+/// ([`describe`]) — [`crate::validate::num`] is used instead.
 fn fmt_num(x: f64) -> String {
     if x != 0.0 && (x.abs() < 1e-3 || x.abs() >= 1e6) {
         format!("{x:.4e}")

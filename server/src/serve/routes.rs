@@ -121,16 +121,9 @@ pub fn table() -> Vec<Route> {
     ]
 }
 
-/// (method, path) of every route, e.g. `("GET", "/v1/jobs/{id}")`.
-pub fn route_list() -> Vec<(String, String)> {
-    table()
-        .into_iter()
-        .map(|r| (r.method.to_string(), r.path.to_string()))
-        .collect()
-}
-
-/// (method, path, query parameters read) of every route; the query is empty where
-/// it is ignored (the health check) or refused.
+/// (method, path, query parameters read) of every route, e.g. `("GET",
+/// "/v1/jobs/{id}", [])`; the query is empty where it is ignored (the health check)
+/// or refused.
 pub fn route_queries() -> Vec<(String, String, Vec<String>)> {
     table()
         .into_iter()

@@ -52,12 +52,6 @@ impl Error {
         Error::Invalid(vec![FieldError::new(path, message)])
     }
 
-    /// A serde error, with the path where it happened, under `prefix`.
-    pub fn from_serde(prefix: &str, e: &serde_json::Error) -> Self {
-        let msg = e.to_string();
-        Error::invalid(prefix.to_string(), msg)
-    }
-
     /// The field errors of this error (a numerical error is one error at its path).
     pub fn field_errors(&self) -> Vec<FieldError> {
         match self {
@@ -141,3 +135,248 @@ impl fmt::Display for Error {
 }
 
 impl std::error::Error for Error {}
+
+/// What a JSON value is, in the words of kea's messages: "an array", "a number"…
+pub fn json_kind(v: &serde_json::Value) -> &'static str {
+    use serde_json::Value;
+    match v {
+        Value::Null => "null",
+        Value::Bool(_) => "a boolean",
+        Value::Number(_) => "a number",
+        Value::String(_) => "a string",
+        Value::Array(_) => "an array",
+        Value::Object(_) => "an object",
+    }
+}
+
+/// A value as a message's "got …": a number as written, a string quoted, else its kind.
+pub fn got(v: &serde_json::Value) -> String {
+    match v {
+        serde_json::Value::Number(n) => n.to_string(),
+        serde_json::Value::String(_) => format!("a string ({v})"),
+        other => json_kind(other).to_string(),
+    }
+}
+
+/// serde's messages in plain words, at the path of the member concerned: "missing
+/// field `mode`" at the root becomes `mode`: "missing: …", "invalid type: string
+/// \"2\", expected f64" becomes "expected a number, got a string (\"2\")". `hints`
+/// say what a missing member is, by name. A message of another form is kept.
+pub fn plain_serde_error(e: FieldError, hints: &[(&str, &str)]) -> FieldError {
+    let FieldError { path, message } = e;
+    let join = |field: &str| {
+        if path.is_empty() {
+            field.to_string()
+        } else {
+            format!("{path}.{field}")
+        }
+    };
+    if let Some(field) = backticked(&message, "missing field ") {
+        let hint = hints
+            .iter()
+            .find(|(name, _)| *name == field)
+            .map_or("this member is required", |(_, hint)| hint);
+        return FieldError::new(join(field), format!("missing: {hint}"));
+    }
+    if let Some(rest) = message.strip_prefix("unknown field `") {
+        return FieldError::new(
+            path,
+            match rest.split_once(", ") {
+                Some((_, expected)) => {
+                    format!("unknown member; expected {}", one_of(expected))
+                }
+                None => "unknown member".into(),
+            },
+        );
+    }
+    if let Some(rest) = message.strip_prefix("unknown variant `") {
+        let (value, expected) = rest.split_once("`, ").unwrap_or((rest, ""));
+        return FieldError::new(
+            path,
+            format!("unknown value \"{value}\"; expected {}", one_of(expected)),
+        );
+    }
+    for prefix in ["invalid type: ", "invalid value: "] {
+        // (The expectation is the type's own wording, without the separator; the
+        // value may hold it — a string can hold anything.)
+        if let Some((got, expected)) = message
+            .strip_prefix(prefix)
+            .and_then(|m| m.rsplit_once(", expected "))
+        {
+            return FieldError::new(
+                path,
+                format!(
+                    "expected {}, got {}",
+                    expected_kind(expected),
+                    got_kind(got)
+                ),
+            );
+        }
+    }
+    if let Some((got, expected)) = message
+        .strip_prefix("invalid length ")
+        .and_then(|m| m.split_once(", expected "))
+    {
+        return FieldError::new(path, format!("expected {expected}, got {got} entries"));
+    }
+    FieldError::new(path, message)
+}
+
+/// The name in `prefix`\`name\`` (the whole message).
+fn backticked<'a>(message: &'a str, prefix: &str) -> Option<&'a str> {
+    let name = message
+        .strip_prefix(prefix)?
+        .strip_prefix('`')?
+        .strip_suffix('`')?;
+    (!name.contains('`')).then_some(name)
+}
+
+/// serde's "one of `a`, `b`" / "`a` or `b`" / "`a`" / "there are no fields" as
+/// "one of: a, b" (or "nothing here").
+fn one_of(expected: &str) -> String {
+    let names: Vec<&str> = expected.split('`').skip(1).step_by(2).collect();
+    match names.as_slice() {
+        [] => "nothing here".into(),
+        [one] => format!("`{one}`"),
+        many => format!("one of: {}", many.join(", ")),
+    }
+}
+
+/// serde's name of what it expected, in the words of JSON and kea.
+fn expected_kind(expected: &str) -> String {
+    match expected {
+        "f64" | "f32" => "a number".into(),
+        "u64" | "u32" | "u16" | "u8" | "usize" => "a whole number ≥ 0".into(),
+        "i64" | "i32" | "isize" => "a whole number".into(),
+        "a sequence" => "an array".into(),
+        "a boolean" => "true or false".into(),
+        "map" | "a map" | "newtype variant" | "struct variant" => "an object".into(),
+        e if e.starts_with("struct ") => "an object".into(),
+        e => e.into(),
+    }
+}
+
+/// serde's description of what it got: `string "x"` → `a string ("x")`.
+fn got_kind(got: &str) -> String {
+    let value = |prefix: &str| got.strip_prefix(prefix).map(|v| v.trim_matches('`'));
+    if let Some(s) = got.strip_prefix("string ") {
+        format!("a string ({s})")
+    } else if let Some(v) = value("integer ").or_else(|| value("floating point ")) {
+        v.to_string()
+    } else if let Some(v) = value("boolean ") {
+        v.to_string()
+    } else {
+        match got {
+            "map" => "an object".into(),
+            "sequence" => "an array".into(),
+            "unit value" => "null".into(),
+            "unit variant" => "a string".into(),
+            g => g.into(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plain(path: &str, message: &str) -> (String, String) {
+        let e = plain_serde_error(
+            FieldError::new(path, message),
+            &[("target", "the desired effect")],
+        );
+        (e.path, e.message)
+    }
+
+    #[test]
+    fn serde_messages_are_put_plainly() {
+        assert_eq!(
+            plain("", "missing field `target`"),
+            ("target".into(), "missing: the desired effect".into())
+        );
+        assert_eq!(
+            plain("mode.bisect", "missing field `param`"),
+            (
+                "mode.bisect.param".into(),
+                "missing: this member is required".into()
+            )
+        );
+        assert_eq!(
+            plain(
+                "target.threshold",
+                "invalid type: string \"2\", expected f64"
+            )
+            .1,
+            "expected a number, got a string (\"2\")"
+        );
+        assert_eq!(
+            plain("runs", "invalid value: integer `-5`, expected u64").1,
+            "expected a whole number ≥ 0, got -5"
+        );
+        assert_eq!(
+            plain("mode.grid.params", "invalid type: map, expected a sequence").1,
+            "expected an array, got an object"
+        );
+        assert_eq!(
+            plain(
+                "target.criterion",
+                "unknown variant `xy`, expected one of `yz`, `zx`, `yx`"
+            )
+            .1,
+            "unknown value \"xy\"; expected one of: yz, zx, yx"
+        );
+        assert_eq!(
+            plain(
+                "target.set",
+                "unknown variant `mc`, expected `bound` or `covariance`"
+            )
+            .1,
+            "unknown value \"mc\"; expected one of: bound, covariance"
+        );
+        assert_eq!(
+            plain(
+                "target.x",
+                "unknown field `x`, expected one of `criterion`, `set`, `state`, `threshold`"
+            )
+            .1,
+            "unknown member; expected one of: criterion, set, state, threshold"
+        );
+        assert_eq!(plain("a", "something else").1, "something else");
+    }
+
+    /// The messages as serde_json writes them for kea's field types, put plainly.
+    #[test]
+    fn serde_json_type_errors_read_in_json_words() {
+        fn message<T: serde::de::DeserializeOwned + std::fmt::Debug>(json: &str) -> String {
+            let m = serde_json::from_str::<T>(json).unwrap_err().to_string();
+            // (the position serde_json appends to an error in text is not ours)
+            let m = m.split(" at line ").next().unwrap().to_string();
+            plain_serde_error(FieldError::new("", m), &[]).message
+        }
+        #[derive(Debug, serde::Deserialize)]
+        #[allow(dead_code)]
+        struct Options {
+            points: usize,
+        }
+        assert_eq!(
+            message::<usize>("-1"),
+            "expected a whole number ≥ 0, got -1"
+        );
+        assert_eq!(
+            message::<u64>("1.5"),
+            "expected a whole number ≥ 0, got 1.5"
+        );
+        assert_eq!(
+            message::<Vec<f64>>(r#""a, expected b""#),
+            r#"expected an array, got a string ("a, expected b")"#
+        );
+        assert_eq!(message::<f64>("true"), "expected a number, got true");
+        assert_eq!(message::<bool>("null"), "expected true or false, got null");
+        assert_eq!(message::<Options>("true"), "expected an object, got true");
+        assert_eq!(
+            message::<Vec<f64>>("{}"),
+            "expected an array, got an object"
+        );
+        assert_eq!(message::<String>("{}"), "expected a string, got an object");
+    }
+}

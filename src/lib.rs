@@ -127,7 +127,7 @@ pub fn model_from_value(value: serde_json::Value) -> Result<Model, Error> {
             "",
             format!(
                 "a model is a JSON object ({{\"kea_model\": 1, \"time\": …, \"system\": …, \"measurement\": …}}), got {}",
-                json_kind(&value)
+                error::json_kind(&value)
             ),
         ));
     };
@@ -144,38 +144,26 @@ pub fn model_from_value(value: serde_json::Value) -> Result<Model, Error> {
     if !missing.is_empty() {
         return Err(Error::Invalid(missing));
     }
+    from_value_at(value, &[])
+}
+
+/// `T` from a JSON value, a serde error located at its field path (`system.a[0]`) and
+/// worded as kea's own ([`error::plain_serde_error`]: "missing field `x`" at `system`
+/// is "missing: …" at `system.x`). `hints` say what a missing member is, by name.
+/// Every request type the core reads is parsed with this.
+pub fn from_value_at<T: serde::de::DeserializeOwned>(
+    value: serde_json::Value,
+    hints: &[(&str, &str)],
+) -> Result<T, Error> {
     serde_path_to_error::deserialize(value).map_err(|e| {
         let path = e.path().to_string();
         let path = if path == "." { String::new() } else { path };
         let message = e.into_inner().to_string();
-        // "missing field `x`" at `system` is an error at `system.x`.
-        match message
-            .strip_prefix("missing field `")
-            .and_then(|m| m.strip_suffix('`'))
-        {
-            Some(field) if !field.contains('`') => Error::invalid(
-                if path.is_empty() {
-                    field.to_string()
-                } else {
-                    format!("{path}.{field}")
-                },
-                "missing: this field is required",
-            ),
-            _ => Error::invalid(path, message),
-        }
+        Error::Invalid(vec![error::plain_serde_error(
+            FieldError::new(path, message),
+            hints,
+        )])
     })
-}
-
-/// "an array", "a number"… for messages.
-fn json_kind(v: &serde_json::Value) -> &'static str {
-    match v {
-        serde_json::Value::Null => "null",
-        serde_json::Value::Bool(_) => "a boolean",
-        serde_json::Value::Number(_) => "a number",
-        serde_json::Value::String(_) => "a string",
-        serde_json::Value::Array(_) => "an array",
-        serde_json::Value::Object(_) => "an object",
-    }
 }
 
 /// Parse a model from JSON text, with serde errors located at their field path.

@@ -283,13 +283,42 @@ pub struct GridCell {
 
 // ---------------------------------------------------------------- parsing, validation
 
+/// What each member of a synthesis request is, for "missing: …" (docs/synthesis.md).
+pub const HINTS: &[(&str, &str)] = &[
+    (
+        "target",
+        "the desired effect, an object such as {\"criterion\": \"yx\", \"threshold\": 14}",
+    ),
+    ("criterion", "the criterion to reach, one of: yz, zx, yx"),
+    (
+        "threshold",
+        "the least value the criterion must reach (a number > 0)",
+    ),
+    ("params", "the params to search (an array)"),
+    (
+        "param",
+        "the name of the param to search (one of the model's params)",
+    ),
+    ("name", "the name of one of the model's params"),
+    ("low", "the lower end of the param's range (a number > 0)"),
+    (
+        "high",
+        "the upper end of the param's range (a number > low)",
+    ),
+    (
+        "shrink",
+        "the factor in (0, 1) each step multiplies the param by",
+    ),
+    ("values", "the param's values (an array of numbers)"),
+    (
+        "cheaper",
+        "which values of the param cost less: \"higher\" or \"lower\"",
+    ),
+];
+
 /// Parse a request from JSON, with serde errors located at their field path.
 pub fn request_from_value(value: serde_json::Value) -> Result<SynthesisRequest, Error> {
-    serde_path_to_error::deserialize(value).map_err(|e| {
-        let path = e.path().to_string();
-        let path = if path == "." { String::new() } else { path };
-        Error::invalid(path, e.into_inner().to_string())
-    })
+    crate::from_value_at(value, HINTS)
 }
 
 pub fn request_from_json(text: &str) -> Result<SynthesisRequest, Error> {

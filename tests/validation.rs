@@ -367,7 +367,7 @@ fn malformed_json_is_located() {
         |v| v["system"]["extra"] = json!(1),
         &[],
         "system.extra",
-        "unknown field `extra`",
+        "unknown member; expected one of: states, a, u, b",
     );
     expect(
         |v| v["kea_model"] = json!(7),
@@ -732,6 +732,33 @@ fn wrong_types_say_what_is_expected() {
             "system.a[1][0]",
             "expected a number or an expression string",
         );
+    }
+    // serde's own messages in JSON's words, at the member's path.
+    for (edit, path, message) in [
+        (
+            json!({"options": {"trace_points": -1}}),
+            "options.trace_points",
+            "expected a whole number ≥ 0, got -1",
+        ),
+        (
+            json!({"options": {"steady_state_shortcut": 1}}),
+            "options.steady_state_shortcut",
+            "expected true or false, got 1",
+        ),
+        (
+            json!({"system": {"y0": "abc"}}),
+            "system.y0",
+            "expected an array, got a string (\"abc\")",
+        ),
+        (
+            json!({"criteria": {"confidence": [0.9]}}),
+            "criteria.confidence",
+            "expected a number, got an array",
+        ),
+    ] {
+        let (part, inner) = edit.as_object().unwrap().iter().next().unwrap();
+        let (field, value) = inner.as_object().unwrap().iter().next().unwrap();
+        expect(|v| v[part][field] = value.clone(), &[], path, message);
     }
     let mut v = good();
     v["time"]["steps"] = json!(1e3);

@@ -128,19 +128,14 @@ struct SimulateIn {
 #[wasm_bindgen]
 pub fn simulate(request_json: &str, progress: &js_sys::Function) -> Result<String, JsValue> {
     let start = js_sys::Date::now();
-    let input: SimulateIn = kea_core::parse_json(request_json.as_bytes())
-        .and_then(serde_json::from_value)
-        .map_err(|e| {
-            to_js(&Error::invalid(
-                "",
-                format!("not a simulation request: {e}"),
-            ))
-        })?;
+    let value = kea_core::parse_json(request_json.as_bytes())
+        .map_err(|e| to_js(&Error::invalid("", format!("not valid JSON: {e}"))))?;
+    let input: SimulateIn = kea_core::from_value_at(value, &[]).map_err(|e| to_js(&e))?;
     let model =
         kea_core::model_from_value(input.model).map_err(|e| to_js(&e.with_prefix("model")))?;
     let request: kea_core::simulation::SimulationRequest =
-        serde_json::from_value(serde_json::Value::Object(input.request))
-            .map_err(|e| to_js(&Error::invalid("", e.to_string())))?;
+        kea_core::from_value_at(serde_json::Value::Object(input.request), &[])
+            .map_err(|e| to_js(&e))?;
     // Locate the errors as the server does: the model's under `model.`, then the run's own.
     let compiled =
         kea_core::validate::compile(&model, &input.set).map_err(|e| to_js(&model_located(e)))?;

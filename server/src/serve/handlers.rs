@@ -52,8 +52,7 @@ pub async fn create_model(
     State(state): State<AppState>,
     JsonBody(body): JsonBody,
 ) -> Result<Response, Problem> {
-    let model = kea_core::model_from_value(body.clone())
-        .map_err(|e| Problem::from_core(request::plain_serde_errors(e, &[])))?;
+    let model = kea_core::model_from_value(body.clone()).map_err(Problem::from_core)?;
     kea_core::check(&model, &Default::default()).map_err(Problem::from_core)?;
     let record = ModelRecord {
         id: new_id(),
@@ -137,7 +136,7 @@ pub async fn resolve_model_id(
             "model_id",
             format!(
                 "expected a model id (a string), got {}",
-                request::type_name(&idv)
+                request::json_kind(&idv)
             ),
         )]));
     };

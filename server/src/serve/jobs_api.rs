@@ -71,7 +71,7 @@ pub async fn submit(
                 "kind",
                 format!(
                     "expected a string (one of: {names}), got {}",
-                    request::type_name(&other)
+                    request::json_kind(&other)
                 ),
             )]));
         }

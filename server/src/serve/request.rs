@@ -5,6 +5,7 @@ use super::problem::{Problem, kind};
 use super::state::AppState;
 use axum::extract::{FromRequest, Request};
 use axum::http::{StatusCode, header};
+pub use kea_core::error::{got, json_kind};
 use kea_core::{FieldError, Overrides};
 use serde_json::{Map, Value};
 use std::collections::BTreeMap;
@@ -97,29 +98,8 @@ pub fn object(body: Value) -> Result<Map<String, Value>, Problem> {
         Value::Object(m) => Ok(m),
         other => Err(Problem::invalid(vec![FieldError::new(
             "",
-            format!("expected a JSON object, got {}", type_name(&other)),
+            format!("expected a JSON object, got {}", json_kind(&other)),
         )])),
-    }
-}
-
-/// What a client sent, for "expected …, got …" messages: a number as itself, a
-/// string quoted, anything else by its type.
-pub fn got(v: &Value) -> String {
-    match v {
-        Value::Number(n) => n.to_string(),
-        Value::String(s) => format!("a string ({})", Value::String(s.clone())),
-        other => type_name(other).to_string(),
-    }
-}
-
-pub fn type_name(v: &Value) -> &'static str {
-    match v {
-        Value::Null => "null",
-        Value::Bool(_) => "a boolean",
-        Value::Number(_) => "a number",
-        Value::String(_) => "a string",
-        Value::Array(_) => "an array",
-        Value::Object(_) => "an object",
     }
 }
 
@@ -154,11 +134,7 @@ pub fn model_and_set(
         Some(v) => match kea_core::model_from_value(v.clone()) {
             Ok(m) => Some(m),
             Err(e) => {
-                errors.extend(
-                    plain_serde_errors(e, &[])
-                        .with_prefix("model")
-                        .field_errors(),
-                );
+                errors.extend(e.with_prefix("model").field_errors());
                 None
             }
         },
@@ -182,7 +158,7 @@ pub fn overrides(set: Option<&Value>) -> Result<Overrides, Vec<FieldError>> {
             "set",
             format!(
                 "expected an object of parameter values (e.g. {{\"q\": 0.5}}), got {}",
-                type_name(set)
+                json_kind(set)
             ),
         )]);
     };
@@ -195,7 +171,7 @@ pub fn overrides(set: Option<&Value>) -> Result<Overrides, Vec<FieldError>> {
             }
             _ => errors.push(FieldError::new(
                 format!("set.{name}"),
-                format!("expected a number, got {}", type_name(v)),
+                format!("expected a number, got {}", json_kind(v)),
             )),
         }
     }
@@ -203,132 +179,6 @@ pub fn overrides(set: Option<&Value>) -> Result<Overrides, Vec<FieldError>> {
         Ok(out)
     } else {
         Err(errors)
-    }
-}
-
-/// serde's messages in plain words, at the path of the member concerned: "missing
-/// field `mode`" at the root becomes `mode`: "missing: …", "invalid type: string
-/// \"2\", expected f64" becomes "expected a number, got a string (\"2\")". `hints`
-/// say what a missing member is, by name. A message of another form is kept.
-pub fn plain_serde_error(e: FieldError, hints: &[(&str, &str)]) -> FieldError {
-    let FieldError { path, message } = e;
-    let join = |field: &str| {
-        if path.is_empty() {
-            field.to_string()
-        } else {
-            format!("{path}.{field}")
-        }
-    };
-    if let Some(field) = backticked(&message, "missing field ") {
-        let hint = hints
-            .iter()
-            .find(|(name, _)| *name == field)
-            .map_or("this member is required", |(_, hint)| hint);
-        return FieldError::new(join(field), format!("missing: {hint}"));
-    }
-    if let Some(rest) = message.strip_prefix("unknown field `") {
-        return FieldError::new(
-            path,
-            match rest.split_once(", ") {
-                Some((_, expected)) => {
-                    format!("unknown member; expected {}", one_of(expected))
-                }
-                None => "unknown member".into(),
-            },
-        );
-    }
-    if let Some(rest) = message.strip_prefix("unknown variant `") {
-        let (value, expected) = rest.split_once("`, ").unwrap_or((rest, ""));
-        return FieldError::new(
-            path,
-            format!("unknown value \"{value}\"; expected {}", one_of(expected)),
-        );
-    }
-    for prefix in ["invalid type: ", "invalid value: "] {
-        if let Some((got, expected)) = message
-            .strip_prefix(prefix)
-            .and_then(|m| m.rsplit_once(", expected "))
-        {
-            return FieldError::new(
-                path,
-                format!(
-                    "expected {}, got {}",
-                    expected_kind(expected),
-                    got_kind(got)
-                ),
-            );
-        }
-    }
-    if let Some((got, expected)) = message
-        .strip_prefix("invalid length ")
-        .and_then(|m| m.split_once(", expected "))
-    {
-        return FieldError::new(path, format!("expected {expected}, got {got} entries"));
-    }
-    FieldError::new(path, message)
-}
-
-/// [`plain_serde_error`] for every field error of a core error.
-pub fn plain_serde_errors(e: kea_core::Error, hints: &[(&str, &str)]) -> kea_core::Error {
-    match e {
-        kea_core::Error::Invalid(v) => {
-            kea_core::Error::Invalid(v.into_iter().map(|e| plain_serde_error(e, hints)).collect())
-        }
-        e => e,
-    }
-}
-
-/// The name in `prefix`\`name\`` (the whole message).
-fn backticked<'a>(message: &'a str, prefix: &str) -> Option<&'a str> {
-    let name = message
-        .strip_prefix(prefix)?
-        .strip_prefix('`')?
-        .strip_suffix('`')?;
-    (!name.contains('`')).then_some(name)
-}
-
-/// serde's "one of `a`, `b`" / "`a` or `b`" / "`a`" / "there are no fields" as
-/// "one of: a, b" (or "nothing here").
-fn one_of(expected: &str) -> String {
-    let names: Vec<&str> = expected.split('`').skip(1).step_by(2).collect();
-    match names.as_slice() {
-        [] => "nothing here".into(),
-        [one] => format!("`{one}`"),
-        many => format!("one of: {}", many.join(", ")),
-    }
-}
-
-/// serde's name of what it expected, in the words of the API.
-fn expected_kind(expected: &str) -> String {
-    match expected {
-        "f64" | "f32" => "a number".into(),
-        "u64" | "u32" | "u16" | "u8" | "usize" => "a whole number ≥ 0".into(),
-        "i64" | "i32" | "isize" => "a whole number".into(),
-        "a sequence" => "an array".into(),
-        "a boolean" => "true or false".into(),
-        "map" | "a map" | "newtype variant" | "struct variant" => "an object".into(),
-        e if e.starts_with("struct ") => "an object".into(),
-        e => e.into(),
-    }
-}
-
-/// serde's description of what it got: `string "x"` → `a string ("x")`.
-fn got_kind(got: &str) -> String {
-    let value = |prefix: &str| got.strip_prefix(prefix).map(|v| v.trim_matches('`'));
-    if let Some(s) = got.strip_prefix("string ") {
-        format!("a string ({s})")
-    } else if let Some(v) = value("integer ").or_else(|| value("floating point ")) {
-        v.to_string()
-    } else if let Some(v) = value("boolean ") {
-        v.to_string()
-    } else {
-        match got {
-            "map" => "an object".into(),
-            "sequence" => "an array".into(),
-            "unit value" => "null".into(),
-            "unit variant" => "a string".into(),
-            g => g.into(),
-        }
     }
 }
 
@@ -543,69 +393,6 @@ mod tests {
         assert_eq!(err[0].path, "set.q");
         let err = overrides(Some(&serde_json::json!([1]))).unwrap_err();
         assert_eq!(err[0].path, "set");
-    }
-
-    #[test]
-    fn serde_messages_are_put_plainly() {
-        let plain = |path: &str, message: &str| {
-            let e = plain_serde_error(
-                FieldError::new(path, message),
-                &[("target", "the desired effect")],
-            );
-            (e.path, e.message)
-        };
-        assert_eq!(
-            plain("", "missing field `target`"),
-            ("target".into(), "missing: the desired effect".into())
-        );
-        assert_eq!(
-            plain("mode.bisect", "missing field `param`"),
-            (
-                "mode.bisect.param".into(),
-                "missing: this member is required".into()
-            )
-        );
-        assert_eq!(
-            plain(
-                "target.threshold",
-                "invalid type: string \"2\", expected f64"
-            )
-            .1,
-            "expected a number, got a string (\"2\")"
-        );
-        assert_eq!(
-            plain("runs", "invalid value: integer `-5`, expected u64").1,
-            "expected a whole number ≥ 0, got -5"
-        );
-        assert_eq!(
-            plain("mode.grid.params", "invalid type: map, expected a sequence").1,
-            "expected an array, got an object"
-        );
-        assert_eq!(
-            plain(
-                "target.criterion",
-                "unknown variant `xy`, expected one of `yz`, `zx`, `yx`"
-            )
-            .1,
-            "unknown value \"xy\"; expected one of: yz, zx, yx"
-        );
-        assert_eq!(
-            plain(
-                "target.set",
-                "unknown variant `mc`, expected `bound` or `covariance`"
-            )
-            .1,
-            "unknown value \"mc\"; expected one of: bound, covariance"
-        );
-        assert_eq!(
-            plain(
-                "target.x",
-                "unknown field `x`, expected one of `criterion`, `set`, `state`, `threshold`"
-            )
-            .1,
-            "unknown member; expected one of: criterion, set, state, threshold"
-        );
-        assert_eq!(plain("a", "something else").1, "something else");
     }
 
     #[test]

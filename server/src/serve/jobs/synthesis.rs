@@ -17,39 +17,6 @@ pub const MEMBERS: &[&str] = &["model", "model_id", "set", "target", "mode"];
 /// The modes, the members of `mode` (exactly one).
 pub const MODES: &[&str] = &["seed_search", "bisect", "grid"];
 
-/// What each member of a synthesis request is, for "missing: …" (docs/synthesis.md).
-const HINTS: &[(&str, &str)] = &[
-    (
-        "target",
-        "the desired effect, an object such as {\"criterion\": \"yx\", \"threshold\": 14}",
-    ),
-    ("criterion", "the criterion to reach, one of: yz, zx, yx"),
-    (
-        "threshold",
-        "the least value the criterion must reach (a number > 0)",
-    ),
-    ("params", "the params to search (an array)"),
-    (
-        "param",
-        "the name of the param to search (one of the model's params)",
-    ),
-    ("name", "the name of one of the model's params"),
-    ("low", "the lower end of the param's range (a number > 0)"),
-    (
-        "high",
-        "the upper end of the param's range (a number > low)",
-    ),
-    (
-        "shrink",
-        "the factor in (0, 1) each step multiplies the param by",
-    ),
-    ("values", "the param's values (an array of numbers)"),
-    (
-        "cheaper",
-        "which values of the param cost less: \"higher\" or \"lower\"",
-    ),
-];
-
 impl JobKind for Synthesis {
     fn name(&self) -> &'static str {
         "synthesis"
@@ -78,8 +45,7 @@ impl JobKind for Synthesis {
         if !errors.is_empty() {
             return Err(Error::Invalid(errors));
         }
-        let request = synthesis::request_from_value(request.clone())
-            .map_err(|e| req::plain_serde_errors(e, HINTS))?;
+        let request = synthesis::request_from_value(request.clone())?;
         synthesis::validate(&request)?;
         let work = work(&request).map_err(req::locate)?;
         Ok(Box::new(Prepared { work, request }))
@@ -87,9 +53,9 @@ impl JobKind for Synthesis {
 }
 
 fn missing(member: &str) -> FieldError {
-    req::plain_serde_error(
+    kea_core::error::plain_serde_error(
         FieldError::new("", format!("missing field `{member}`")),
-        HINTS,
+        synthesis::HINTS,
     )
 }
 

@@ -64,14 +64,18 @@ pub enum ModelError {
     Constant,
 }
 
+/// The seed of a request that gives none: the same in the API, `kea simulate` and the
+/// browser form, so one request gives the same numbers everywhere.
+pub const DEFAULT_SEED: u64 = 1;
+
 /// A Monte Carlo request (without the model).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SimulationRequest {
     /// Number of runs R.
     pub runs: u64,
-    /// Seed of the random streams; the same seed gives bit-identical results. Default
-    /// 1, as `kea simulate` and the browser form.
+    /// Seed of the random streams; the same seed gives bit-identical results
+    /// ([`DEFAULT_SEED`] when absent).
     #[serde(default = "default_seed")]
     pub seed: u64,
     #[serde(default = "default_truth")]
@@ -84,7 +88,7 @@ pub struct SimulationRequest {
 }
 
 fn default_seed() -> u64 {
-    1
+    DEFAULT_SEED
 }
 
 fn default_truth() -> Truth {

@@ -98,23 +98,27 @@ fn models_are_stored_listed_paged_and_deleted() {
     assert_eq!(page_ids(&s.get("/v1/models").json()).len(), 2);
 }
 
-/// `kea analyze --json` for a preset with overrides.
-fn cli_result(preset_name: &str, set: &[&str]) -> Value {
-    let file = common::repo()
-        .join("presets")
-        .join(format!("{preset_name}.json"));
-    let mut cmd = Command::new(common::KEA);
-    cmd.arg("analyze").arg(file).arg("--json");
-    for s in set {
-        cmd.arg("--set").arg(s);
-    }
-    let out = cmd.output().unwrap();
+/// The JSON `kea ARGS…` prints (it must succeed).
+fn kea_json<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Value {
+    let out = Command::new(common::KEA).args(args).output().unwrap();
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
     serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// `kea analyze --json` for a preset with overrides.
+fn cli_result(preset_name: &str, set: &[&str]) -> Value {
+    let file = common::repo()
+        .join("presets")
+        .join(format!("{preset_name}.json"));
+    let mut args = vec!["analyze".into(), file.into_os_string(), "--json".into()];
+    for s in set {
+        args.extend(["--set".into(), s.into()]);
+    }
+    kea_json(&args)
 }
 
 #[test]
@@ -164,6 +168,42 @@ fn analyze_sync_and_job_equal_the_cli() {
         assert!(header.starts_with("t,"), "{header}");
         let rows = csv.text.lines().count() - 1;
         assert_eq!(rows, cli["traces"]["t"].as_array().unwrap().len());
+    }
+}
+
+/// A simulation job gives `kea simulate`'s result, bit for bit — also without a seed,
+/// where both take the documented default (the server once took 0, the CLI 1).
+#[test]
+fn a_simulation_job_equals_kea_simulate() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    let cli = |seed: &str| {
+        without_timing(kea_json(&[
+            "simulate",
+            "preset:cv-tracker",
+            "--runs",
+            "20",
+            "--seed",
+            seed,
+            "--json",
+        ]))
+    };
+    let (default_seed, seed_0) = (cli("1"), cli("0"));
+    assert_ne!(
+        default_seed["final"], seed_0["final"],
+        "the seed changes the runs"
+    );
+    for (request, expected) in [(json!({}), &default_seed), (json!({"seed": 0}), &seed_0)] {
+        let mut body = json!({"kind": "simulation", "model": preset("cv-tracker"), "runs": 20});
+        body.as_object_mut()
+            .unwrap()
+            .extend(request.as_object().unwrap().clone());
+        let job = s.post("/v1/jobs", &body);
+        assert_eq!(job.status, 202, "{}", job.text);
+        let id = job.json()["id"].as_str().unwrap().to_string();
+        assert_eq!(s.wait_finished(&id, LONG)["status"], "succeeded");
+        let result = without_timing(s.get(&format!("/v1/jobs/{id}/result")).json());
+        assert_eq!(&result, expected, "simulation job {request}");
     }
 }
 

@@ -1,6 +1,8 @@
-//! `kea simulate MODEL.json --runs R [--seed S] [--truth process|mean]
-//! [--model-error white|constant] [--threads T] [--json | --csv FILE]`: the Monte Carlo
-//! of METHOD §1.8 — real (simulated) against potential (Riccati) accuracy.
+//! `kea simulate MODEL.json|preset:NAME [--runs R] [--seed S] [--truth process|mean]
+//! [--model-error white|constant] [--trace-points ROWS] [--set name=value]… [--threads T]
+//! [--max-work UNITS] [--json] [--csv FILE]`: the Monte Carlo of METHOD §1.8 — real
+//! (simulated) against potential (Riccati) accuracy. R is 1000 unless given. The report
+//! is text, or JSON with `--json`; `--csv` also writes the traces to a file.
 
 use crate::Run;
 use crate::parallel::Rayon;
@@ -33,7 +35,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1000)]
     pub runs: u64,
     /// Seed of the random streams (same seed, same numbers, whatever --threads).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = kea_core::simulation::DEFAULT_SEED)]
     pub seed: u64,
     /// What the filter is compared with: the noisy process Y, or the mean y (seed 000).
     #[arg(long, value_enum, default_value = "process")]

@@ -37,7 +37,7 @@ impl JobKind for Simulation {
         let mut errors = request::unknown_members(obj, MEMBERS);
         let (model, set) = request::model_and_set(obj, &mut errors);
         // The simulation's own members, each checked at its own path.
-        let mut sim = SimulationRequest::new(0, 0);
+        let mut sim = SimulationRequest::new(0, kea_core::simulation::DEFAULT_SEED);
         let whole = |name: &str, what: &str, errors: &mut Vec<FieldError>| {
             let v = obj.get(name)?;
             let n = v.as_u64();

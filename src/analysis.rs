@@ -818,9 +818,9 @@ pub const ROUNDING_LEVEL: f64 = 1e-12;
 
 /// How many times the covariance's confidence half-width λσ the bound may be at t_end
 /// before a warning says the bound set describes |A|'s growth rather than the filter.
-/// Bounds that follow the filter stay within ≈ 10³ of it (the seed's example: 716 for
-/// η, 652 for χ); the modulus procedure on oscillatory or feedback dynamics grows
-/// geometrically past 10⁶ (the textbook tracker: χ at 6.6·10³² times λσ after 100 s).
+/// Bounds that follow the filter stay within ≈ 10³ of it (the seed's example: 365 for
+/// η, 332 for χ); the modulus procedure on oscillatory or feedback dynamics grows
+/// geometrically past 10⁶ (the textbook tracker: χ at 7.1·10³² times λσ after 100 s).
 pub const BOUND_GROWTH_WARN: f64 = 1e6;
 
 /// The warning for a bound (η or χ at t_end) above [`BOUND_GROWTH_WARN`] times the

@@ -1,8 +1,14 @@
-//! The stationary solution of the filter's Riccati recursion for a time-invariant
-//! model, by the structure-preserving doubling algorithm (SDA). Used by the
-//! steady-state shortcut (analysis) and checked against scipy's DARE in the tests.
+//! The filter's Riccati recursion (2.1)–(2.7), step by step and at its stationary point.
 //!
-//! The predicted covariance r of (2.1)–(2.7) is stationary when
+//! - [`SequentialJoseph`]: one step, for the analysis engine. The measurements,
+//!   whitened by [`Prepared`] (Rv = L D Lᵀ), are processed one scalar at a time in
+//!   Joseph form; the block gain p_k (2.5) is read off the updated covariance or
+//!   composed from the scalar gains. The tests check it against the plain block form.
+//! - [`dare_doubling`]: the stationary solution for a time-invariant model, by the
+//!   structure-preserving doubling algorithm (SDA), for the analysis's steady-state
+//!   shortcut; checked against scipy's DARE in the tests.
+//!
+//! The predicted covariance r is stationary when
 //!     r = A r Aᵀ − A r Cᵀ (C r Cᵀ + Rv)⁻¹ C r Aᵀ + B,
 //! a DARE in the dual (control) form with A_c = Aᵀ, B_c = Cᵀ, R_c = Rv, Q_c = B. SDA:
 //!     A₀ = Aᵀ, G₀ = Cᵀ Rv⁻¹ C, H₀ = B,  W = I + G_k H_k,

@@ -2,9 +2,9 @@
 //!
 //! A kind parses a self-contained request (the `model_id` already resolved to
 //! `model`) into a [`PreparedJob`], which estimates its work and runs on a worker
-//! thread with progress and cancellation. Adding a kind (synthesis, Monte Carlo
-//! simulation, identification) is one module implementing [`JobKind`] plus one line
-//! in [`registry`].
+//! thread with progress and cancellation. The kinds are `analysis`, `simulation`
+//! (Monte Carlo) and `synthesis`; adding one is one module implementing [`JobKind`]
+//! plus one line in [`registry`].
 
 pub mod analysis;
 pub mod cost;
@@ -64,7 +64,7 @@ pub fn registry() -> Registry {
             Box::new(analysis::Analysis),
             Box::new(simulation::Simulation),
             Box::new(synthesis::Synthesis),
-            // New kinds: one line each, e.g. Box::new(synthesis::Synthesis),
+            // A new kind is one more line here.
         ]),
     }
 }

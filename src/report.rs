@@ -168,28 +168,67 @@ pub fn traces_csv(r: &AnalysisResult) -> String {
         }
         cols.push((format!("local_yx:{n}"), st.local_yx.clone()));
     }
-    let mut s = String::from("t");
-    for (name, _) in &cols {
-        s.push(',');
-        s.push_str(name);
+    let header = std::iter::once("t".to_string()).chain(cols.iter().map(|(n, _)| n.clone()));
+    let rows = tr.t.iter().enumerate().map(|(k, t)| {
+        std::iter::once(t.to_string()).chain(cols.iter().map(move |(_, v)| match v.get(k) {
+            Some(Some(x)) => x.to_string(),
+            _ => String::new(),
+        }))
+    });
+    csv_text(header, rows)
+}
+
+/// Records as CSV text (RFC 4180: a field holding a comma, a quote or a line break —
+/// a state may be named so — is quoted).
+pub fn csv_text<R, F>(header: F, rows: impl Iterator<Item = R>) -> String
+where
+    R: IntoIterator<Item = String>,
+    F: IntoIterator<Item = String>,
+{
+    let mut w = csv::WriterBuilder::new()
+        .terminator(csv::Terminator::Any(b'\n'))
+        .from_writer(Vec::new());
+    // (Writing to a Vec cannot fail: the results are ignored.)
+    let _ = w.write_record(header);
+    for row in rows {
+        let _ = w.write_record(row);
     }
-    s.push('\n');
-    for (k, t) in tr.t.iter().enumerate() {
-        let _ = write!(s, "{t}");
-        for (_, v) in &cols {
-            s.push(',');
-            if let Some(Some(x)) = v.get(k) {
-                let _ = write!(s, "{x}");
-            }
-        }
-        s.push('\n');
-    }
-    s
+    let bytes = w.into_inner().unwrap_or_default();
+    String::from_utf8(bytes).unwrap_or_default()
 }
 
 #[cfg(test)]
 mod tests {
-    use super::{CELL, cell, short};
+    use super::{CELL, cell, short, traces_csv};
+
+    /// State names may hold a comma, a quote or a line break: the CSV quotes them
+    /// (RFC 4180), so every record keeps its columns.
+    #[test]
+    fn csv_quotes_names_that_need_it() {
+        let model = crate::model_from_value(serde_json::json!({
+            "time": {"t0": 0, "t_end": 1, "steps": 100},
+            "system": {"states": ["p,1", "v \"x\"\nw"], "a": [[0, 1], [0, 0]],
+                       "b": [[0], [1]], "phi": [1], "eta0": [1, 1]},
+            "measurement": {"names": ["z"], "c": [[1, 0]], "gamma": [[1]], "psi": [0.5]},
+            "options": {"trace_points": 10}
+        }))
+        .unwrap();
+        let r = crate::analyze(&model, &Default::default(), &mut crate::NoProgress).unwrap();
+        let text = traces_csv(&r);
+        assert!(
+            text.starts_with("t,\"y:p,1\",\"eta:p,1\","),
+            "{}",
+            &text[..80]
+        );
+        assert!(text.contains(",\"y:v \"\"x\"\"\nw\","), "{text}");
+        let mut reader = csv::Reader::from_reader(text.as_bytes());
+        let header = reader.headers().unwrap().clone();
+        assert_eq!(&header[1], "y:p,1");
+        assert_eq!(&header[header.len() - 1], "local_yx:v \"x\"\nw");
+        let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
+        assert_eq!(rows.len(), r.traces.t.len());
+        assert!(rows.iter().all(|row| row.len() == header.len()));
+    }
 
     #[test]
     fn times_read_short() {

@@ -1473,41 +1473,47 @@ fn outgrown(state: &str, scale: f64, sko: f64, k: u64, t: f64) -> Error {
 /// value that is not a number (overflowed, or no measurement) is an empty cell, as in
 /// the analysis's CSV (`null` in the JSON).
 pub fn traces_csv(r: &SimulationResult) -> String {
-    use std::fmt::Write;
-    let mut s = String::from("t");
-    for st in &r.traces.states {
-        let name = &st.state;
-        write!(
-            s,
-            ",{name}.a_priori_sko,{name}.open_loop_sko,{name}.measured_sko,{name}.filtered_sko,{name}.filtered_mean,{name}.potential_sko,{name}.chi"
+    const SERIES: [&str; 7] = [
+        "a_priori_sko",
+        "open_loop_sko",
+        "measured_sko",
+        "filtered_sko",
+        "filtered_mean",
+        "potential_sko",
+        "chi",
+    ];
+    let tr = &r.traces;
+    let header = std::iter::once("t".to_string())
+        .chain(
+            tr.states
+                .iter()
+                .flat_map(|st| SERIES.iter().map(move |s| format!("{}.{s}", st.state))),
         )
-        .unwrap();
-    }
-    s.push_str(",nees,nis\n");
+        .chain(["nees".to_string(), "nis".to_string()]);
     let opt = |v: Option<f64>| {
         v.filter(|x| x.is_finite())
             .map(|x| format!("{x:e}"))
             .unwrap_or_default()
     };
-    let num = |x: f64| opt(Some(x));
-    for (row, t) in r.traces.t.iter().enumerate() {
-        write!(s, "{t:e}").unwrap();
-        for st in &r.traces.states {
+    let rows = tr.t.iter().enumerate().map(|(row, t)| {
+        let mut fields = vec![format!("{t:e}")];
+        for st in &tr.states {
             let meas = st.measured_sko.as_ref().and_then(|m| m[row]);
-            write!(
-                s,
-                ",{},{},{},{},{},{},{}",
-                num(st.a_priori_sko[row]),
-                num(st.open_loop_sko[row]),
-                opt(meas),
-                num(st.filtered_sko[row]),
-                num(st.filtered_mean[row]),
-                num(st.potential_sko[row]),
-                num(st.chi[row])
-            )
-            .unwrap();
+            fields.extend(
+                [
+                    Some(st.a_priori_sko[row]),
+                    Some(st.open_loop_sko[row]),
+                    meas,
+                    Some(st.filtered_sko[row]),
+                    Some(st.filtered_mean[row]),
+                    Some(st.potential_sko[row]),
+                    Some(st.chi[row]),
+                ]
+                .map(opt),
+            );
         }
-        writeln!(s, ",{},{}", opt(r.traces.nees[row]), opt(r.traces.nis[row])).unwrap();
-    }
-    s
+        fields.extend([opt(tr.nees[row]), opt(tr.nis[row])]);
+        fields
+    });
+    crate::report::csv_text(header, rows)
 }

@@ -12,6 +12,7 @@ pub mod exec;
 pub mod expr;
 pub mod expr_block;
 mod inputs;
+pub mod json;
 mod lanes;
 pub mod linalg;
 pub mod model;
@@ -26,6 +27,7 @@ pub mod synthesis;
 pub mod validate;
 
 pub use error::{Error, FieldError};
+pub use json::{from_value_at, parse_json};
 pub use model::Model;
 pub use result::AnalysisResult;
 
@@ -147,95 +149,9 @@ pub fn model_from_value(value: serde_json::Value) -> Result<Model, Error> {
     from_value_at(value, &[])
 }
 
-/// `T` from a JSON value, a serde error located at its field path (`system.a[0]`) and
-/// worded as kea's own ([`error::plain_serde_error`]: "missing field `x`" at `system`
-/// is "missing: …" at `system.x`). `hints` say what a missing member is, by name.
-/// Every request type the core reads is parsed with this.
-pub fn from_value_at<T: serde::de::DeserializeOwned>(
-    value: serde_json::Value,
-    hints: &[(&str, &str)],
-) -> Result<T, Error> {
-    serde_path_to_error::deserialize(value).map_err(|e| {
-        let path = e.path().to_string();
-        let path = if path == "." { String::new() } else { path };
-        let message = e.into_inner().to_string();
-        Error::Invalid(vec![error::plain_serde_error(
-            FieldError::new(path, message),
-            hints,
-        )])
-    })
-}
-
 /// Parse a model from JSON text, with serde errors located at their field path.
 pub fn model_from_json(text: &str) -> Result<Model, Error> {
     let value = parse_json(text.as_bytes())
         .map_err(|e| Error::invalid("", format!("not valid JSON: {e}")))?;
     model_from_value(value)
-}
-
-/// JSON text as a value, refusing an object with the same key twice. serde_json keeps
-/// the last one silently, so `{"model": A, …, "model": B}` would run B unannounced;
-/// here it is an error with the key, line and column. Every way into kea (HTTP bodies,
-/// the command line's files, the browser's worker) parses with this.
-pub fn parse_json(text: &[u8]) -> Result<serde_json::Value, serde_json::Error> {
-    serde_json::from_slice::<StrictValue>(text).map(|v| v.0)
-}
-
-/// A [`serde_json::Value`] whose objects have distinct keys.
-struct StrictValue(serde_json::Value);
-
-impl<'de> serde::Deserialize<'de> for StrictValue {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        use serde::de::{Error, MapAccess, SeqAccess, Visitor};
-        use serde_json::Value;
-        struct V;
-        impl<'de> Visitor<'de> for V {
-            type Value = StrictValue;
-            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                f.write_str("a JSON value")
-            }
-            fn visit_bool<E>(self, b: bool) -> Result<StrictValue, E> {
-                Ok(StrictValue(Value::Bool(b)))
-            }
-            fn visit_i64<E>(self, x: i64) -> Result<StrictValue, E> {
-                Ok(StrictValue(x.into()))
-            }
-            fn visit_u64<E>(self, x: u64) -> Result<StrictValue, E> {
-                Ok(StrictValue(x.into()))
-            }
-            fn visit_f64<E>(self, x: f64) -> Result<StrictValue, E> {
-                Ok(StrictValue(x.into()))
-            }
-            fn visit_str<E>(self, s: &str) -> Result<StrictValue, E> {
-                Ok(StrictValue(Value::String(s.to_string())))
-            }
-            fn visit_string<E>(self, s: String) -> Result<StrictValue, E> {
-                Ok(StrictValue(Value::String(s)))
-            }
-            fn visit_unit<E>(self) -> Result<StrictValue, E> {
-                Ok(StrictValue(Value::Null))
-            }
-            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<StrictValue, A::Error> {
-                let mut items = Vec::new();
-                while let Some(StrictValue(v)) = seq.next_element()? {
-                    items.push(v);
-                }
-                Ok(StrictValue(Value::Array(items)))
-            }
-            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<StrictValue, A::Error> {
-                let mut object = serde_json::Map::new();
-                while let Some(key) = map.next_key::<String>()? {
-                    if object.contains_key(&key) {
-                        return Err(A::Error::custom(format!(
-                            "the key \"{key}\" appears twice in one object"
-                        )));
-                    }
-                    let StrictValue(v) = map.next_value()?;
-                    object.insert(key, v);
-                }
-                Ok(StrictValue(Value::Object(object)))
-            }
-        }
-        d.deserialize_any(V)
-    }
 }

@@ -771,6 +771,49 @@ fn wrong_types_say_what_is_expected() {
     );
 }
 
+/// A struct must be an object: serde's derived structs also read an array of the
+/// fields in order, which took `"options": [0, false]` as no traces and no shortcut.
+#[test]
+fn an_array_is_not_an_object() {
+    for (part, array) in [
+        ("time", json!([0, 1, 100])),
+        ("options", json!([0, false])),
+        ("criteria", json!([])),
+    ] {
+        expect(
+            |v| v[part] = array.clone(),
+            &[],
+            part,
+            "expected an object, got an array",
+        );
+    }
+    expect(
+        |v| v["time"]["auto"] = json!([1e-3, 100, 800]),
+        &[],
+        "time.auto",
+        "expected an object, got an array",
+    );
+    expect(
+        |v| v["measurement"]["pairs"] = json!([["x", "z"]]),
+        &[],
+        "measurement.pairs[0]",
+        "expected an object, got an array",
+    );
+    // Enums: a synthesis mode is an object holding one object.
+    let mut request = json!({"model": good(), "target": {"criterion": "yx", "threshold": 2},
+                             "mode": {"bisect": ["q", 0.01, 100]}});
+    let e = kea_core::synthesis::request_from_value(request.clone()).unwrap_err();
+    assert_eq!(
+        e.field_errors(),
+        [kea_core::FieldError::new(
+            "mode.bisect",
+            "expected an object, got an array"
+        )]
+    );
+    request["mode"] = json!({"bisect": {"param": "q", "low": 0.01, "high": 100}});
+    assert!(kea_core::synthesis::request_from_value(request).is_ok());
+}
+
 /// A model that is not an object, or lacks its parts, gets one error per part, each at
 /// its path (serde read an array as the fields in order, and named one missing field
 /// with an empty path).

@@ -1,0 +1,259 @@
+//! Reading JSON: strictly (a key given twice is an error; a struct must be an object,
+//! not an array of its fields in order), with every error at its field path and in
+//! kea's words.
+
+use crate::error::{Error, FieldError, plain_serde_error};
+use serde::de::{
+    self, DeserializeSeed, Deserializer, EnumAccess, IntoDeserializer, Unexpected, VariantAccess,
+    Visitor,
+    value::{MapDeserializer, SeqDeserializer},
+};
+use serde_json::Value;
+
+/// `T` from a JSON value, a serde error located at its field path (`system.a[0]`) and
+/// worded as kea's own ([`plain_serde_error`]: "missing field `x`" at `system`
+/// is "missing: …" at `system.x`). `hints` say what a missing member is, by name.
+/// Every request type the core reads is parsed with this.
+pub fn from_value_at<T: serde::de::DeserializeOwned>(
+    value: serde_json::Value,
+    hints: &[(&str, &str)],
+) -> Result<T, Error> {
+    serde_path_to_error::deserialize(Objects(&value)).map_err(|e| {
+        let path = e.path().to_string();
+        let path = if path == "." { String::new() } else { path };
+        let message = e.into_inner().to_string();
+        Error::Invalid(vec![plain_serde_error(
+            FieldError::new(path, message),
+            hints,
+        )])
+    })
+}
+
+/// JSON text as a value, refusing an object with the same key twice. serde_json keeps
+/// the last one silently, so `{"model": A, …, "model": B}` would run B unannounced;
+/// here it is an error with the key, line and column. Every way into kea (HTTP bodies,
+/// the command line's files, the browser's worker) parses with this.
+pub fn parse_json(text: &[u8]) -> Result<serde_json::Value, serde_json::Error> {
+    serde_json::from_slice::<StrictValue>(text).map(|v| v.0)
+}
+
+/// A [`serde_json::Value`] whose objects have distinct keys.
+struct StrictValue(serde_json::Value);
+
+impl<'de> serde::Deserialize<'de> for StrictValue {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::{Error, MapAccess, SeqAccess, Visitor};
+        use serde_json::Value;
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = StrictValue;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a JSON value")
+            }
+            fn visit_bool<E>(self, b: bool) -> Result<StrictValue, E> {
+                Ok(StrictValue(Value::Bool(b)))
+            }
+            fn visit_i64<E>(self, x: i64) -> Result<StrictValue, E> {
+                Ok(StrictValue(x.into()))
+            }
+            fn visit_u64<E>(self, x: u64) -> Result<StrictValue, E> {
+                Ok(StrictValue(x.into()))
+            }
+            fn visit_f64<E>(self, x: f64) -> Result<StrictValue, E> {
+                Ok(StrictValue(x.into()))
+            }
+            fn visit_str<E>(self, s: &str) -> Result<StrictValue, E> {
+                Ok(StrictValue(Value::String(s.to_string())))
+            }
+            fn visit_string<E>(self, s: String) -> Result<StrictValue, E> {
+                Ok(StrictValue(Value::String(s)))
+            }
+            fn visit_unit<E>(self) -> Result<StrictValue, E> {
+                Ok(StrictValue(Value::Null))
+            }
+            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<StrictValue, A::Error> {
+                let mut items = Vec::new();
+                while let Some(StrictValue(v)) = seq.next_element()? {
+                    items.push(v);
+                }
+                Ok(StrictValue(Value::Array(items)))
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<StrictValue, A::Error> {
+                let mut object = serde_json::Map::new();
+                while let Some(key) = map.next_key::<String>()? {
+                    if object.contains_key(&key) {
+                        return Err(A::Error::custom(format!(
+                            "the key \"{key}\" appears twice in one object"
+                        )));
+                    }
+                    let StrictValue(v) = map.next_value()?;
+                    object.insert(key, v);
+                }
+                Ok(StrictValue(Value::Object(object)))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// A JSON value read as serde_json reads a [`Value`], except that a struct (or a
+/// struct variant) must be an object: serde's derived structs also accept an array of
+/// the fields in order, so `"options": [0, false]` was read as `trace_points = 0,
+/// steady_state_shortcut = false` — unannounced, where every schema says object.
+struct Objects<'a>(&'a Value);
+
+fn unexpected(v: &Value) -> Unexpected<'_> {
+    match v {
+        Value::Null => Unexpected::Unit,
+        Value::Bool(b) => Unexpected::Bool(*b),
+        Value::Number(n) => match (n.as_u64(), n.as_i64(), n.as_f64()) {
+            (Some(u), _, _) => Unexpected::Unsigned(u),
+            (_, Some(i), _) => Unexpected::Signed(i),
+            (_, _, f) => Unexpected::Float(f.unwrap_or(f64::NAN)),
+        },
+        Value::String(s) => Unexpected::Str(s),
+        Value::Array(_) => Unexpected::Seq,
+        Value::Object(_) => Unexpected::Map,
+    }
+}
+
+impl<'de> IntoDeserializer<'de, serde_json::Error> for Objects<'de> {
+    type Deserializer = Self;
+    fn into_deserializer(self) -> Self {
+        self
+    }
+}
+
+impl<'de> Objects<'de> {
+    fn visit_object<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, serde_json::Error> {
+        match self.0 {
+            Value::Object(m) => visitor.visit_map(MapDeserializer::new(
+                m.iter().map(|(k, v)| (k.as_str(), Objects(v))),
+            )),
+            other => Err(de::Error::invalid_type(unexpected(other), &visitor)),
+        }
+    }
+}
+
+impl<'de> Deserializer<'de> for Objects<'de> {
+    type Error = serde_json::Error;
+
+    fn deserialize_any<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, Self::Error> {
+        match self.0 {
+            Value::Null => visitor.visit_unit(),
+            Value::Bool(b) => visitor.visit_bool(*b),
+            Value::Number(n) => match (n.as_u64(), n.as_i64(), n.as_f64()) {
+                (Some(u), _, _) => visitor.visit_u64(u),
+                (_, Some(i), _) => visitor.visit_i64(i),
+                (_, _, f) => visitor.visit_f64(f.unwrap_or(f64::NAN)),
+            },
+            Value::String(s) => visitor.visit_borrowed_str(s),
+            Value::Array(a) => visitor.visit_seq(SeqDeserializer::new(a.iter().map(Objects))),
+            Value::Object(_) => self.visit_object(visitor),
+        }
+    }
+
+    fn deserialize_option<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, Self::Error> {
+        match self.0 {
+            Value::Null => visitor.visit_none(),
+            _ => visitor.visit_some(self),
+        }
+    }
+
+    fn deserialize_newtype_struct<V: Visitor<'de>>(
+        self,
+        _name: &'static str,
+        visitor: V,
+    ) -> Result<V::Value, Self::Error> {
+        visitor.visit_newtype_struct(self)
+    }
+
+    fn deserialize_struct<V: Visitor<'de>>(
+        self,
+        _name: &'static str,
+        _fields: &'static [&'static str],
+        visitor: V,
+    ) -> Result<V::Value, Self::Error> {
+        self.visit_object(visitor)
+    }
+
+    fn deserialize_enum<V: Visitor<'de>>(
+        self,
+        _name: &'static str,
+        _variants: &'static [&'static str],
+        visitor: V,
+    ) -> Result<V::Value, Self::Error> {
+        match self.0 {
+            Value::String(s) => visitor.visit_enum(s.as_str().into_deserializer()),
+            Value::Object(m) if m.len() == 1 => {
+                let (variant, value) = m
+                    .iter()
+                    .next()
+                    .map(|(k, v)| (k.as_str(), v))
+                    .unwrap_or(("", &Value::Null));
+                visitor.visit_enum(Variant { variant, value })
+            }
+            Value::Object(_) => Err(de::Error::invalid_value(
+                Unexpected::Map,
+                &"map with a single key",
+            )),
+            other => Err(de::Error::invalid_type(
+                unexpected(other),
+                &"a string or an object with one member",
+            )),
+        }
+    }
+
+    serde::forward_to_deserialize_any! {
+        bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string bytes
+        byte_buf unit unit_struct seq tuple tuple_struct map identifier ignored_any
+    }
+}
+
+/// An externally tagged enum's `{"variant": value}`.
+struct Variant<'a> {
+    variant: &'a str,
+    value: &'a Value,
+}
+
+impl<'de> EnumAccess<'de> for Variant<'de> {
+    type Error = serde_json::Error;
+    type Variant = Objects<'de>;
+    fn variant_seed<S: DeserializeSeed<'de>>(
+        self,
+        seed: S,
+    ) -> Result<(S::Value, Objects<'de>), serde_json::Error> {
+        let variant = seed.deserialize(self.variant.into_deserializer())?;
+        Ok((variant, Objects(self.value)))
+    }
+}
+
+impl<'de> VariantAccess<'de> for Objects<'de> {
+    type Error = serde_json::Error;
+    fn unit_variant(self) -> Result<(), serde_json::Error> {
+        match self.0 {
+            Value::Null => Ok(()),
+            other => Err(de::Error::invalid_type(unexpected(other), &"unit variant")),
+        }
+    }
+    fn newtype_variant_seed<S: DeserializeSeed<'de>>(
+        self,
+        seed: S,
+    ) -> Result<S::Value, serde_json::Error> {
+        seed.deserialize(self)
+    }
+    fn tuple_variant<V: Visitor<'de>>(
+        self,
+        _len: usize,
+        visitor: V,
+    ) -> Result<V::Value, serde_json::Error> {
+        self.deserialize_seq(visitor)
+    }
+    fn struct_variant<V: Visitor<'de>>(
+        self,
+        _fields: &'static [&'static str],
+        visitor: V,
+    ) -> Result<V::Value, serde_json::Error> {
+        self.visit_object(visitor)
+    }
+}

@@ -828,7 +828,7 @@ pub const BOUND_GROWTH_WARN: f64 = 1e6;
 fn bound_growth(states: &[String], f: &Final, lambda: f64) -> Option<String> {
     let worst = |bound: &[f64], sko: &[f64]| {
         (0..states.len())
-            .filter(|&i| sko[i] > 0.0 && bound[i].is_finite())
+            .filter(|&i| lambda * sko[i] > 0.0 && bound[i].is_finite())
             .map(|i| (bound[i] / (lambda * sko[i]), i))
             .fold(None, |w: Option<(f64, usize)>, x| match w {
                 Some(w) if w.0 >= x.0 => Some(w),
@@ -841,8 +841,14 @@ fn bound_growth(states: &[String], f: &Final, lambda: f64) -> Option<String> {
         ("η", &f.eta, &f.open_loop_sko, "the open-loop"),
     ] {
         if let Some((ratio, i)) = worst(bound, sko).filter(|w| w.0 > BOUND_GROWTH_WARN) {
+            // (A tiny confidence makes λσ tiny: the ratio can pass f64's range.)
+            let ratio = if ratio.is_finite() {
+                format!("{ratio:.1e}")
+            } else {
+                "more than 1.8e308".to_string()
+            };
             parts.push(format!(
-                "{name} of \"{}\" is {ratio:.1e} times {what} λσ",
+                "{name} of \"{}\" is {ratio} times {what} λσ",
                 states[i]
             ));
         }
@@ -944,11 +950,18 @@ fn diag_close(a: &[f64], b: &[f64], n: usize, tol: f64) -> bool {
 }
 
 /// λ = Φ⁻¹((1+P)/2), the two-sided normal quantile (3.14): the root of
-/// erfc(λ/√2) = 1 − P, bisected on `libm`'s erfc down to adjacent floats. A quantile
-/// built on the standard library's exp and ln (statrs') differs in its last bits
-/// between the native C library and wasm (P = 0.99 did); this one is the same
-/// arithmetic on every target. `p` in (0, 1).
+/// erfc(λ/√2) = 1 − P (or, for P < 1/2, of erf(λ/√2) = P), bisected on `libm`'s erfc
+/// (erf) down to adjacent floats. A quantile built on the standard library's exp and
+/// ln (statrs') differs in its last bits between the native C library and wasm
+/// (P = 0.99 did); this one is the same arithmetic on every target. `p` in (0, 1).
 pub fn laplace_lambda(p: f64) -> f64 {
+    if p < 0.5 {
+        // erf keeps its relative accuracy near 0, where 1 − P would round to 1 and
+        // λ to 0 (P = 1e-300 gave λ = 0, and ΔY = λη = 0).
+        return bisect_root(0.0, 40.0, |x| {
+            libm::erf(x * std::f64::consts::FRAC_1_SQRT_2) - p
+        });
+    }
     // 1 − P is exact for P ≥ 1/2 (Sterbenz), and erfc keeps its relative accuracy in
     // the tail, so λ stays accurate for P near 1.
     let tail = 1.0 - p;

@@ -357,6 +357,16 @@ fn laplace_lambda_is_the_two_sided_normal_quantile() {
         let want = normal.inverse_cdf((1.0 + p) / 2.0);
         assert!(rel(laplace_lambda(p), want) < 1e-12, "P = {p}");
     }
+    // Near 0, λ = P √(π/2) (1 + O(P²)) (erf(z) = 2z/√π (1 − z²/3 + …)): no rounding
+    // of (1 + P)/2 to 1/2, down to the smallest normal P.
+    for p in [1e-9, 1e-17, 1e-300, f64::MIN_POSITIVE] {
+        let want = p * (std::f64::consts::PI / 2.0).sqrt();
+        assert!(
+            rel(laplace_lambda(p), want) < 1e-15,
+            "P = {p}: {}",
+            laplace_lambda(p)
+        );
+    }
     // Near 1 the tail keeps its accuracy: P = 1 − 1e-12 (so 1 − P = 9.999778782798785e-13
     // in f64), λ = Φ⁻¹(1 − (1 − P)/2) = 7.130509892879273 (scipy's norm.isf((1 − P)/2)).
     let p = 1.0 - 1e-12;

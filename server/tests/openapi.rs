@@ -740,6 +740,27 @@ fn an_overflowing_simulation_validates_against_the_spec() {
     );
 }
 
+/// A Monte Carlo run with no measurement at any step: NIS has no degrees of freedom,
+/// so its band is [null, null] — the spec said numbers.
+#[test]
+fn a_simulation_without_measurements_validates_against_the_spec() {
+    let spec = spec();
+    let v = Validator::new(&spec);
+    let dir = tempfile::tempdir().unwrap();
+    let s = Server::start(dir.path(), &[]);
+    let mut m = preset("cv-tracker");
+    m["measurement"]["schedule"] = json!([{"when": "-1"}]);
+    let (id, done) = simulation_job(&s, &m, 5, 20);
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let result = s.get(&format!("/v1/jobs/{id}/result")).json();
+    assert_eq!(result["consistency"]["nis"]["band"], json!([null, null]));
+    v.expect(
+        &spec["components"]["schemas"]["SimulationResult"],
+        &result,
+        "a simulation without measurements",
+    );
+}
+
 /// max |dy/dt| and max |C y| of a model whose mean stays finite can overflow f64;
 /// they are null then, in the analysis and in the simulation. The spec said `Numbers`.
 #[test]

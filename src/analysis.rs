@@ -656,10 +656,13 @@ impl<'m, const N: usize> Engine<'m, N> {
         let lambda = laplace_lambda(m.confidence);
         let (bound, cov) = running.into_sets(n);
         let bound_why = bound_diverged.map(|(k, t)| format!(
-            "the bound (modulus procedure) overflowed at step {k} (t = {t}): |A| taken element-wise grows where A does not (oscillatory or feedback dynamics), so the bound is not informative here; see the covariance set"
+            "the bound (modulus procedure) overflowed at step {k} (t = {}): |A| taken element-wise grows where A does not (oscillatory or feedback dynamics), so the bound is not informative here; see the covariance set", crate::report::short(t)
         ));
         let open_why = open_diverged.map(|(k, t)| {
-            format!("the open-loop (a-priori) covariance overflowed at step {k} (t = {t})")
+            format!(
+                "the open-loop (a-priori) covariance overflowed at step {k} (t = {})",
+                crate::report::short(t)
+            )
         });
         if let Some(w) = &bound_why {
             warnings.push(w.clone());

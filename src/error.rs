@@ -64,7 +64,10 @@ impl Error {
                 ..
             } => vec![FieldError::new(
                 path.clone(),
-                format!("{message} (at step {step}, t = {t})"),
+                format!(
+                    "{message} (at step {step}, t = {})",
+                    crate::report::short(*t)
+                ),
             )],
             Error::Cancelled => vec![FieldError::new("", "cancelled")],
         }
@@ -124,9 +127,17 @@ impl fmt::Display for Error {
                 message,
             } => {
                 if path.is_empty() {
-                    write!(f, "{message} (at step {step}, t = {t})")
+                    write!(
+                        f,
+                        "{message} (at step {step}, t = {})",
+                        crate::report::short(*t)
+                    )
                 } else {
-                    write!(f, "{path}: {message} (at step {step}, t = {t})")
+                    write!(
+                        f,
+                        "{path}: {message} (at step {step}, t = {})",
+                        crate::report::short(*t)
+                    )
                 }
             }
             Error::Cancelled => write!(f, "cancelled"),

@@ -4,12 +4,13 @@ use crate::result::{AnalysisResult, CriteriaSet};
 use std::fmt::Write;
 
 /// Width of the table's number columns.
-const CELL: usize = 10;
+pub const CELL: usize = 10;
 
-/// A criterion for a column of [`CELL`] characters: four decimals, or the exponent form
-/// where those would not fit or would show fewer than two significant digits.
-fn cell(x: Option<f64>) -> String {
-    let Some(v) = x else {
+/// A number for a column of [`CELL`] characters: four decimals, or the exponent form
+/// where those would not fit or would show fewer than two significant digits; `—`
+/// where there is no finite value. Every text table of kea writes its numbers so.
+pub fn cell(x: Option<f64>) -> String {
+    let Some(v) = x.filter(|v| v.is_finite()) else {
         return "—".to_string();
     };
     let fixed = format!("{v:.4}");
@@ -26,8 +27,8 @@ fn cell(x: Option<f64>) -> String {
 }
 
 /// A time for reading: 12 significant digits, so t0 + kΔt's rounding does not show
-/// (15.600000000000001 → 15.6).
-fn short(t: f64) -> String {
+/// (15.600000000000001 → 15.6), in exponent form where plain would be long (1e-300).
+pub fn short(t: f64) -> String {
     crate::validate::num(format!("{t:.11e}").parse().unwrap_or(t))
 }
 
@@ -39,8 +40,8 @@ pub fn criteria_table(r: &AnalysisResult) -> String {
         "steps D = {}, dt = {:e}, t = [{}, {}]{}",
         r.steps,
         r.dt,
-        r.t0,
-        r.t_end,
+        short(r.t0),
+        short(r.t_end),
         if r.timing.wall_ms > 0.0 {
             format!(", {:.1} ms", r.timing.wall_ms)
         } else {
@@ -251,6 +252,8 @@ mod tests {
         assert_eq!(cell(Some(4.2e-4)), "4.2000e-4");
         assert_eq!(cell(Some(0.0)), "0.0000");
         assert_eq!(cell(None), "—");
+        assert_eq!(cell(Some(f64::NAN)), "—");
+        assert_eq!(cell(Some(f64::INFINITY)), "—");
         assert_eq!(cell(Some(1e-300)), "1.000e-300");
         for v in [1e-300, 3.3e-3, 1.0, 12345.678, 1e5, 7.7e7, 1e300] {
             assert!(cell(Some(v)).len() <= CELL, "{v}: {}", cell(Some(v)));

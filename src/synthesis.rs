@@ -776,7 +776,10 @@ impl Ctx<'_> {
 fn best_of<'a>(points: impl Iterator<Item = &'a Point> + Clone, range: &str) -> String {
     match points.clone().filter_map(|p| p.value).reduce(f64::max) {
         Some(best) => {
-            format!(" (the best is {best:.4}): widen the {range} or lower the target.")
+            format!(
+                " (the best is {}): widen the {range} or lower the target.",
+                crate::report::cell(Some(best))
+            )
         }
         None => {
             let why = points
@@ -833,8 +836,9 @@ fn crit_name(t: &Target) -> String {
     }
 }
 
+/// A criterion's value as the analysis table writes it ([`crate::report::cell`]).
 fn fmt_value(v: Option<f64>) -> String {
-    v.map_or("undefined".into(), |v| format!("{v:.4}"))
+    v.map_or("undefined".into(), |v| crate::report::cell(Some(v)))
 }
 
 // ---------------------------------------------------------------- the modes
@@ -1333,7 +1337,9 @@ fn grid<E: Executor>(
 /// with `*` on those meeting the target and `[ ]` around the cheapest.
 pub fn render_text(r: &SynthesisResult) -> String {
     let mut s = String::new();
-    let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+    // Cells of three criteria, each as the analysis table writes it.
+    let f = crate::report::cell;
+    const W: usize = 3 * crate::report::CELL + 8;
     match &r.details {
         Details::Grid(g) => {
             let rows = &g.params[0];
@@ -1352,7 +1358,7 @@ pub fn render_text(r: &SynthesisResult) -> String {
                 s += &format!("{head:>14}");
                 for j in 0..n_cols {
                     let h = cols.map_or("F_YZ / F_ZX / F_YX".into(), |c| fmt_num(c.values[j]));
-                    s += &format!(" | {h:^24}");
+                    s += &format!(" | {h:^W$}");
                 }
                 s += "\n";
                 for (i, rv) in rows.values.iter().enumerate() {
@@ -1376,7 +1382,7 @@ pub fn render_text(r: &SynthesisResult) -> String {
                                 format!(" {body} {mark}")
                             }
                         });
-                        s += &format!(" | {txt:^24}");
+                        s += &format!(" | {txt:^W$}");
                     }
                     s += "\n";
                 }

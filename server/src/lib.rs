@@ -10,6 +10,7 @@ pub mod parallel;
 pub mod serve;
 
 use clap::{CommandFactory, Parser, Subcommand};
+use std::io::Write;
 use std::process::ExitCode;
 
 /// What every subcommand's arguments implement: run it, return the exit code
@@ -67,9 +68,29 @@ impl Cli {
             Some(command) => command.run(),
             None => {
                 // `kea` alone: the help, as a successful answer.
-                let _ = Cli::command().print_help();
-                ExitCode::SUCCESS
+                let help = Cli::command().print_help();
+                match cli::stdout_written(help.and_then(|()| std::io::stdout().flush())) {
+                    Ok(()) => ExitCode::SUCCESS,
+                    Err(code) => code,
+                }
             }
         }
+    }
+
+    /// Parse the command line, or the exit code where parsing was the whole answer:
+    /// `--help` and `--version` are printed here, checked like any output
+    /// ([`cli::stdout_written`]); a usage error exits with clap's message (status 2).
+    pub fn parse_or_exit() -> Result<Cli, ExitCode> {
+        let err = match Cli::try_parse() {
+            Ok(cli) => return Ok(cli),
+            Err(err) => err,
+        };
+        if err.use_stderr() {
+            err.exit();
+        }
+        cli::stdout_written(err.print().and_then(|()| std::io::stdout().flush()))?;
+        Err(ExitCode::from(
+            u8::try_from(err.exit_code()).unwrap_or(cli::EXIT_FAILURE),
+        ))
     }
 }

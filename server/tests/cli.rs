@@ -102,11 +102,12 @@ fn simd_and_baseline_builds_agree_bitwise() {
 
 /// `kea` with these arguments, `KEA_MAX_WORK` unset: (exit code, stdout, stderr).
 fn kea(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(KEA)
-        .args(args)
-        .env_remove("KEA_MAX_WORK")
-        .output()
-        .expect("kea runs");
+    run(Command::new(KEA).args(args))
+}
+
+/// Run a `kea` command, `KEA_MAX_WORK` unset: (exit code, stdout, stderr).
+fn run(cmd: &mut Command) -> (i32, String, String) {
+    let out = cmd.env_remove("KEA_MAX_WORK").output().expect("kea runs");
     let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
     (
         out.status.code().unwrap_or(-1),
@@ -279,4 +280,198 @@ fn input_errors_name_their_source_and_exit_2_up_front() {
         v
     };
     assert_eq!(strip(&by_model.1), strip(&by_preset.1));
+}
+
+/// A synthesis request that finds its point (exit 0) on preset:cv-tracker.
+const FOUND_REQUEST: &str = r#"{"target": {"criterion": "yx", "set": "covariance", "threshold": 2}, "mode": {"grid": {"params": [{"name": "r", "values": [0.5, 1]}]}}}"#;
+
+/// Every command's output goes through one checked write: stdout that cannot be
+/// written (a full disk) is said on stderr and exits 1, never a panic or a silent 0;
+/// a `--csv` file that fails while written is the same failure (not input to fix). A
+/// closed pipe (`kea … | head`) ends the output quietly, exit 0.
+#[cfg(target_os = "linux")]
+#[test]
+fn output_that_cannot_be_written_is_a_failure_and_a_closed_pipe_is_not() {
+    let dir = tempfile::tempdir().unwrap();
+    let request = dir.path().join("request.json");
+    std::fs::write(&request, FOUND_REQUEST).unwrap();
+    let request = request.to_str().unwrap();
+    let commands: [&[&str]; 11] = [
+        &["presets"],
+        &["presets", "--json"],
+        &["preset", "cv-tracker"],
+        &["analyze", "preset:cv-tracker"],
+        &["analyze", "preset:cv-tracker", "--json"],
+        &["simulate", "preset:cv-tracker", "--runs", "20"],
+        &["simulate", "preset:cv-tracker", "--runs", "20", "--json"],
+        &["synthesize", request, "--preset", "cv-tracker"],
+        &["synthesize", request, "--preset", "cv-tracker", "--json"],
+        &["analyze", "preset:cv-tracker", "--csv", "-"],
+        &["--help"],
+    ];
+    for args in commands {
+        let full = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap();
+        let (code, _, err) = run(Command::new(KEA).args(args).stdout(full));
+        assert_eq!(code, 1, "{args:?}: {err}");
+        assert_eq!(
+            err, "cannot write to stdout: No space left on device (os error 28)\n",
+            "{args:?}"
+        );
+
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let (code, _, err) = run(Command::new(KEA).args(args).stdout(writer));
+        assert_eq!(code, 0, "{args:?}: {err}");
+        assert!(err.is_empty(), "{args:?}: {err}");
+    }
+    let (code, _, err) = kea(&["analyze", "preset:cv-tracker", "--csv", "/dev/full"]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.starts_with("cannot write /dev/full: "), "{err}");
+}
+
+/// The Monte Carlo report writes its numbers as the analysis table does: exponent form
+/// where four decimals would be unreadable (1.4281e25, not 26 digits; 1.2551e-5, not
+/// 0.0000), each close to the JSON's value, and `—` for anything undefined — never NaN.
+#[test]
+fn simulation_report_numbers_are_readable_and_undefined_is_a_dash() {
+    let cases: [&[&str]; 2] = [
+        &["simulate", "preset:helicopter-hover", "--runs", "100"],
+        &[
+            "simulate",
+            "preset:cv-tracker",
+            "--set",
+            "r=1e7",
+            "--runs",
+            "20",
+        ],
+    ];
+    for args in cases {
+        let (code, text, err) = kea(args);
+        assert_eq!(code, 0, "{err}");
+        let (code, json, err) = kea(&[args, &["--json"]].concat());
+        assert_eq!(code, 0, "{err}");
+        let json: Value = serde_json::from_str(&json).unwrap();
+        for (row, key) in [("F_YZ ", "yz"), ("F_ZX ", "zx"), ("F_YX ", "yx")] {
+            let line = text.lines().find(|l| l.starts_with(row)).expect(row);
+            let cells: Vec<&str> = line.split_whitespace().skip(1).collect();
+            for (cell, set) in cells.iter().zip(["bound", "covariance", "monte_carlo"]) {
+                assert!(cell.len() <= 10, "{args:?}: {line}");
+                let want = &json["criteria"][set]["weighted"][key];
+                match want.as_f64() {
+                    Some(want) => {
+                        let got: f64 = cell.parse().expect(line);
+                        assert!(
+                            (got - want).abs() <= 1e-3 * want.abs(),
+                            "{args:?} {set} {key}: {got} against {want}"
+                        );
+                    }
+                    None => assert_eq!(*cell, "—", "{args:?}: {line}"),
+                }
+            }
+        }
+    }
+
+    // No measurement is ever available: the NIS check has no average and no band.
+    let dir = tempfile::tempdir().unwrap();
+    let mut model: Value = serde_json::from_str(&kea(&["preset", "helicopter-hover"]).1).unwrap();
+    let n = model["measurement"]["names"].as_array().unwrap().len();
+    model["measurement"]["schedule"] = json!(vec![json!({"when": "0"}); n]);
+    let file = dir.path().join("unmeasured.json");
+    std::fs::write(&file, model.to_string()).unwrap();
+    let (code, text, err) = kea(&["simulate", file.to_str().unwrap(), "--runs", "20"]);
+    assert_eq!(code, 0, "{err}");
+    let nis = text
+        .lines()
+        .find(|l| l.starts_with("NIS:"))
+        .expect("NIS line");
+    assert!(nis.contains("band [—, —]"), "{nis}");
+    for bad in ["NaN", "inf"] {
+        assert!(!text.contains(bad), "{text}");
+    }
+
+    // A time for reading, not 300 digits.
+    let mut model: Value = serde_json::from_str(&kea(&["preset", "cv-tracker"]).1).unwrap();
+    model["time"]["t_end"] = json!(1e-300);
+    let file = dir.path().join("brief.json");
+    std::fs::write(&file, model.to_string()).unwrap();
+    let (code, text, err) = kea(&["simulate", file.to_str().unwrap(), "--runs", "20"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(text.contains("\nAt t = 1e-300: "), "{text}");
+}
+
+/// `--csv -` writes the CSV to stdout in place of the table (no file named `-`), and is
+/// refused with `--json`; a `--csv` path that is the model file is refused (exit 2)
+/// and the model left as it was — for analyze and simulate alike.
+#[test]
+fn csv_to_stdout_and_never_over_the_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let by_file = dir.path().join("traces.csv");
+    let (code, _, err) = kea(&[
+        "analyze",
+        "preset:cv-tracker",
+        "--csv",
+        by_file.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (code, out, err) = run(Command::new(KEA)
+        .args(["analyze", "preset:cv-tracker", "--csv", "-"])
+        .current_dir(dir.path()));
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(out, std::fs::read_to_string(&by_file).unwrap());
+    assert!(!dir.path().join("-").exists());
+    let (code, out, err) = run(Command::new(KEA)
+        .args([
+            "simulate",
+            "preset:cv-tracker",
+            "--runs",
+            "20",
+            "--csv",
+            "-",
+        ])
+        .current_dir(dir.path()));
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.starts_with("t,") && !out.contains("Monte Carlo"),
+        "{out}"
+    );
+    assert!(!dir.path().join("-").exists());
+
+    let model = dir.path().join("m.json");
+    let text = kea(&["preset", "cv-tracker"]).1;
+    std::fs::write(&model, &text).unwrap();
+    let same = dir.path().join(".").join("m.json");
+    let (model, same) = (model.to_str().unwrap(), same.to_str().unwrap());
+    for cmd in ["analyze", "simulate"] {
+        let (code, out, err) = kea(&[cmd, "preset:cv-tracker", "--json", "--csv", "-"]);
+        assert_eq!(code, 2, "{err}");
+        assert!(out.is_empty(), "{out}");
+        assert!(
+            err.starts_with("--csv -: stdout carries the --json result"),
+            "{err}"
+        );
+        let (code, _, err) = kea(&[cmd, model, "--csv", same]);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains("that is the model file"), "{err}");
+        assert_eq!(std::fs::read_to_string(model).unwrap(), text);
+    }
+}
+
+/// stdin can be read once: a synthesis request and its `--model` both `-` is refused.
+#[test]
+fn synthesize_refuses_stdin_twice() {
+    let mut child = Command::new(KEA)
+        .args(["synthesize", "-", "--model", "-"])
+        .stdin(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("kea runs");
+    // (kea may refuse before reading: a closed pipe here is fine.)
+    let _ = std::io::Write::write_all(&mut child.stdin.take().unwrap(), FOUND_REQUEST.as_bytes());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("stdin can be read once"), "{err}");
 }

@@ -1,4 +1,4 @@
-//! `kea analyze MODEL.json|preset:NAME [--set name=value]… [--json] [--csv FILE]`.
+//! `kea analyze MODEL.json|preset:NAME [--set name=value]… [--json] [--csv FILE|-]`.
 
 use crate::Run;
 use kea_core::Overrides;
@@ -17,7 +17,8 @@ pub struct Args {
     #[arg(long)]
     pub json: bool,
     /// Also write the decimated traces as CSV to this file (t, then every series of
-    /// every state; an empty cell is undefined).
+    /// every state; an empty cell is undefined); `-` writes them to stdout in place of
+    /// the table (not with --json). The model file itself is refused.
     #[arg(long, value_name = "FILE")]
     pub csv: Option<PathBuf>,
     #[command(flatten)]
@@ -37,8 +38,8 @@ impl Run for Args {
         {
             return code;
         }
-        let csv_file = match self.csv.as_deref().map(super::create_file).transpose() {
-            Ok(f) => f,
+        let csv = match super::Csv::open(self.csv.as_deref(), &self.model, self.json) {
+            Ok(c) => c,
             Err(code) => return code,
         };
         let start = Instant::now();
@@ -50,18 +51,15 @@ impl Run for Args {
             Err(e) => return super::report_error(&e),
         };
         result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        if let (Some(path), Some(file)) = (&self.csv, csv_file)
-            && let Err(code) = super::write_file(file, path, &kea_core::report::traces_csv(&result))
-        {
-            return code;
+        match super::print_run(
+            &result,
+            self.json,
+            csv,
+            kea_core::report::traces_csv,
+            kea_core::report::criteria_table,
+        ) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(code) => code,
         }
-        if self.json {
-            if let Err(code) = super::print_json(&result) {
-                return code;
-            }
-        } else {
-            super::print_text(&kea_core::report::criteria_table(&result));
-        }
-        ExitCode::SUCCESS
     }
 }

@@ -8,7 +8,9 @@ pub mod synthesize;
 
 use crate::serve::jobs::Work;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::io::Write;
 use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -29,13 +31,11 @@ pub fn report_error(err: &kea_core::Error) -> ExitCode {
     }
 }
 
-/// Print a result as pretty JSON on stdout; on failure say so and return the exit code.
+/// Print a result as pretty JSON on stdout ([`print_text`]); on failure say so and
+/// return the exit code.
 pub fn print_json<T: serde::Serialize>(value: &T) -> Result<(), ExitCode> {
     match serde_json::to_string_pretty(value) {
-        Ok(s) => {
-            print_text(&format!("{s}\n"));
-            Ok(())
-        }
+        Ok(s) => print_text(&format!("{s}\n")),
         Err(e) => {
             eprintln!("cannot serialise the result: {e}");
             Err(ExitCode::from(EXIT_FAILURE))
@@ -43,11 +43,24 @@ pub fn print_json<T: serde::Serialize>(value: &T) -> Result<(), ExitCode> {
     }
 }
 
-/// Write to stdout; a closed pipe (`kea … | head`) ends the output quietly instead of
-/// panicking as `print!` does.
-pub fn print_text(text: &str) {
-    use std::io::Write;
-    let _ = std::io::stdout().lock().write_all(text.as_bytes());
+/// Write a command's output to stdout and flush it: every command prints through here
+/// (or [`print_json`]), so that no output is lost unsaid.
+pub fn print_text(text: &str) -> Result<(), ExitCode> {
+    let mut out = std::io::stdout().lock();
+    stdout_written(out.write_all(text.as_bytes()).and_then(|()| out.flush()))
+}
+
+/// What a write to stdout came to. A failure (a full disk, a closed terminal) is said on
+/// stderr, exit 1. A closed pipe (`kea … | head`) is not a failure: the reader has all it
+/// wanted, so the output ends quietly, as a Unix filter's does (no panic as `print!`'s).
+pub fn stdout_written(result: std::io::Result<()>) -> Result<(), ExitCode> {
+    match result {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            eprintln!("cannot write to stdout: {e}");
+            Err(ExitCode::from(EXIT_FAILURE))
+        }
+        _ => Ok(()),
+    }
 }
 
 /// The JSON a command names: a file, `-` for stdin, or `preset:NAME` for a preset. Every failure
@@ -98,25 +111,94 @@ pub fn load_model(arg: &str) -> Result<kea_core::Model, ExitCode> {
 }
 
 /// Create (truncate) the file an option names before a run, so that a path that
-/// cannot be written is refused up front (exit 2) rather than after the work.
-pub fn create_file(path: &std::path::Path) -> Result<std::fs::File, ExitCode> {
+/// cannot be created is refused up front (exit 2) rather than after the work.
+pub fn create_file(path: &Path) -> Result<std::fs::File, ExitCode> {
     std::fs::File::create(path).map_err(|e| {
         eprintln!("cannot write {}: {e}", path.display());
         ExitCode::from(EXIT_INVALID)
     })
 }
 
-/// Write `text` to a file made by [`create_file`]; on failure say so (exit 1).
-pub fn write_file(
-    mut file: std::fs::File,
-    path: &std::path::Path,
-    text: &str,
-) -> Result<(), ExitCode> {
-    use std::io::Write;
+/// Write `text` to a file made by [`create_file`]; on failure (a full disk…) say so
+/// (exit 1: the run is done, the input was not at fault).
+pub fn write_file(mut file: std::fs::File, path: &Path, text: &str) -> Result<(), ExitCode> {
     file.write_all(text.as_bytes()).map_err(|e| {
         eprintln!("cannot write {}: {e}", path.display());
         ExitCode::from(EXIT_FAILURE)
     })
+}
+
+/// Where a command's `--csv` goes.
+pub enum Csv {
+    /// A file, created up front.
+    File(PathBuf, std::fs::File),
+    /// Stdout (`--csv -`), in place of the command's table.
+    Stdout,
+}
+
+impl Csv {
+    /// Check a command's `--csv` against its model argument and `--json`, before any
+    /// work: `-` is stdout, refused with `--json` (which prints there too); a path that
+    /// is the model file is refused, not overwritten; any other is created now
+    /// ([`create_file`]). A refusal is input to fix (exit 2).
+    pub fn open(csv: Option<&Path>, model: &str, json: bool) -> Result<Option<Csv>, ExitCode> {
+        let refuse = |message: String| {
+            eprintln!("{message}");
+            Err(ExitCode::from(EXIT_INVALID))
+        };
+        let Some(path) = csv else {
+            return Ok(None);
+        };
+        if path == Path::new("-") {
+            if json {
+                return refuse(
+                    "--csv -: stdout carries the --json result; write the CSV to a file".into(),
+                );
+            }
+            return Ok(Some(Csv::Stdout));
+        }
+        let is_file = model != "-" && !model.starts_with("preset:");
+        if is_file
+            && let (Ok(a), Ok(b)) = (path.canonicalize(), Path::new(model).canonicalize())
+            && a == b
+        {
+            return refuse(format!(
+                "--csv {}: that is the model file; write the CSV to another file",
+                path.display()
+            ));
+        }
+        create_file(path).map(|file| Some(Csv::File(path.to_path_buf(), file)))
+    }
+
+    /// Write the CSV text to its file or stdout.
+    pub fn write(self, text: &str) -> Result<(), ExitCode> {
+        match self {
+            Csv::File(path, file) => write_file(file, &path, text),
+            Csv::Stdout => print_text(text),
+        }
+    }
+}
+
+/// Print a run's result: its CSV where `--csv` says, then the JSON (`--json`) or the
+/// text on stdout, unless the CSV took stdout.
+pub fn print_run<T: serde::Serialize>(
+    result: &T,
+    json: bool,
+    csv: Option<Csv>,
+    csv_text: impl FnOnce(&T) -> String,
+    text: impl FnOnce(&T) -> String,
+) -> Result<(), ExitCode> {
+    let text_on_stdout = !matches!(csv, Some(Csv::Stdout));
+    if let Some(csv) = csv {
+        csv.write(&csv_text(result))?;
+    }
+    if json {
+        print_json(result)
+    } else if text_on_stdout {
+        print_text(&text(result))
+    } else {
+        Ok(())
+    }
 }
 
 /// Parse one `--set name=value` argument.

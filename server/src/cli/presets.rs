@@ -1,6 +1,7 @@
 //! `kea presets` (list) and `kea preset NAME` (print the JSON).
 
 use crate::Run;
+use std::fmt::Write;
 use std::process::ExitCode;
 
 #[derive(Debug, clap::Args)]
@@ -13,21 +14,24 @@ pub struct ListArgs {
 impl Run for ListArgs {
     fn run(self) -> ExitCode {
         let list = kea_core::presets::list();
-        if self.json {
-            println!(
-                "{}",
-                serde_json::to_string_pretty(&list).expect("plain data")
-            );
-            return ExitCode::SUCCESS;
+        let printed = if self.json {
+            super::print_json(&list)
+        } else {
+            let w = list.iter().map(|p| p.name.len()).max().unwrap_or(0);
+            let mut text = String::new();
+            for p in list {
+                let _ = writeln!(
+                    text,
+                    "{:<w$}  N={} n={}  {}",
+                    p.name, p.states, p.measurements, p.title
+                );
+            }
+            super::print_text(&text)
+        };
+        match printed {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(code) => code,
         }
-        let w = list.iter().map(|p| p.name.len()).max().unwrap_or(0);
-        for p in list {
-            println!(
-                "{:<w$}  N={} n={}  {}",
-                p.name, p.states, p.measurements, p.title
-            );
-        }
-        ExitCode::SUCCESS
     }
 }
 
@@ -41,11 +45,11 @@ impl Run for ShowArgs {
     fn run(self) -> ExitCode {
         match kea_core::presets::get_json(&self.name) {
             Some(json) => {
-                super::print_text(json);
-                if !json.ends_with('\n') {
-                    println!();
+                let end = if json.ends_with('\n') { "" } else { "\n" };
+                match super::print_text(&format!("{json}{end}")) {
+                    Ok(()) => ExitCode::SUCCESS,
+                    Err(code) => code,
                 }
-                ExitCode::SUCCESS
             }
             None => {
                 eprintln!("{}", super::no_preset(&self.name));

@@ -1,12 +1,14 @@
 //! `kea simulate MODEL.json|preset:NAME [--runs R] [--seed S] [--truth process|mean]
 //! [--model-error white|constant] [--trace-points ROWS] [--set name=value]… [--threads T]
-//! [--max-work UNITS] [--json] [--csv FILE]`: the Monte Carlo of METHOD §1.8 — real
+//! [--max-work UNITS] [--json] [--csv FILE|-]`: the Monte Carlo of METHOD §1.8 — real
 //! (simulated) against potential (Riccati) accuracy. R is 1000 unless given. The report
-//! is text, or JSON with `--json`; `--csv` also writes the traces to a file.
+//! is text, or JSON with `--json`; `--csv` also writes the traces to a file (or, as
+//! `-`, to stdout in place of the text).
 
 use crate::Run;
 use crate::parallel::Rayon;
 use kea_core::Overrides;
+use kea_core::report::{cell, short};
 use kea_core::simulation::{
     Executor, ModelError, SimulationRequest, SimulationResult, Truth, Verdict,
 };
@@ -55,7 +57,9 @@ pub struct Args {
     /// Print the whole result as JSON.
     #[arg(long)]
     pub json: bool,
-    /// Also write the traces (potential against real SKOs) as CSV to this file.
+    /// Also write the traces (potential against real SKOs) as CSV to this file; `-`
+    /// writes them to stdout in place of the report (not with --json). The model file
+    /// itself is refused.
     #[arg(long, value_name = "FILE")]
     pub csv: Option<PathBuf>,
     #[command(flatten)]
@@ -94,8 +98,8 @@ impl Run for Args {
         if let Err(code) = self.limit.check(work) {
             return code;
         }
-        let csv_file = match self.csv.as_deref().map(super::create_file).transpose() {
-            Ok(f) => f,
+        let csv = match super::Csv::open(self.csv.as_deref(), &self.model, self.json) {
+            Ok(c) => c,
             Err(code) => return code,
         };
         let start = Instant::now();
@@ -107,25 +111,17 @@ impl Run for Args {
             Err(e) => return super::report_error(&e),
         };
         result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        if let (Some(path), Some(file)) = (&self.csv, csv_file)
-            && let Err(code) =
-                super::write_file(file, path, &kea_core::simulation::traces_csv(&result))
-        {
-            return code;
+        match super::print_run(
+            &result,
+            self.json,
+            csv,
+            kea_core::simulation::traces_csv,
+            |r| table(r, exec.threads()),
+        ) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(code) => code,
         }
-        if self.json {
-            if let Err(code) = super::print_json(&result) {
-                return code;
-            }
-        } else {
-            super::print_text(&table(&result, exec.threads()));
-        }
-        ExitCode::SUCCESS
     }
-}
-
-fn opt(v: Option<f64>) -> String {
-    v.map_or("—".to_string(), |x| format!("{x:.4}"))
 }
 
 fn verdict(v: Verdict) -> &'static str {
@@ -137,7 +133,8 @@ fn verdict(v: Verdict) -> &'static str {
     }
 }
 
-/// The plain-text report: final SKOs, verdicts, and the three criteria sets.
+/// The plain-text report: final SKOs, verdicts, and the three criteria sets; numbers as
+/// in the analysis table ([`number`]), `—` where undefined.
 pub fn table(r: &SimulationResult, threads: usize) -> String {
     let mut s = String::new();
     let _ = writeln!(
@@ -160,7 +157,7 @@ pub fn table(r: &SimulationResult, threads: usize) -> String {
     let _ = writeln!(
         s,
         "\nAt t = {}: SKO of the errors (sample) against the potential sqrt(R_ii) and the bound χ",
-        r.t_end
+        short(r.t_end)
     );
     let _ = writeln!(
         s,
@@ -172,29 +169,29 @@ pub fn table(r: &SimulationResult, threads: usize) -> String {
         let v = &r.consistency.per_state[i];
         let _ = writeln!(
             s,
-            "{:<12} {:>12.5e} {:>12} {:>12.5e} {:>12.5e} {:>12.5e}   {} ({} in [{:.3}, {:.3}])",
+            "{:<12} {:>12} {:>12} {:>12} {:>12} {:>12}   {} ({} in [{}, {}])",
             st,
-            f.a_priori_sko[i],
-            f.measured_sko[i].map_or("—".into(), |x| format!("{x:.5e}")),
-            f.filtered_sko[i],
-            f.potential_sko[i],
-            f.chi[i],
+            cell(Some(f.a_priori_sko[i])),
+            cell(f.measured_sko[i]),
+            cell(Some(f.filtered_sko[i])),
+            cell(Some(f.potential_sko[i])),
+            cell(Some(f.chi[i])),
             verdict(v.verdict),
-            opt(v.variance_ratio),
-            v.band[0],
-            v.band[1]
+            cell(v.variance_ratio),
+            cell(Some(v.band[0])),
+            cell(Some(v.band[1]))
         );
     }
     let c = &r.consistency;
     for (name, st) in [("NEES", &c.nees), ("NIS", &c.nis)] {
         let _ = writeln!(
             s,
-            "{name}: average {} (dof {:.2}), {:.0} % band [{:.3}, {:.3}], {} of steps in band: {}",
-            opt(st.time_average),
+            "{name}: average {} (dof {:.2}), {:.0} % band [{}, {}], {} of steps in band: {}",
+            cell(st.time_average),
             st.dof,
             c.band_probability * 100.0,
-            st.band[0],
-            st.band[1],
+            cell(Some(st.band[0])),
+            cell(Some(st.band[1])),
             st.fraction_in_band
                 .map_or("—".into(), |f| format!("{:.1} %", f * 100.0)),
             verdict(st.verdict)
@@ -213,7 +210,7 @@ pub fn table(r: &SimulationResult, threads: usize) -> String {
         let vals: Vec<String> = sets
             .iter()
             .map(|set| {
-                opt(set.and_then(|c| match get {
+                cell(set.and_then(|c| match get {
                     0 => c.weighted.yz,
                     1 => c.weighted.zx,
                     _ => c.weighted.yx,

@@ -35,6 +35,12 @@ pub struct Args {
 
 impl Run for Args {
     fn run(self) -> ExitCode {
+        if self.request == "-" && self.model.as_deref() == Some("-") {
+            eprintln!(
+                "the request and --model are both `-`, but stdin can be read once: give one of them as a file"
+            );
+            return ExitCode::from(super::EXIT_INVALID);
+        }
         let mut value = match super::read_json(&self.request) {
             Ok(v) => v,
             Err(c) => return c,
@@ -98,12 +104,13 @@ impl Run for Args {
             Err(e) => return super::report_error(&e),
         };
         result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        if self.json {
-            if let Err(code) = super::print_json(&result) {
-                return code;
-            }
+        let printed = if self.json {
+            super::print_json(&result)
         } else {
-            super::print_text(&synthesis::render_text(&result));
+            super::print_text(&synthesis::render_text(&result))
+        };
+        if let Err(code) = printed {
+            return code;
         }
         match result.status {
             Status::Found | Status::Table => ExitCode::SUCCESS,

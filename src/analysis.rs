@@ -70,21 +70,41 @@ fn unconverged(s: &StepSelection) -> Option<String> {
     if s.converged {
         return None;
     }
-    let last = s
+    let measured: Vec<(u64, f64)> = s
         .history
         .iter()
-        .rev()
-        .find_map(|h| h.difference.map(|d| (h.steps, d)));
+        .filter_map(|h| h.difference.map(|d| (h.steps, d)))
+        .collect();
     let chosen = s.history.last().map_or(s.max_steps, |h| h.steps);
-    let measured = match last {
-        Some((d, diff)) => format!(
-            "; the difference was {diff:.2e} at D = {d}, so about D = {:.1e} would reach it",
-            d as f64 * diff / s.tolerance
+    let limit = crate::validate::MAX_STEPS;
+    let (measured, advice) = match measured.as_slice() {
+        [.., (_, before), (d, diff)] if diff >= before => (
+            format!(
+                "; the difference did not fall as D doubled ({before:.2e}, then {diff:.2e} at D = {d}), so Euler's 1/D convergence has not begun and no D can be predicted"
+            ),
+            "raise time.auto.tolerance, or check the model's time scales against Δt",
         ),
-        None => String::new(),
+        [.., (d, diff)] => {
+            let needed = *d as f64 * diff / s.tolerance;
+            let advice = if needed > limit as f64 {
+                "beyond the limit of 1e8 steps: raise time.auto.tolerance"
+            } else {
+                "raise time.auto.max_steps or time.auto.tolerance"
+            };
+            (
+                format!(
+                    "; the difference was {diff:.2e} at D = {d}, so about D = {needed:.1e} would reach it"
+                ),
+                advice,
+            )
+        }
+        [] => (
+            String::new(),
+            "raise time.auto.max_steps or time.auto.tolerance",
+        ),
     };
     Some(format!(
-        "time.steps \"auto\" did not reach its tolerance {:e} within time.auto.max_steps = {}: the result uses D = {chosen}{measured}; raise time.auto.max_steps or time.auto.tolerance",
+        "time.steps \"auto\" did not reach its tolerance {:e} within time.auto.max_steps = {}: the result uses D = {chosen}{measured}; {advice}",
         s.tolerance, s.max_steps
     ))
 }

@@ -96,6 +96,16 @@ impl<'de> serde::Deserialize<'de> for StrictValue {
     }
 }
 
+/// A whole number ≥ 0, also where written as a float (`1000.0`, `1e3`: Python's json
+/// writes a float so), as every whole-number member of kea's requests reads it.
+pub fn whole_u64(v: &Value) -> Option<u64> {
+    match v.as_f64() {
+        _ if v.is_u64() => v.as_u64(),
+        Some(x) if x.fract() == 0.0 && (0.0..1.8e19).contains(&x) => Some(x as u64),
+        _ => None,
+    }
+}
+
 /// A JSON value read as serde_json reads a [`Value`], except that a struct (or a
 /// struct variant) must be an object: serde's derived structs also accept an array of
 /// the fields in order, so `"options": [0, false]` was read as `trace_points = 0,
@@ -204,8 +214,21 @@ impl<'de> Deserializer<'de> for Objects<'de> {
         }
     }
 
+    // A whole number written with a fraction or an exponent (`1000.0`, `1e3`, as
+    // Python's json writes a float) is that whole number, as `time.steps` reads it.
+    fn deserialize_u64<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, Self::Error> {
+        match whole_u64(self.0) {
+            Some(x) => visitor.visit_u64(x),
+            None => self.deserialize_any(visitor),
+        }
+    }
+
+    fn deserialize_u32<V: Visitor<'de>>(self, visitor: V) -> Result<V::Value, Self::Error> {
+        self.deserialize_u64(visitor)
+    }
+
     serde::forward_to_deserialize_any! {
-        bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string bytes
+        bool i8 i16 i32 i64 i128 u8 u16 u128 f32 f64 char str string bytes
         byte_buf unit unit_struct seq tuple tuple_struct map identifier ignored_any
     }
 }

@@ -109,7 +109,8 @@ pub enum Steps {
 
 /// By hand, for errors that say what is expected (serde's untagged derive says "data
 /// did not match any variant"). A whole number written as a float (`1e6`, `1000.0`)
-/// is D; one beyond u64 is `u64::MAX`, which validation reports as over the limit.
+/// is D; one over the limit of steps is refused here, as written (`1e30`, not
+/// saturated to u64's largest).
 impl<'de> Deserialize<'de> for Steps {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         use serde::de::Error;
@@ -130,9 +131,13 @@ impl<'de> Deserialize<'de> for Steps {
                 })
             }
             fn visit_f64<E: Error>(self, x: f64) -> Result<Steps, E> {
-                if x >= 0.0 && x.fract() == 0.0 {
-                    // (as saturates: 2^70 becomes u64::MAX, over the limit)
+                if x >= 0.0 && x.fract() == 0.0 && x <= crate::validate::MAX_STEPS as f64 {
                     Ok(Steps::Fixed(x as u64))
+                } else if x.fract() == 0.0 && x > 0.0 {
+                    Err(E::custom(format!(
+                        "{x:e} steps is more than the limit of {}",
+                        crate::validate::MAX_STEPS
+                    )))
                 } else {
                     Err(E::custom(format!(
                         "expected a positive whole number of steps D, or \"auto\"; got {x}"

@@ -262,7 +262,12 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
                     format!("must not exceed the limit of {MAX_STEPS}"),
                 );
             }
-            if auto.max_steps < auto.initial_steps {
+            if auto.initial_steps > MAX_STEPS {
+                errs.at(
+                    "time.auto.initial_steps",
+                    format!("must not exceed the limit of {MAX_STEPS}"),
+                );
+            } else if auto.max_steps < auto.initial_steps {
                 errs.at("time.auto.max_steps", "must be at least initial_steps");
             }
             StepPlan::Auto {

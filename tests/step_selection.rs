@@ -128,6 +128,44 @@ fn time_varying_model_matches_a_second_implementation_and_respects_the_cap() {
     }
 }
 
+/// A selection stopped by its cap says which D the tolerance would take (Euler: the
+/// difference falls as 1/D) and what to change: max_steps where that D is within the
+/// limit of 1e8 steps, the tolerance where it is not.
+#[test]
+fn a_capped_selection_says_what_would_reach_the_tolerance() {
+    let warning = |tolerance: f64| {
+        let m = model_from_value(scalar(
+            json!("-1-0.5*sin(3*t)"),
+            json!("cos(t)"),
+            json!({"tolerance": tolerance, "initial_steps": 100, "max_steps": 800}),
+        ))
+        .unwrap();
+        let r = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap();
+        let s = r.step_selection.unwrap();
+        assert!(!s.converged);
+        let (d, diff) = (s.history[2].steps, s.history[2].difference.unwrap());
+        let w = r
+            .warnings
+            .into_iter()
+            .find(|w| w.contains("did not reach its tolerance"))
+            .expect("the warning");
+        (w, d as f64 * diff / tolerance)
+    };
+    let (w, needed) = warning(1e-12);
+    assert!(needed > 1e8, "{needed:e}");
+    assert!(
+        w.ends_with("beyond the limit of 1e8 steps: raise time.auto.tolerance"),
+        "{w}"
+    );
+    let (w, needed) = warning(1e-5);
+    assert!(needed < 1e8 && needed > 800.0, "{needed:e}");
+    assert!(w.contains(&format!("about D = {needed:.1e}")), "{w}");
+    assert!(
+        w.ends_with("raise time.auto.max_steps or time.auto.tolerance"),
+        "{w}"
+    );
+}
+
 /// The covariance recursion alone (the benchmarks' like-for-like run) runs a fixed
 /// number of steps; "auto" is refused with the field named.
 #[test]

@@ -211,6 +211,21 @@ fn numbers_and_ranges() {
         "more than the limit",
     );
     expect(
+        |v| v["time"]["steps"] = json!(1e30),
+        &[],
+        "time.steps",
+        "1e30 steps is more than the limit of 100000000",
+    );
+    expect(
+        |v| {
+            v["time"]["steps"] = json!("auto");
+            v["time"]["auto"] = json!({"initial_steps": 1e9});
+        },
+        &[],
+        "time.auto.initial_steps",
+        "must not exceed the limit of 100000000",
+    );
+    expect(
         |v| v["time"]["steps"] = json!("many"),
         &[],
         "time.steps",
@@ -760,6 +775,11 @@ fn wrong_types_say_what_is_expected() {
         let (field, value) = inner.as_object().unwrap().iter().next().unwrap();
         expect(|v| v[part][field] = value.clone(), &[], path, message);
     }
+    // Every whole-number member reads a whole number written as a float, as steps do.
+    let mut v = good();
+    v["options"] = json!({"trace_points": 500.0});
+    v["kea_model"] = json!(1.0);
+    assert_eq!(model_from_value(v).unwrap().options.trace_points, 500);
     let mut v = good();
     v["time"]["steps"] = json!(1e3);
     let m = model_from_value(v).unwrap();

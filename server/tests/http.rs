@@ -193,7 +193,11 @@ fn a_simulation_job_equals_kea_simulate() {
         default_seed["final"], seed_0["final"],
         "the seed changes the runs"
     );
-    for (request, expected) in [(json!({}), &default_seed), (json!({"seed": 0}), &seed_0)] {
+    // (`runs` 20.0: a whole number written as a float is that number, as in the model)
+    for (request, expected) in [
+        (json!({}), &default_seed),
+        (json!({"seed": 0, "runs": 20.0}), &seed_0),
+    ] {
         let mut body = json!({"kind": "simulation", "model": preset("cv-tracker"), "runs": 20});
         body.as_object_mut()
             .unwrap()

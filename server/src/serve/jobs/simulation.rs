@@ -40,7 +40,7 @@ impl JobKind for Simulation {
         let mut sim = SimulationRequest::new(0, kea_core::simulation::DEFAULT_SEED);
         let whole = |name: &str, what: &str, errors: &mut Vec<FieldError>| {
             let v = obj.get(name)?;
-            let n = v.as_u64();
+            let n = kea_core::json::whole_u64(v);
             if n.is_none() {
                 errors.push(FieldError::new(
                     name,

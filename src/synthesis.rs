@@ -330,10 +330,58 @@ pub fn request_from_json(text: &str) -> Result<SynthesisRequest, Error> {
 /// Check a request without running it; every problem found, at its path.
 pub fn validate(req: &SynthesisRequest) -> Result<(), Error> {
     let mut errs: Vec<FieldError> = Vec::new();
-    if let Err(e) = crate::check(&req.model, &req.set) {
-        errs.extend(locate_model_errors(e).field_errors());
+    let compiled = crate::validate::compile(&req.model, &req.set);
+    if let Err(e) = &compiled {
+        errs.extend(locate_model_errors(e.clone()).field_errors());
     }
     let t = &req.target;
+    // F_YZ and F_ZX of a state are defined only where it has a measurement: a target
+    // there could never be met (every point would be undefined).
+    if let (Ok(c), Some(s), Criterion::Yz | Criterion::Zx) = (&compiled, &t.state, t.criterion)
+        && let Some(i) = c.states.iter().position(|x| x == s)
+        && c.pair_of_state[i].is_none()
+    {
+        errs.push(FieldError::new(
+            "target.criterion",
+            format!(
+                "{} is undefined for state \"{s}\": it has no paired measurement (measurement.pairs); yx is defined for every state",
+                crit_name(t)
+            ),
+        ));
+    }
+    // The searched params take values the model may refuse (an SKO ≤ 0, a square root
+    // of a negative): each param's extreme values are checked here, with the others
+    // as the model and `set` give them, so that such a request is refused now at the
+    // value's path rather than as a failed run.
+    let mut fixed_in_set: Vec<&str> = Vec::new();
+    for (name, path, value) in extremes(&req.mode) {
+        if req.set.contains_key(name) {
+            if !fixed_in_set.contains(&name) {
+                fixed_in_set.push(name);
+                errs.push(FieldError::new(
+                    format!("set.{name}"),
+                    format!("\"{name}\" is a searched param (at {path}): the search sets it, so it cannot be fixed in set"),
+                ));
+            }
+            continue;
+        }
+        if compiled.is_err() || !req.model.params.contains_key(name) || !value.is_finite() {
+            continue;
+        }
+        let mut set = req.set.clone();
+        set.insert(name.to_string(), value);
+        if let Err(e) = crate::check(&req.model, &set)
+            && let Some(first) = locate_model_errors(e).field_errors().into_iter().next()
+        {
+            errs.push(FieldError::new(
+                path,
+                format!(
+                    "the model is invalid with {name} = {}: {first}",
+                    crate::validate::num(value)
+                ),
+            ));
+        }
+    }
     if !(t.threshold.is_finite() && t.threshold > 0.0) {
         errs.push(FieldError::new(
             "target.threshold",
@@ -532,6 +580,39 @@ pub fn validate(req: &SynthesisRequest) -> Result<(), Error> {
     } else {
         Err(Error::Invalid(errs))
     }
+}
+
+/// Each searched param's extreme values with their paths: a grid's smallest and
+/// largest value, a range's ends.
+fn extremes(mode: &Mode) -> Vec<(&str, String, f64)> {
+    let mut out: Vec<(&str, String, f64)> = Vec::new();
+    match mode {
+        Mode::SeedSearch(s) => {
+            for (i, p) in s.params.iter().enumerate() {
+                let path = format!("mode.seed_search.params[{i}]");
+                out.push((&p.name, format!("{path}.low"), p.low));
+                out.push((&p.name, format!("{path}.high"), p.high));
+            }
+        }
+        Mode::Bisect(b) => {
+            out.push((&b.param, "mode.bisect.low".into(), b.low));
+            out.push((&b.param, "mode.bisect.high".into(), b.high));
+        }
+        Mode::Grid(g) => {
+            for (i, p) in g.params.iter().enumerate() {
+                let finite = p.values.iter().enumerate().filter(|(_, v)| v.is_finite());
+                let by = |a: &(usize, &f64), b: &(usize, &f64)| a.1.total_cmp(b.1);
+                let path = |j: usize| format!("mode.grid.params[{i}].values[{j}]");
+                if let (Some(lo), Some(hi)) = (finite.clone().min_by(by), finite.max_by(by)) {
+                    out.push((&p.name, path(lo.0), *lo.1));
+                    if hi.0 != lo.0 {
+                        out.push((&p.name, path(hi.0), *hi.1));
+                    }
+                }
+            }
+        }
+    }
+    out
 }
 
 fn duplicate_check<'a>(

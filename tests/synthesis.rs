@@ -500,6 +500,61 @@ fn invalid_requests_name_the_field() {
     );
 }
 
+/// What the model would refuse during the run is refused with the request, at the
+/// request's own path: a searched value the model cannot take, a searched param also
+/// fixed in `set`, a YZ or ZX target for a state without a measurement.
+#[test]
+fn values_the_model_refuses_are_named_before_the_run() {
+    let model = serde_json::to_value(seed_model()).unwrap();
+    let target = json!({"criterion": "yx", "threshold": 14});
+    let errors = |v: Value| -> Vec<(String, String)> {
+        let req = synthesis::request_from_value(v).expect("readable");
+        synthesis::validate(&req)
+            .expect_err("invalid")
+            .field_errors()
+            .into_iter()
+            .map(|e| (e.path, e.message))
+            .collect()
+    };
+    // ψ = −1e-5: negative SKOs (φ = fψ, ψ), at the grid value (the column's smallest).
+    let e = errors(json!({"model": model, "target": target,
+        "mode": {"grid": {"params": [{"name": "psi", "values": [1e-5, -1e-5, 2e-5]}]}}}));
+    assert_eq!(e.len(), 1, "{e:?}");
+    assert_eq!(e[0].0, "mode.grid.params[0].values[1]");
+    assert!(
+        e[0].1
+            .starts_with("the model is invalid with psi = -1e-5: "),
+        "{e:?}"
+    );
+    assert!(e[0].1.contains("an SKO must be ≥ 0"), "{e:?}");
+    // m = 0 at a bisection's end: a = s/m is not finite.
+    let e = errors(json!({"model": model, "target": target, "set": {"f": 3},
+        "mode": {"seed_search": {"params": [{"name": "m", "low": 1e-320, "high": 100, "shrink": 0.5}]}}}));
+    assert!(
+        e.iter().any(|(p, _)| p == "mode.seed_search.params[0].low"),
+        "{e:?}"
+    );
+    let e = errors(
+        json!({"model": model, "target": target, "set": {"psi": 1e-5},
+        "mode": {"bisect": {"param": "psi", "low": 1e-6, "high": 1e-4}}}),
+    );
+    assert_eq!(
+        e,
+        [(
+            "set.psi".to_string(),
+            "\"psi\" is a searched param (at mode.bisect.low): the search sets it, so it cannot be fixed in set".to_string()
+        )]
+    );
+    let cv = serde_json::to_value(presets::get("cv-tracker").unwrap()).unwrap();
+    let e = errors(
+        json!({"model": cv, "target": {"criterion": "yz", "threshold": 2, "state": "velocity"},
+        "mode": {"grid": {"params": [{"name": "r", "values": [1]}]}}}),
+    );
+    assert_eq!(e.len(), 1, "{e:?}");
+    assert_eq!(e[0].0, "target.criterion");
+    assert!(e[0].1.contains("no paired measurement"), "{e:?}");
+}
+
 #[test]
 fn cancellation_stops_the_synthesis() {
     let req = seed_grid_request(None);

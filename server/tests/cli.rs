@@ -475,3 +475,26 @@ fn synthesize_refuses_stdin_twice() {
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("stdin can be read once"), "{err}");
 }
+
+/// A `--set` name given twice is refused (exit 2), as a key given twice in JSON is,
+/// in every command that takes `--set`; once is fine.
+#[test]
+fn a_set_name_given_twice_is_refused() {
+    for command in ["analyze", "simulate"] {
+        let (code, _, err) = kea(&[command, "preset:cv-tracker", "--set", "q=1", "--set", "q=2"]);
+        assert_eq!(code, 2, "{command}: {err}");
+        assert!(
+            err.contains("--set q is given twice (q=1, then q=2)"),
+            "{command}: {err}"
+        );
+    }
+    let (code, _, err) = kea(&[
+        "analyze",
+        "preset:cv-tracker",
+        "--set",
+        "q=1",
+        "--set",
+        "r=2",
+    ]);
+    assert_eq!(code, 0, "{err}");
+}

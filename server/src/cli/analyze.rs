@@ -1,7 +1,6 @@
 //! `kea analyze MODEL.json|preset:NAME [--set name=value]… [--json] [--csv FILE|-]`.
 
 use crate::Run;
-use kea_core::Overrides;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -31,7 +30,10 @@ impl Run for Args {
             Ok(m) => m,
             Err(code) => return code,
         };
-        let set: Overrides = self.set.into_iter().collect();
+        let set = match super::overrides(&self.set) {
+            Ok(s) => s,
+            Err(code) => return code,
+        };
         if let Err(code) = self
             .limit
             .check(crate::serve::jobs::analysis::work(&model, &set))

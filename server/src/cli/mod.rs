@@ -220,6 +220,23 @@ pub fn parse_override(arg: &str) -> Result<(String, f64), String> {
     Ok((name.to_string(), value))
 }
 
+/// The `--set` arguments as overrides; a name given twice is refused (exit 2), as a
+/// key given twice in JSON is, rather than the last one silently winning.
+pub fn overrides(set: &[(String, f64)]) -> Result<kea_core::Overrides, ExitCode> {
+    let mut out = kea_core::Overrides::new();
+    for (name, value) in set {
+        if let Some(before) = out.insert(name.clone(), *value) {
+            eprintln!(
+                "--set {name} is given twice ({name}={}, then {name}={}): give each param once",
+                kea_core::report::short(before),
+                kea_core::report::short(*value)
+            );
+            return Err(ExitCode::from(EXIT_INVALID));
+        }
+    }
+    Ok(out)
+}
+
 /// The work limit of the commands that run the core: the server's estimate and its
 /// default, so that a model the service refuses is not silently left running for hours.
 #[derive(Debug, clap::Args)]

@@ -7,7 +7,6 @@
 
 use crate::Run;
 use crate::parallel::Rayon;
-use kea_core::Overrides;
 use kea_core::report::{cell, short};
 use kea_core::simulation::{
     Executor, ModelError, SimulationRequest, SimulationResult, Truth, Verdict,
@@ -92,7 +91,10 @@ impl Run for Args {
                 return ExitCode::from(super::EXIT_FAILURE);
             }
         };
-        let set: Overrides = self.set.into_iter().collect();
+        let set = match super::overrides(&self.set) {
+            Ok(s) => s,
+            Err(code) => return code,
+        };
         let work = kea_core::validate::compile(&model, &set)
             .map(|c| crate::serve::jobs::simulation::work_of(&c, Some(&model), &req));
         if let Err(code) = self.limit.check(work) {

@@ -69,13 +69,17 @@ impl Run for Args {
                 "missing: give the model in the request, or with --model FILE|preset:NAME",
             ));
         }
-        if !self.set.is_empty() {
+        let overrides = match super::overrides(&self.set) {
+            Ok(s) => s,
+            Err(code) => return code,
+        };
+        if !overrides.is_empty() {
             let set = obj
                 .entry("set")
                 .or_insert_with(|| Value::Object(Default::default()));
             if let Value::Object(set) = set {
-                for (k, v) in &self.set {
-                    set.insert(k.clone(), (*v).into());
+                for (k, v) in overrides {
+                    set.insert(k, v.into());
                 }
             }
         }

@@ -910,12 +910,13 @@ fn not_positive(big_r: &[f64], k: u64, t: f64) -> Error {
     }
 }
 
-fn singular(k: u64, t: f64) -> Error {
+/// A singular innovation covariance at step k (time t), with its possible causes.
+pub(crate) fn singular(k: u64, t: f64) -> Error {
     Error::Numerical {
         step: k,
         t,
         path: "measurement".into(),
-        message: "the innovation covariance q = C r Cᵀ + Γ V Γᵀ is singular (not positive definite): a measurement has no error and its direction of the state is already known exactly; give non-zero psi/V or eta0".into(),
+        message: "the innovation covariance q = C r Cᵀ + Γ V Γᵀ is singular (not positive definite): a measurement has no error (Γ V Γᵀ is 0 in its direction) and what it measures is already known exactly (C r Cᵀ is 0 there: C is 0, or the state's variance is); or the terms are below f64's range (entries of c, gamma or psi near 1e-154 or below, whose squares underflow to 0); give non-zero psi/V or eta0, or rescale the units".into(),
     }
 }
 

@@ -554,12 +554,7 @@ impl<'m> Plan<'m> {
         }
         let q_ok = nm == 0 || cholesky(&mut self.q, nm);
         if !q_ok {
-            return Err(Error::Numerical {
-                step: k,
-                t: t_k,
-                path: "measurement".into(),
-                message: "the innovation covariance q = C r Cᵀ + Γ V Γᵀ is singular (not positive definite); give non-zero psi/V or eta0".into(),
-            });
+            return Err(crate::analysis::singular(k, t_k));
         }
         // (2.5) pᵀ = q⁻¹ S
         self.x_solve.copy_from_slice(&self.s_cr);
@@ -1464,7 +1459,7 @@ fn outgrown(state: &str, scale: f64, sko: f64, k: u64, t: f64) -> Error {
         t,
         path: "system".into(),
         message: format!(
-            "the simulated process of \"{state}\" reached {size}: the simulated filter errors, differences of numbers this large, would be rounding rather than the filter (the limit is {PRECISION_RATIO:.0e} times the SKO); simulate a shorter span (t_end), a model whose process stays bounded, or states measured from a nearby reference (an offset of 1e13 with an SKO of 1 is beyond it)"
+            "the simulated process of \"{state}\" reached {size}: the simulated filter errors, differences of numbers this large, would be rounding rather than the filter (the limit is {PRECISION_RATIO:.0e} times the SKO); simulate a shorter span (t_end), a model whose process stays bounded, or states measured from a nearby reference (an offset of 1e13 with an SKO of 1 is beyond it); a filter SKO near 0 — a measurement given no noise (psi = 0) — makes the ratio as large"
         ),
     }
 }

@@ -433,6 +433,38 @@ fn limits_sync_work_and_absurd_work() {
     assert_eq!(r.json()["type"], "urn:kea:problem:too-much-work");
 }
 
+/// A body that stops arriving (a Content-Length of 100, then 4 bytes) is answered 408
+/// once `--body-timeout` has passed, instead of holding the connection open.
+#[test]
+fn a_body_that_stops_arriving_times_out() {
+    use std::io::{Read, Write};
+    let dir = tmp();
+    let s = Server::start(dir.path(), &["--body-timeout", "1"]);
+    let host = s.base.trim_start_matches("http://");
+    let mut tcp = std::net::TcpStream::connect(host).unwrap();
+    tcp.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+    write!(
+        tcp,
+        "POST /v1/analyze HTTP/1.1\r\nHost: {host}\r\nContent-Type: application/json\r\nContent-Length: 100\r\n\r\n{{\"mo"
+    )
+    .unwrap();
+    let started = std::time::Instant::now();
+    let mut answer = Vec::new();
+    let mut buf = [0u8; 4096];
+    while !String::from_utf8_lossy(&answer).contains("body-timeout") {
+        match tcp.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => answer.extend_from_slice(&buf[..n]),
+            Err(e) => panic!("no answer after {:?}: {e}", started.elapsed()),
+        }
+    }
+    let answer = String::from_utf8_lossy(&answer);
+    assert!(answer.starts_with("HTTP/1.1 408"), "{answer}");
+    assert!(answer.contains("urn:kea:problem:body-timeout"), "{answer}");
+    assert!(answer.contains("4 bytes came"), "{answer}");
+    assert!(started.elapsed() < Duration::from_secs(10));
+}
+
 #[test]
 fn time_limit_fails_a_job() {
     let dir = tmp();

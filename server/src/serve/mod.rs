@@ -53,6 +53,10 @@ pub struct Args {
     /// Largest request body, bytes.
     #[arg(long, env = "KEA_MAX_BODY_BYTES", default_value_t = 2 * 1024 * 1024)]
     pub max_body_bytes: usize,
+    /// Seconds a request body may take to arrive, whole (then 408): 2 MiB at 100 kB/s
+    /// is 21 s.
+    #[arg(long, env = "KEA_BODY_TIMEOUT", default_value_t = 30)]
+    pub body_timeout: u64,
     /// Largest estimated work (about 1 ns of one core a unit; openapi.yaml, "Work") that
     /// POST /v1/analyze answers synchronously: ≈ half a second.
     #[arg(long, env = "KEA_SYNC_WORK_LIMIT", default_value_t = 5e8)]
@@ -144,6 +148,7 @@ fn serve(args: Args) -> Result<(), Failure> {
         workers,
         limits: Limits {
             max_body_bytes: args.max_body_bytes,
+            body_timeout: Duration::from_secs(args.body_timeout.max(1)),
             sync_work: args.sync_work_limit,
             max_work: args.max_work,
             job_time: Duration::from_secs(args.job_time_limit),

@@ -19,6 +19,7 @@ pub mod kind {
     pub const CONFLICT: &str = "urn:kea:problem:conflict";
     pub const UNAUTHORIZED: &str = "urn:kea:problem:unauthorized";
     pub const TOO_LARGE: &str = "urn:kea:problem:body-too-large";
+    pub const BODY_TIMEOUT: &str = "urn:kea:problem:body-timeout";
     pub const MEDIA_TYPE: &str = "urn:kea:problem:unsupported-media-type";
     pub const QUEUE_FULL: &str = "urn:kea:problem:queue-full";
     pub const INTERNAL: &str = "urn:kea:problem:internal";

@@ -11,7 +11,7 @@ use serde_json::{Map, Value};
 use std::collections::BTreeMap;
 
 /// A JSON request body, read under the configured size limit. Every failure is a
-/// problem+json 4xx: 415 (not JSON), 413 (too large), 400 (malformed).
+/// problem+json 4xx: 415 (not JSON), 413 (too large), 408 (too slow), 400 (malformed).
 pub struct JsonBody(pub Value);
 
 impl FromRequest<AppState> for JsonBody {
@@ -39,8 +39,8 @@ impl FromRequest<AppState> for JsonBody {
                 "send the header `Content-Type: application/json` (got `{ct}`)"
             )));
         }
-        let limit = state.config.limits.max_body_bytes;
-        let bytes = read_limited(req, limit).await?;
+        let limits = &state.config.limits;
+        let bytes = read_limited(req, limits.max_body_bytes, limits.body_timeout).await?;
         kea_core::parse_json(&bytes).map(JsonBody).map_err(|e| {
             Problem::new(
                 StatusCode::BAD_REQUEST,
@@ -57,13 +57,32 @@ impl FromRequest<AppState> for JsonBody {
 /// so the connection closes cleanly and the client sees the answer, not a reset.
 const DRAIN_BEYOND_LIMIT: usize = 16 * 1024 * 1024;
 
-/// Read the body up to `limit` bytes; over it, 413 (after draining a bounded amount).
-async fn read_limited(req: Request, limit: usize) -> Result<Vec<u8>, Problem> {
+/// Read the body up to `limit` bytes; over it, 413 (after draining a bounded amount);
+/// not whole within `within`, 408 — a client that sent a Content-Length and then
+/// trickled or stopped held its connection for as long as it liked.
+async fn read_limited(
+    req: Request,
+    limit: usize,
+    within: std::time::Duration,
+) -> Result<Vec<u8>, Problem> {
     use futures_util::StreamExt;
     let mut stream = req.into_body().into_data_stream();
     let mut buf = Vec::new();
     let mut total = 0usize;
-    while let Some(chunk) = stream.next().await {
+    let deadline = tokio::time::Instant::now() + within;
+    loop {
+        let Ok(next) = tokio::time::timeout_at(deadline, stream.next()).await else {
+            return Err(Problem::new(
+                StatusCode::REQUEST_TIMEOUT,
+                kind::BODY_TIMEOUT,
+                "the request body did not arrive in time",
+            )
+            .detail(format!(
+                "a body must arrive whole within {} s (server option --body-timeout); {total} bytes came",
+                within.as_secs()
+            )));
+        };
+        let Some(chunk) = next else { break };
         let chunk = chunk.map_err(|e| {
             Problem::new(
                 StatusCode::BAD_REQUEST,

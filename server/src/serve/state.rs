@@ -14,6 +14,8 @@ use tokio::sync::{Semaphore, watch};
 pub struct Limits {
     /// Largest request body, bytes.
     pub max_body_bytes: usize,
+    /// How long a request body may take to arrive, whole.
+    pub body_timeout: Duration,
     /// Largest work (the estimate of `jobs::cost`, ≈ ns) answered synchronously by
     /// `POST /v1/analyze`.
     pub sync_work: f64,

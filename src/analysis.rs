@@ -1082,7 +1082,9 @@ pub(crate) fn criteria_set(
                 None => {
                     undefined.insert(
                         name.to_string(),
-                        format!("every step has a zero denominator in the {set} set"),
+                        format!(
+                            "every step is excluded in the {set} set (a zero denominator, or no measurement available)"
+                        ),
                     );
                     None
                 }

@@ -126,7 +126,7 @@ fn notes(s: &mut String, set: &str, c: &CriteriaSet) {
         if e.yz + e.zx + e.yx > 0 {
             let _ = writeln!(
                 s,
-                "{set}: {} excluded steps (zero denominator): yz {}, zx {}, yx {}",
+                "{set}: {} excluded steps (a zero denominator, or no measurement then): yz {}, zx {}, yx {}",
                 p.state, e.yz, e.zx, e.yx
             );
         }

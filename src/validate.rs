@@ -997,7 +997,10 @@ fn weights(
     }
     let sum: f64 = w.iter().sum();
     if ok && (sum - 1.0).abs() > WEIGHT_TOL {
-        errs.at(path, format!("weights must sum to 1, they sum to {sum}"));
+        errs.at(
+            path,
+            format!("weights must sum to 1 (within {WEIGHT_TOL:e}), they sum to {sum}"),
+        );
         ok = false;
     }
     ok.then(|| w.to_vec())

@@ -609,6 +609,17 @@ fn bad_request_corpus() {
     assert!(r.text.contains("appears twice"), "{}", r.text);
     let r = s.post_raw("/v1/jobs", "text/plain", "{}");
     assert_eq!(r.status, 415, "{}", r.text);
+    // A compressed body: said so, not "not valid JSON".
+    let r = s.post_with(
+        "/v1/jobs",
+        &[
+            ("content-type", "application/json"),
+            ("content-encoding", "gzip"),
+        ],
+        "{}",
+    );
+    assert_eq!(r.status, 415, "{}", r.text);
+    assert!(r.text.contains("must not be compressed"), "{}", r.text);
     let big = format!("{{\"pad\": \"{}\"}}", "x".repeat(200_000));
     let r = s.post_raw("/v1/models", "application/json", &big);
     assert_eq!(r.status, 413, "{}", r.text);

@@ -39,6 +39,21 @@ impl FromRequest<AppState> for JsonBody {
                 "send the header `Content-Type: application/json` (got `{ct}`)"
             )));
         }
+        // A compressed body would reach the JSON parser as bytes (400 "not valid JSON");
+        // kea takes none, so say that.
+        if let Some(enc) = req.headers().get(header::CONTENT_ENCODING) {
+            let enc = enc.to_str().unwrap_or("?").trim().to_ascii_lowercase();
+            if enc != "identity" {
+                return Err(Problem::new(
+                    StatusCode::UNSUPPORTED_MEDIA_TYPE,
+                    kind::MEDIA_TYPE,
+                    "the body must not be compressed",
+                )
+                .detail(format!(
+                    "send the JSON uncompressed, without `Content-Encoding: {enc}`"
+                )));
+            }
+        }
         let limits = &state.config.limits;
         let bytes = read_limited(req, limits.max_body_bytes, limits.body_timeout).await?;
         kea_core::parse_json(&bytes).map(JsonBody).map_err(|e| {

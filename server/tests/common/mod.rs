@@ -191,10 +191,15 @@ impl Server {
     }
 
     pub fn post_raw(&self, path: &str, content_type: &str, body: &str) -> Reply {
-        let mut req = self
-            .agent
-            .post(self.url(path))
-            .header("content-type", content_type);
+        self.post_with(path, &[("content-type", content_type)], body)
+    }
+
+    /// A POST with explicit headers.
+    pub fn post_with(&self, path: &str, headers: &[(&str, &str)], body: &str) -> Reply {
+        let mut req = self.agent.post(self.url(path));
+        for (k, v) in headers {
+            req = req.header(*k, *v);
+        }
         if let Some(a) = self.auth() {
             req = req.header("authorization", a);
         }

@@ -118,10 +118,34 @@ pub fn criteria_table(r: &AnalysisResult) -> String {
 }
 
 fn notes(s: &mut String, set: &str, c: &CriteriaSet) {
-    for p in &c.per_state {
-        for (k, why) in &p.undefined {
-            let _ = writeln!(s, "{set}: {} {k} undefined: {why}", p.state);
+    // Undefined criteria, one line per reason (an overflowed bound makes every one
+    // undefined for the same reason): "D_f yz, zx, yx; V_f yz, zx, yx undefined: …".
+    let mut reasons: Vec<(&str, Vec<String>)> = Vec::new();
+    let undefined = c
+        .per_state
+        .iter()
+        .map(|p| (p.state.as_str(), &p.undefined))
+        .chain(std::iter::once(("weighted", &c.weighted.undefined)));
+    for (state, list) in undefined {
+        let mut by_reason: Vec<(&str, Vec<&str>)> = Vec::new();
+        for (k, why) in list {
+            match by_reason.iter_mut().find(|(w, _)| *w == why) {
+                Some((_, ks)) => ks.push(k),
+                None => by_reason.push((why, vec![k])),
+            }
         }
+        for (why, ks) in by_reason {
+            let entry = format!("{state} {}", ks.join(", "));
+            match reasons.iter_mut().find(|(w, _)| *w == why) {
+                Some((_, entries)) => entries.push(entry),
+                None => reasons.push((why, vec![entry])),
+            }
+        }
+    }
+    for (why, entries) in reasons {
+        let _ = writeln!(s, "{set}: {} undefined: {why}", entries.join("; "));
+    }
+    for p in &c.per_state {
         let e = &p.excluded_steps;
         if e.yz + e.zx + e.yx > 0 {
             let _ = writeln!(
@@ -130,9 +154,6 @@ fn notes(s: &mut String, set: &str, c: &CriteriaSet) {
                 p.state, e.yz, e.zx, e.yx
             );
         }
-    }
-    for (k, why) in &c.weighted.undefined {
-        let _ = writeln!(s, "{set}: weighted {k} undefined: {why}");
     }
 }
 
@@ -201,6 +222,26 @@ where
 #[cfg(test)]
 mod tests {
     use super::{CELL, cell, short, traces_csv};
+
+    /// Criteria undefined for one reason are one line, not one per state and criterion
+    /// (the tracker's bound overflows over 1000 s: six criteria, one reason).
+    #[test]
+    fn undefined_criteria_are_listed_once_per_reason() {
+        let mut model = crate::presets::get("cv-tracker").unwrap();
+        model.time.t_end = 1000.0;
+        model.time.steps = crate::model::Steps::Fixed(10_000);
+        let r = crate::analyze(&model, &Default::default(), &mut crate::NoProgress).unwrap();
+        let table = super::criteria_table(&r);
+        let overflow: Vec<&str> = table
+            .lines()
+            .filter(|l| l.contains("overflowed at step"))
+            .collect();
+        assert_eq!(overflow.len(), 2, "{table}"); // the note and the warning
+        assert!(
+            overflow[0].starts_with("bound: position yx, yz, zx; velocity yx, yz, zx undefined: the bound (modulus procedure) overflowed"),
+            "{table}"
+        );
+    }
 
     /// State names may hold a comma, a quote or a line break: the CSV quotes them
     /// (RFC 4180), so every record keeps its columns.

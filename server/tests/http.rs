@@ -434,12 +434,13 @@ fn limits_sync_work_and_absurd_work() {
 }
 
 /// A body that stops arriving (a Content-Length of 100, then 4 bytes) is answered 408
-/// once `--body-timeout` has passed, instead of holding the connection open.
+/// once `--read-timeout` has passed, and headers that stop arriving close the
+/// connection, instead of holding it open.
 #[test]
-fn a_body_that_stops_arriving_times_out() {
+fn a_request_that_stops_arriving_times_out() {
     use std::io::{Read, Write};
     let dir = tmp();
-    let s = Server::start(dir.path(), &["--body-timeout", "1"]);
+    let s = Server::start(dir.path(), &["--read-timeout", "1"]);
     let host = s.base.trim_start_matches("http://");
     let mut tcp = std::net::TcpStream::connect(host).unwrap();
     tcp.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
@@ -463,6 +464,21 @@ fn a_body_that_stops_arriving_times_out() {
     assert!(answer.contains("urn:kea:problem:body-timeout"), "{answer}");
     assert!(answer.contains("4 bytes came"), "{answer}");
     assert!(started.elapsed() < Duration::from_secs(10));
+
+    let mut tcp = std::net::TcpStream::connect(host).unwrap();
+    tcp.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+    write!(tcp, "POST /v1/analyze HTTP/1.1\r\nHost: {host}\r\n").unwrap();
+    let started = std::time::Instant::now();
+    let mut rest = Vec::new();
+    // The server closes the connection (an end of stream, or a reset).
+    let _ = tcp.read_to_end(&mut rest);
+    let waited = started.elapsed();
+    assert!(
+        waited >= Duration::from_millis(900) && waited < Duration::from_secs(10),
+        "closed after {waited:?}"
+    );
+    // The service itself is unaffected.
+    assert_eq!(s.get("/healthz").status, 200);
 }
 
 #[test]

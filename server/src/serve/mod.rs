@@ -53,10 +53,10 @@ pub struct Args {
     /// Largest request body, bytes.
     #[arg(long, env = "KEA_MAX_BODY_BYTES", default_value_t = 2 * 1024 * 1024)]
     pub max_body_bytes: usize,
-    /// Seconds a request body may take to arrive, whole (then 408): 2 MiB at 100 kB/s
-    /// is 21 s.
-    #[arg(long, env = "KEA_BODY_TIMEOUT", default_value_t = 30)]
-    pub body_timeout: u64,
+    /// Seconds a request's line and headers may take to arrive (then the connection is
+    /// closed), and then its body, whole (then 408): 2 MiB at 100 kB/s is 21 s.
+    #[arg(long, env = "KEA_READ_TIMEOUT", default_value_t = 30)]
+    pub read_timeout: u64,
     /// Largest estimated work (about 1 ns of one core a unit; openapi.yaml, "Work") that
     /// POST /v1/analyze answers synchronously: ≈ half a second.
     #[arg(long, env = "KEA_SYNC_WORK_LIMIT", default_value_t = 5e8)]
@@ -148,7 +148,7 @@ fn serve(args: Args) -> Result<(), Failure> {
         workers,
         limits: Limits {
             max_body_bytes: args.max_body_bytes,
-            body_timeout: Duration::from_secs(args.body_timeout.max(1)),
+            read_timeout: Duration::from_secs(args.read_timeout.max(1)),
             sync_work: args.sync_work_limit,
             max_work: args.max_work,
             job_time: Duration::from_secs(args.job_time_limit),
@@ -196,20 +196,67 @@ fn serve(args: Args) -> Result<(), Failure> {
         // The one line on stdout: scripts and tests read the bound address here.
         println!("kea: listening on http://{local}");
         let _ = std::io::stdout().flush();
-        axum::serve(listener, routes::app(state))
-            .with_graceful_shutdown(async move {
-                shutdown_signal().await;
-                tracing::info!("shutting down: no new requests; finishing running jobs");
-                let _ = shutdown_tx.send(true);
-            })
-            .await
-            .map_err(|e| failure(format!("server error: {e}")))
+        let header_timeout = config.limits.read_timeout;
+        serve_connections(listener, routes::app(state), header_timeout, async move {
+            shutdown_signal().await;
+            tracing::info!("shutting down: no new requests; finishing running jobs");
+            let _ = shutdown_tx.send(true);
+        })
+        .await;
+        Ok(())
     });
     // Workers run on their own threads: let them finish or re-queue their jobs.
     pool.shutdown(config.limits.shutdown_grace);
     runtime.shutdown_timeout(Duration::from_secs(1));
     tracing::info!("stopped");
     served
+}
+
+/// Accept connections and serve `app` on each (HTTP/1.1, hyper) until `shutdown`
+/// completes; then stop accepting and wait for the open connections to finish, each
+/// told to close after its current request. What `axum::serve` does, plus a timeout
+/// on reading a request's line and headers (`header_timeout`), which it does not set.
+async fn serve_connections(
+    listener: tokio::net::TcpListener,
+    app: axum::Router,
+    header_timeout: Duration,
+    shutdown: impl std::future::Future<Output = ()>,
+) {
+    use hyper_util::rt::{TokioIo, TokioTimer};
+    use hyper_util::service::TowerToHyperService;
+    let graceful = hyper_util::server::graceful::GracefulShutdown::new();
+    let mut http = hyper::server::conn::http1::Builder::new();
+    http.timer(TokioTimer::new())
+        .header_read_timeout(header_timeout);
+    tokio::pin!(shutdown);
+    loop {
+        let stream = tokio::select! {
+            accepted = listener.accept() => match accepted {
+                Ok((stream, _)) => stream,
+                Err(e) => {
+                    // A connection that failed before it was accepted is the client's
+                    // matter; anything else (out of file descriptors) is waited out.
+                    use std::io::ErrorKind::*;
+                    if !matches!(e.kind(), ConnectionRefused | ConnectionAborted | ConnectionReset) {
+                        tracing::error!(error = %e, "accept failed; retrying in 1 s");
+                        tokio::time::sleep(Duration::from_secs(1)).await;
+                    }
+                    continue;
+                }
+            },
+            () = &mut shutdown => break,
+        };
+        let conn =
+            http.serve_connection(TokioIo::new(stream), TowerToHyperService::new(app.clone()));
+        let conn = graceful.watch(conn);
+        tokio::spawn(async move {
+            if let Err(e) = conn.await {
+                tracing::debug!(error = %e, "connection ended with an error");
+            }
+        });
+    }
+    drop(listener);
+    graceful.shutdown().await;
 }
 
 async fn shutdown_signal() {

@@ -55,7 +55,7 @@ impl FromRequest<AppState> for JsonBody {
             }
         }
         let limits = &state.config.limits;
-        let bytes = read_limited(req, limits.max_body_bytes, limits.body_timeout).await?;
+        let bytes = read_limited(req, limits.max_body_bytes, limits.read_timeout).await?;
         kea_core::parse_json(&bytes).map(JsonBody).map_err(|e| {
             Problem::new(
                 StatusCode::BAD_REQUEST,
@@ -93,7 +93,7 @@ async fn read_limited(
                 "the request body did not arrive in time",
             )
             .detail(format!(
-                "a body must arrive whole within {} s (server option --body-timeout); {total} bytes came",
+                "a body must arrive whole within {} s (server option --read-timeout); {total} bytes came",
                 within.as_secs()
             )));
         };

@@ -14,8 +14,9 @@ use tokio::sync::{Semaphore, watch};
 pub struct Limits {
     /// Largest request body, bytes.
     pub max_body_bytes: usize,
-    /// How long a request body may take to arrive, whole.
-    pub body_timeout: Duration,
+    /// How long a request's line and headers, and then its body, may each take to
+    /// arrive.
+    pub read_timeout: Duration,
     /// Largest work (the estimate of `jobs::cost`, ≈ ns) answered synchronously by
     /// `POST /v1/analyze`.
     pub sync_work: f64,

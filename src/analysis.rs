@@ -9,7 +9,7 @@ use crate::decimate::Decimator;
 use crate::error::Error;
 use crate::inputs::{Inputs, time_err};
 use crate::lanes::{Lanes, Scalar};
-use crate::linalg::{SparseRows, arr, arr_mut, cov_rel_diff, mat, predict_cov, predict_work};
+use crate::linalg::{SparseRows, arr, arr_mut, cov_rel_diff, mat, predict_in_place, predict_work};
 use crate::result::*;
 use crate::riccati::{Prepared, SequentialJoseph};
 use crate::steps::select_steps;
@@ -372,7 +372,6 @@ impl<'m, const N: usize> Engine<'m, N> {
             big_r[i * n + i] = m.eta0[i] * m.eta0[i];
         }
         let mut p_y = big_r.clone(); // open-loop covariance P^Y
-        let mut p_next = vec![0.0; n * n];
         let mut work = predict_work(n);
         let mut eta = m.eta0.clone();
         let mut chi = vec![0.0; n]; // χ(t0) = 0 (3.18)
@@ -516,8 +515,7 @@ impl<'m, const N: usize> Engine<'m, N> {
 
             // Open-loop covariance P^Y = A P Aᵀ + B (§1.5, exact second moments)
             if open_diverged.is_none() {
-                predict_cov::<N, L>(&mut p_next, &p_y, &inp.e, &inp.big_b, &mut work, n);
-                std::mem::swap(&mut p_y, &mut p_next);
+                predict_in_place::<N, L>(&mut p_y, &inp.e, &inp.big_b, &mut work, n);
                 if !(0..n).fold(true, |ok, i| ok & p_y[i * n + i].is_finite()) {
                     open_diverged = Some((k, t_k));
                 }

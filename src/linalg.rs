@@ -187,16 +187,9 @@ impl SparseRows {
     pub(crate) fn mul_vec_fixed<const N: usize>(&self, y: &mut [f64; N], x: &[f64; N]) {
         match &self.diagonals {
             Some(dia) => {
-                let mut pad = [0.0f64; 36];
-                pad[12..12 + N].copy_from_slice(x);
                 let mut w = [0.0f64; N];
                 for (&d, vals) in dia.offsets.iter().zip(dia.values.chunks_exact(N)) {
-                    let src: &[f64; N] = pad[(12 + d) as usize..][..N].try_into().expect("N");
-                    let vals: &[f64; N] = vals.try_into().expect("N");
-                    #[allow(clippy::needless_range_loop)]
-                    for j in 0..N {
-                        w[j] += vals[j] * src[j];
-                    }
+                    add_shifted(&mut w, vals.try_into().expect("N"), x, d);
                 }
                 *y = w;
             }
@@ -205,6 +198,42 @@ impl SparseRows {
                 for &(i, j, v) in &self.nz {
                     y[i] += v * x[j];
                 }
+            }
+        }
+    }
+}
+
+/// w_j += v_j x_{j+d} for j in 0..N, x_{j+d} = 0 outside 0..N (N ≤ 12): one
+/// diagonal of a sparse product as a whole-row operation. The diagonals ±1 and 0 read
+/// x itself; others read a zero-padded copy (a load across the copy's fresh stores
+/// waits for them: store forwarding fails on a shifted load, ≈ a third of a frozen
+/// step when the chain's diagonals took that path).
+#[inline(always)]
+fn add_shifted<const N: usize>(w: &mut [f64; N], v: &[f64; N], x: &[f64; N], d: isize) {
+    match d {
+        0 => {
+            for j in 0..N {
+                w[j] += v[j] * x[j];
+            }
+        }
+        1 => {
+            for j in 0..N - 1 {
+                w[j] += v[j] * x[j + 1];
+            }
+            w[N - 1] += v[N - 1] * 0.0;
+        }
+        -1 => {
+            w[0] += v[0] * 0.0;
+            for j in 1..N {
+                w[j] += v[j] * x[j - 1];
+            }
+        }
+        _ => {
+            let mut pad = [0.0f64; 36];
+            pad[12..12 + N].copy_from_slice(x);
+            let src: &[f64; N] = pad[(12 + d) as usize..][..N].try_into().expect("N");
+            for j in 0..N {
+                w[j] += v[j] * src[j];
             }
         }
     }
@@ -241,14 +270,43 @@ pub(crate) fn predict_cov<const N: usize, L: Lanes>(
     u: &mut [f64],
     n: usize,
 ) {
+    predict_first::<N, L>(u, r, e, n);
+    predict_second::<N, L>(out, u, e, b, n, true);
+}
+
+/// [`predict_cov`] in place, P ← A P Aᵀ + B: the first half reads all of P before
+/// the second writes it, so no second buffer (and no copy or swap of one) is needed.
+/// For fixed N the result is not re-symmetrised: every entry is its own row's
+/// (A P Aᵀ)_ab, so P keeps an antisymmetric part at rounding level, which never
+/// reaches the diagonal (A S Aᵀ of an antisymmetric S is antisymmetric: its diagonal
+/// is 0) — for callers that read only the diagonal. Copying the upper triangle onto
+/// the lower one entry at a time made the next step's whole-row loads wait for those
+/// stores (store forwarding fails on a load spanning several of them): ≈ 45 ns of a
+/// 170 ns frozen analysis step.
+#[inline(always)]
+pub(crate) fn predict_in_place<const N: usize, L: Lanes>(
+    p: &mut [f64],
+    e: &SparseRows,
+    b: &[f64],
+    u: &mut [f64],
+    n: usize,
+) {
+    predict_first::<N, L>(u, p, e, n);
+    predict_second::<N, L>(p, u, e, b, n, false);
+}
+
+/// The prediction's first half: V = (A R)ᵀ in `u`, or U = A R itself for fixed N
+/// with few diagonals (what [`predict_second`] reads).
+#[inline(always)]
+fn predict_first<const N: usize, L: Lanes>(u: &mut [f64], r: &[f64], e: &SparseRows, n: usize) {
     if N > 0 {
-        return predict_fixed::<N>(mat_mut(out), mat(r), e, mat(b), mat_mut(u));
+        return fixed_first::<N>(mat_mut(u), mat(r), e);
     }
     // Runtime N: the same sums, arranged as row operations for the row kernels L.
     // V = Uᵀ (transposed in place); W = A V = V + E V row by row, of which row b's
     // first b + 1 entries are needed: W_ba = U_ab + Σ_c E_bc U_ac = (U Aᵀ)_ab with
     // the same terms in the same order; then + B (exactly symmetric) and mirrored.
-    let (r, b, out, u) = (&r[..n * n], &b[..n * n], &mut out[..n * n], &mut u[..n * n]);
+    let (r, u) = (&r[..n * n], &mut u[..n * n]);
     if let Some(dia) = &e.diagonals {
         // V = Uᵀ = R Aᵀ directly, no transpose: row c, V_ca = R_ca + Σ_d E_a,a+d R_c,a+d
         // over the diagonals d ascending, one shifted row operation each. These are
@@ -264,7 +322,24 @@ pub(crate) fn predict_cov<const N: usize, L: Lanes>(
     } else {
         mul_transpose_into::<L>(u, r, e, n);
     }
-    second_half::<L>(out, u, e, b, n);
+}
+
+/// The prediction's second half: out = A V + B from [`predict_first`]'s `u`;
+/// `symmetric`: mirrored to be exactly symmetric (always so for runtime N, which
+/// computes only one triangle).
+#[inline(always)]
+fn predict_second<const N: usize, L: Lanes>(
+    out: &mut [f64],
+    u: &[f64],
+    e: &SparseRows,
+    b: &[f64],
+    n: usize,
+    symmetric: bool,
+) {
+    if N > 0 {
+        return fixed_second::<N>(mat_mut(out), mat(u), e, mat(b), symmetric);
+    }
+    second_half::<L>(out, &u[..n * n], e, &b[..n * n], n);
 }
 
 /// V = (A R)ᵀ for A = I + E: U = R + E R by row operations, transposed in place.
@@ -315,17 +390,10 @@ fn second_half<L: Lanes>(out: &mut [f64], u: &[f64], e: &SparseRows, b: &[f64], 
     }
 }
 
-/// [`predict_cov`] on fixed-size arrays (every loop over N unrolled): U = A R by row
-/// operations, then — when E has few diagonals — the rows of U Aᵀ by one whole-row
-/// operation per diagonal, else by transposing U as the runtime path once did.
+/// [`predict_first`] on fixed-size arrays (every loop over N unrolled): U = A R by
+/// row operations; without few diagonals, transposed as the runtime path does.
 #[inline(always)]
-fn predict_fixed<const N: usize>(
-    out: &mut [[f64; N]; N],
-    r: &[[f64; N]; N],
-    e: &SparseRows,
-    b: &[[f64; N]; N],
-    u: &mut [[f64; N]; N],
-) {
+fn fixed_first<const N: usize>(u: &mut [[f64; N]; N], r: &[[f64; N]; N], e: &SparseRows) {
     if let Some(dia) = &e.diagonals {
         // U row by row: R_i + E_i,i+d R_i+d over the diagonals d ascending — the
         // non-zeros' terms in column order, as below (an entry off the pattern adds
@@ -344,33 +412,7 @@ fn predict_fixed<const N: usize>(
             }
             *ui = w;
         }
-        // Row a of U Aᵀ directly: (U Aᵀ)_ab = U_ab + Σ_d E_b,b+d U_a,b+d over the
-        // diagonals d ascending — the terms, in the order, of the transposing path
-        // below; then + B and the upper triangle mirrored.
-        // Row a padded with zeros (N ≤ 12), so each diagonal is a whole-row operation:
-        // an entry whose b + d falls outside adds 0·0.
-        let mut pad = [0.0f64; 36];
-        for a in 0..N {
-            let ua = &u[a];
-            pad[12..12 + N].copy_from_slice(ua);
-            let mut w = *ua;
-            // (Index loops: zipped iterators cost ≈ 2 % more instructions a step here.)
-            for (&d, vals) in dia.offsets.iter().zip(dia.values.chunks_exact(N)) {
-                let src: &[f64; N] = pad[(12 + d) as usize..][..N].try_into().expect("N");
-                let vals: &[f64; N] = vals.try_into().expect("N");
-                #[allow(clippy::needless_range_loop)]
-                for j in 0..N {
-                    w[j] += vals[j] * src[j];
-                }
-            }
-            let b_row = &b[a];
-            #[allow(clippy::needless_range_loop)]
-            for j in 0..N {
-                w[j] += b_row[j];
-            }
-            out[a] = w;
-        }
-        return mirror(out, true);
+        return;
     }
     // U = R, then + E_ik R_k for the non-zeros in order (sorted by row and column,
     // so each row's terms are added as the row loop would): one flat loop, no
@@ -391,6 +433,42 @@ fn predict_fixed<const N: usize>(
             u[j][i] = x;
         }
     }
+}
+
+/// [`predict_second`] on fixed-size arrays: when E has few diagonals, the rows of
+/// U Aᵀ by one whole-row operation per diagonal, else the rows of A·Uᵀ.
+#[inline(always)]
+fn fixed_second<const N: usize>(
+    out: &mut [[f64; N]; N],
+    u: &[[f64; N]; N],
+    e: &SparseRows,
+    b: &[[f64; N]; N],
+    symmetric: bool,
+) {
+    if let Some(dia) = &e.diagonals {
+        // Row a of U Aᵀ directly: (U Aᵀ)_ab = U_ab + Σ_d E_b,b+d U_a,b+d over the
+        // diagonals d ascending — the terms, in the order, of the transposing path
+        // below; then + B and the upper triangle mirrored.
+        // Row a padded with zeros (N ≤ 12), so each diagonal is a whole-row operation:
+        // an entry whose b + d falls outside adds 0·0.
+        for a in 0..N {
+            let ua = &u[a];
+            let mut w = *ua;
+            for (&d, vals) in dia.offsets.iter().zip(dia.values.chunks_exact(N)) {
+                add_shifted(&mut w, vals.try_into().expect("N"), ua, d);
+            }
+            let b_row = &b[a];
+            #[allow(clippy::needless_range_loop)]
+            for j in 0..N {
+                w[j] += b_row[j];
+            }
+            out[a] = w;
+        }
+        if symmetric {
+            mirror(out, true);
+        }
+        return;
+    }
     // Whole rows (fixed length, so unrolled): the entries right of the diagonal are
     // overwritten by the mirror below.
     for bb in 0..N {
@@ -407,7 +485,9 @@ fn predict_fixed<const N: usize>(
         }
         out[bb] = w;
     }
-    mirror(out, false);
+    if symmetric {
+        mirror(out, false);
+    }
 }
 
 /// Copies the upper triangle onto the lower (`from_upper`), or the lower onto the upper.

@@ -156,13 +156,38 @@ fn dispatch(
     }
 }
 
-/// Whether the engine runs its AVX2 + FMA build: the CPU has both and
-/// `KEA_NO_SIMD` is not set (the switch lets the tests compare both builds).
+/// The builds of the engine's loop (x86-64).
 #[cfg(target_arch = "x86_64")]
-fn simd_enabled() -> bool {
-    std::arch::is_x86_feature_detected!("avx2")
-        && std::arch::is_x86_feature_detected!("fma")
-        && std::env::var_os("KEA_NO_SIMD").is_none()
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Build {
+    /// AVX-512 F + VL with AVX2 + FMA: the fixed-size loops in 8-lane registers, a
+    /// row of up to 8 values in one (masked) operation.
+    Avx512,
+    /// AVX2 + FMA: the explicit 4-lane row kernels.
+    Avx2,
+    /// Portable code (SSE2).
+    Baseline,
+}
+
+/// The widest build this CPU runs, unless `KEA_NO_SIMD` (the baseline) or
+/// `KEA_NO_AVX512` (at most AVX2) is set: the switches let the tests compare the
+/// builds.
+#[cfg(target_arch = "x86_64")]
+fn build() -> Build {
+    let off = |var: &str| std::env::var_os(var).is_some();
+    if off("KEA_NO_SIMD")
+        || !(std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma"))
+    {
+        Build::Baseline
+    } else if !off("KEA_NO_AVX512")
+        && std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+    {
+        Build::Avx512
+    } else {
+        Build::Avx2
+    }
 }
 
 /// Running sums of one criterion of one state (3.24).
@@ -359,15 +384,17 @@ impl<'m, const N: usize> Engine<'m, N> {
         if N == 0 { self.nn } else { N }
     }
 
-    /// Runs the recursion, compiled for AVX2 + FMA when the CPU has them (x86-64).
-    /// Rust never contracts a·b + c into an FMA and LLVM does not reorder
-    /// floating-point sums, so both builds of the loop give bit-identical results
-    /// (`server/tests/cli.rs::simd_and_baseline_builds_agree_bitwise`).
+    /// Runs the recursion, compiled for AVX-512 or AVX2 + FMA when the CPU has them
+    /// (x86-64, [`build`]). Rust never contracts a·b + c into an FMA and LLVM does
+    /// not reorder floating-point sums, so every build of the loop gives
+    /// bit-identical results (`server/tests/cli.rs::simd_builds_agree_bitwise`).
     fn run(&self, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
         #[cfg(target_arch = "x86_64")]
-        if simd_enabled() {
-            // SAFETY: both features were detected on this CPU just above.
-            return unsafe { self.run_avx2(progress) };
+        match build() {
+            // SAFETY: `build` chose each only where the CPU has its features.
+            Build::Avx512 => return unsafe { self.run_avx512(progress) },
+            Build::Avx2 => return unsafe { self.run_avx2(progress) },
+            Build::Baseline => {}
         }
         self.run_body::<Scalar>(progress)
     }
@@ -376,6 +403,15 @@ impl<'m, const N: usize> Engine<'m, N> {
     #[target_feature(enable = "avx2,fma")]
     fn run_avx2(&self, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
         // The explicit AVX2 row kernels: this function is only entered on a CPU with AVX2.
+        self.run_body::<crate::lanes::Avx2>(progress)
+    }
+
+    /// The same loop for AVX-512: LLVM puts the fixed-size (N ≤ 12) row operations
+    /// in 8-lane registers (a 10-state row in two operations instead of three); the
+    /// runtime-sized kernels stay the explicit AVX2 ones.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+    fn run_avx512(&self, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
         self.run_body::<crate::lanes::Avx2>(progress)
     }
 

@@ -8,7 +8,7 @@
 //!
 //! Each lane performs the same operations in the same order as the portable loop —
 //! products and sums, never fused — so both builds give identical bits
-//! (`server/tests/cli.rs::simd_and_baseline_builds_agree_bitwise`).
+//! (`server/tests/cli.rs::simd_builds_agree_bitwise`).
 
 /// Row kernels; every slice argument is at least as long as `d`.
 pub(crate) trait Lanes: Copy {

@@ -5,15 +5,18 @@ use std::process::Command;
 
 const KEA: &str = env!("CARGO_BIN_EXE_kea");
 
-/// `kea analyze FILE --json`, with `KEA_NO_SIMD` set or not; the result without
-/// its wall-clock timing.
-fn analyze(file: &std::path::Path, no_simd: bool) -> Value {
+/// `kea analyze FILE --json` with only the given one of the engine's build switches
+/// (`KEA_NO_SIMD`, `KEA_NO_AVX512`) set, or none; the result without its wall-clock
+/// timing.
+fn analyze(file: &std::path::Path, switch: Option<&str>) -> Value {
     let mut cmd = Command::new(KEA);
     cmd.arg("analyze").arg(file).arg("--json");
-    if no_simd {
-        cmd.env("KEA_NO_SIMD", "1");
-    } else {
-        cmd.env_remove("KEA_NO_SIMD");
+    for var in ["KEA_NO_SIMD", "KEA_NO_AVX512"] {
+        if switch == Some(var) {
+            cmd.env(var, "1");
+        } else {
+            cmd.env_remove(var);
+        }
     }
     let out = cmd.output().expect("kea runs");
     assert!(
@@ -26,15 +29,17 @@ fn analyze(file: &std::path::Path, no_simd: bool) -> Value {
     v
 }
 
-/// A 13-state chain (the runtime-sized kernels) with time-varying a(t), measurements
-/// that mix states, and correlated measurement noise (the whitened path).
-fn chain13() -> Value {
-    let n = 13;
+/// An n-state chain, its a(t) time-varying or constant, with measurements that mix
+/// states and correlated measurement noise (the whitened path).
+fn chain(n: usize, varying: bool) -> Value {
     let a: Vec<Vec<Value>> = (0..n)
         .map(|i| {
             (0..n)
                 .map(|j| match j {
-                    _ if j == i => json!(format!("-0.5 - 0.1*{i} + 0.2*sin(t + {i})")),
+                    _ if j == i && varying => {
+                        json!(format!("-0.5 - 0.1*{i} + 0.2*sin(t + {i})"))
+                    }
+                    _ if j == i => json!(-0.5 - 0.1 * i as f64),
                     _ if j == i + 1 => json!(1.0),
                     _ => json!(0.0),
                 })
@@ -76,27 +81,42 @@ fn chain13() -> Value {
     })
 }
 
-/// The engine runs an AVX2 + FMA build of its loop where the CPU has them; it must
-/// give the same bits as the baseline build (`KEA_NO_SIMD=1`). On a CPU without
-/// AVX2 both runs take the baseline path and this test checks nothing more than
-/// determinism.
+/// The engine runs an AVX-512 or AVX2 + FMA build of its loop where the CPU has
+/// them; each must give the same bits as the baseline build (`KEA_NO_SIMD=1`). The
+/// files: the seed (N = 1), the helicopter (N = 6, frozen at its steady state), the
+/// benchmarks' time-invariant 10-state chain (frozen) and a 13-state time-varying
+/// chain (the runtime-sized kernels). On a CPU without AVX-512 the first two runs take
+/// the same path, without AVX2 all three do, and this test checks less.
 #[test]
-fn simd_and_baseline_builds_agree_bitwise() {
+fn simd_builds_agree_bitwise() {
     let dir = tempfile::tempdir().unwrap();
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let big = dir.path().join("chain13.json");
-    std::fs::write(&big, chain13().to_string()).unwrap();
+    let (big, frozen) = (
+        dir.path().join("chain13.json"),
+        dir.path().join("chain10.json"),
+    );
+    std::fs::write(&big, chain(13, true).to_string()).unwrap();
+    std::fs::write(&frozen, chain(10, false).to_string()).unwrap();
     for file in [
         root.join("presets/seed-example.json"),
         root.join("presets/helicopter-range.json"),
+        frozen,
         big,
     ] {
-        let (simd, base) = (analyze(&file, false), analyze(&file, true));
+        let base = analyze(&file, Some("KEA_NO_SIMD"));
         assert!(
-            simd["criteria"]["covariance"]["weighted"]["yx"].is_number(),
-            "{file:?}: {simd}"
+            base["criteria"]["covariance"]["weighted"]["yx"].is_number(),
+            "{file:?}: {base}"
         );
-        assert_eq!(simd, base, "{file:?}");
+        if file.ends_with("chain10.json") {
+            assert!(base["steady_state"].is_object(), "the frozen phase is run");
+        }
+        assert_eq!(analyze(&file, None), base, "{file:?}: the widest build");
+        assert_eq!(
+            analyze(&file, Some("KEA_NO_AVX512")),
+            base,
+            "{file:?}: AVX2"
+        );
     }
 }
 
@@ -162,7 +182,7 @@ fn work_above_the_limit_is_refused_up_front() {
 #[test]
 fn analyze_a_preset_by_name_and_write_its_traces_as_csv() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let by_file = analyze(&root.join("presets/cv-tracker.json"), false);
+    let by_file = analyze(&root.join("presets/cv-tracker.json"), None);
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("traces.csv");
     let (code, out, err) = kea(&[
@@ -240,7 +260,7 @@ fn input_errors_name_their_source_and_exit_2_up_front() {
     let mut piped: Value = serde_json::from_slice(&out.stdout).expect("JSON result");
     piped.as_object_mut().unwrap().remove("timing");
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    assert_eq!(piped, analyze(&root.join("presets/cv-tracker.json"), false));
+    assert_eq!(piped, analyze(&root.join("presets/cv-tracker.json"), None));
     let nowhere = dir.path().join("no/such/dir/t.csv");
     let (code, out, err) = kea(&[
         "analyze",

@@ -449,6 +449,9 @@ impl<'m, const N: usize> Engine<'m, N> {
             big_r[i * n + i] = m.eta0[i] * m.eta0[i];
         }
         let mut p_y = big_r.clone(); // open-loop covariance P^Y
+        // Fixed N: P^Y's diagonal, gathered once a step (after the prediction) for
+        // its check and its roots.
+        let mut py_diag = [0.0f64; N];
         let mut work = predict_work(n);
         let mut eta = m.eta0.clone();
         let mut chi = vec![0.0; n]; // χ(t0) = 0 (3.18)
@@ -595,7 +598,16 @@ impl<'m, const N: usize> Engine<'m, N> {
             // Open-loop covariance P^Y = A P Aᵀ + B (§1.5, exact second moments)
             if open_diverged.is_none() {
                 predict_in_place::<N, L>(&mut p_y, &inp.e, &inp.big_b, &mut work, n);
-                if !(0..n).fold(true, |ok, i| ok & p_y[i * n + i].is_finite()) {
+                let finite = if N > 0 {
+                    let p = mat::<N>(&p_y);
+                    for i in 0..N {
+                        py_diag[i] = p[i][i];
+                    }
+                    all_finite(&py_diag)
+                } else {
+                    (0..n).fold(true, |ok, i| ok & p_y[i * n + i].is_finite())
+                };
+                if !finite {
                     open_diverged = Some((k, t_k));
                 }
             }
@@ -708,13 +720,9 @@ impl<'m, const N: usize> Engine<'m, N> {
                     r_y[i] = y[i];
                 }
                 if N > 0 {
-                    // The diagonal gathered first, so that the roots are taken a
-                    // whole lane at a time (one at a time they were ≈ 10 % of a
-                    // frozen step).
-                    let (p, mut d) = (mat::<N>(&p_y), [0.0f64; N]);
-                    for i in 0..N {
-                        d[i] = p[i][i];
-                    }
+                    // From the gathered diagonal, so that the roots are taken a whole
+                    // lane at a time (one at a time they were ≈ 10 % of a frozen step).
+                    let mut d = py_diag;
                     for v in &mut d {
                         *v = v.max(0.0).sqrt();
                     }

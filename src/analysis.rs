@@ -347,9 +347,9 @@ fn take_row(
     }
     dec.begin(w.t);
     if w.constants || dec.bucket_starts() {
-        dec.put_row(w.k, 0, &row[..SERIES * n]);
+        dec.put_row(0, &row[..SERIES * n]);
     } else {
-        dec.put_row(w.k, S_Y * n, &row[S_Y * n..SERIES * n]);
+        dec.put_row(S_Y * n, &row[S_Y * n..SERIES * n]);
     }
     dec.end(w.k);
 }

@@ -85,8 +85,8 @@ fn chain(n: usize, varying: bool) -> Value {
 /// them; each must give the same bits as the baseline build (`KEA_NO_SIMD=1`). The
 /// files: the seed (N = 1), the helicopter (N = 6, frozen at its steady state), the
 /// benchmarks' time-invariant 10-state chain (frozen) and a 13-state time-varying
-/// chain (the runtime-sized kernels). On a CPU without AVX-512 the first two runs take
-/// the same path, without AVX2 all three do, and this test checks less.
+/// chain (the runtime-sized kernels). On a CPU without AVX-512 the widest and the
+/// AVX2 runs take the same path, without AVX2 all three do, and this test checks less.
 #[test]
 fn simd_builds_agree_bitwise() {
     let dir = tempfile::tempdir().unwrap();

@@ -18,9 +18,6 @@ pub struct Decimator {
     max: Vec<f64>,
     max_at: Vec<u32>,
     in_bucket: u64,
-    /// The current step's place in its bucket (saturated; a bucket never holds more
-    /// than `validate::MAX_STEPS` < 2³² steps).
-    place: u32,
     first_t: f64,
     last_t: f64,
     pub t: Vec<f64>,
@@ -54,7 +51,6 @@ impl Decimator {
             max: vec![f64::NEG_INFINITY; series],
             max_at: vec![0; series],
             in_bucket: 0,
-            place: 0,
             first_t: 0.0,
             last_t: 0.0,
             t: Vec::with_capacity(rows),
@@ -77,7 +73,6 @@ impl Decimator {
             self.first_t = t;
         }
         self.last_t = t;
-        self.place = u32::try_from(self.in_bucket).unwrap_or(u32::MAX);
     }
 
     /// Whether the next step begins a bucket (then every series must be put).
@@ -96,7 +91,10 @@ impl Decimator {
         if !self.enabled {
             return;
         }
-        let (n, k) = (row.len(), self.place);
+        // The step's place in its bucket (a bucket never holds more than
+        // `validate::MAX_STEPS` < 2³² steps).
+        debug_assert!(self.in_bucket <= u64::from(u32::MAX));
+        let (n, k) = (row.len(), self.in_bucket as u32);
         let (min, min_at) = (
             &mut self.min[from..from + n],
             &mut self.min_at[from..from + n],

@@ -302,6 +302,59 @@ fn input_errors_name_their_source_and_exit_2_up_front() {
     assert_eq!(strip(&by_model.1), strip(&by_preset.1));
 }
 
+/// `--threads` (and the server's `--workers`) take 0 (every core) to 256: more is
+/// refused up front with the limit named, not tried (each thread reserves a stack).
+#[test]
+fn threads_above_the_cap_are_refused() {
+    // (The server's address and data directory are such that, were the cap not
+    // checked, it would fail at once rather than serve.)
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let data = data.to_str().unwrap();
+    for cmd in [
+        &[
+            "simulate",
+            "preset:cv-tracker",
+            "--runs",
+            "2",
+            "--threads",
+            "100000",
+        ][..],
+        &["synthesize", "no-such-request.json", "--threads", "257"][..],
+        &[
+            "serve",
+            "--workers",
+            "1000",
+            "--addr",
+            "no-such-address",
+            "--data-dir",
+            data,
+        ][..],
+    ] {
+        let (code, out, err) = kea(cmd);
+        assert_eq!(code, 2, "{cmd:?}: {err}");
+        assert!(out.is_empty(), "{cmd:?} ran: {out}");
+        assert!(
+            err.contains("at most 256 threads (0: every core), got"),
+            "{cmd:?}: {err}"
+        );
+    }
+    let (code, _, err) = kea(&["simulate", "preset:cv-tracker", "--threads", "many"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("expected a whole number of threads"), "{err}");
+    let (code, out, err) = kea(&[
+        "simulate",
+        "preset:cv-tracker",
+        "--runs",
+        "2",
+        "--threads",
+        "256",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("\"runs\""), "{out}");
+}
+
 /// A synthesis request that finds its point (exit 0) on preset:cv-tracker.
 const FOUND_REQUEST: &str = r#"{"target": {"criterion": "yx", "set": "covariance", "threshold": 2}, "mode": {"grid": {"params": [{"name": "r", "values": [0.5, 1]}]}}}"#;
 

@@ -220,6 +220,24 @@ pub fn parse_override(arg: &str) -> Result<(String, f64), String> {
     Ok((name.to_string(), value))
 }
 
+/// The most threads `--threads` accepts: more than any machine here has cores, and
+/// far below what would exhaust the process (each thread reserves a stack).
+pub const MAX_THREADS: usize = 256;
+
+/// `--threads T`: 0 (every core) to [`MAX_THREADS`].
+pub fn parse_threads(arg: &str) -> Result<usize, String> {
+    let t: usize = arg
+        .trim()
+        .parse()
+        .map_err(|_| format!("expected a whole number of threads (0: every core), got `{arg}`"))?;
+    if t > MAX_THREADS {
+        return Err(format!(
+            "at most {MAX_THREADS} threads (0: every core), got {t}"
+        ));
+    }
+    Ok(t)
+}
+
 /// The `--set` arguments as overrides; a name given twice is refused (exit 2), as a
 /// key given twice in JSON is, rather than the last one silently winning.
 pub fn overrides(set: &[(String, f64)]) -> Result<kea_core::Overrides, ExitCode> {

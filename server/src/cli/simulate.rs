@@ -47,8 +47,8 @@ pub struct Args {
     /// Rows of the traces (bucket averages).
     #[arg(long)]
     pub trace_points: Option<usize>,
-    /// Threads (default: every core). Results do not depend on it.
-    #[arg(long)]
+    /// Threads (default or 0: every core; at most 256). Results do not depend on it.
+    #[arg(long, value_parser = super::parse_threads)]
     pub threads: Option<usize>,
     /// Override a model parameter, e.g. `--set q=0.5` (repeatable).
     #[arg(long = "set", value_name = "NAME=VALUE", value_parser = super::parse_override)]

@@ -23,8 +23,9 @@ pub struct Args {
     /// Override a model parameter at every point, e.g. `--set c=0.25` (repeatable).
     #[arg(long = "set", value_name = "NAME=VALUE", value_parser = super::parse_override)]
     pub set: Vec<(String, f64)>,
-    /// Threads for the analyses (default: every core). Answers do not depend on it.
-    #[arg(long)]
+    /// Threads for the analyses (default or 0: every core; at most 256). Answers do not
+    /// depend on it.
+    #[arg(long, value_parser = super::parse_threads)]
     pub threads: Option<usize>,
     /// Print the whole result as JSON instead of the table and message.
     #[arg(long)]

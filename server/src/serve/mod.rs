@@ -47,8 +47,8 @@ pub struct Args {
     /// Allowed CORS origin (repeatable, or comma-separated); CORS is off without one.
     #[arg(long = "cors-origin", env = "KEA_CORS_ORIGINS", value_delimiter = ',')]
     pub cors_origins: Vec<String>,
-    /// Worker threads for jobs [default: one per core].
-    #[arg(long, env = "KEA_WORKERS")]
+    /// Worker threads for jobs [default or 0: one per core; at most 256].
+    #[arg(long, env = "KEA_WORKERS", value_parser = crate::cli::parse_threads)]
     pub workers: Option<usize>,
     /// Largest request body, bytes.
     #[arg(long, env = "KEA_MAX_BODY_BYTES", default_value_t = 2 * 1024 * 1024)]

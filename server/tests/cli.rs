@@ -1,5 +1,6 @@
 //! The `kea` command line as a user runs it: a process, a model file, its output.
 
+use kea_server::cli::MAX_THREADS;
 use serde_json::{Value, json};
 use std::process::Command;
 
@@ -302,8 +303,9 @@ fn input_errors_name_their_source_and_exit_2_up_front() {
     assert_eq!(strip(&by_model.1), strip(&by_preset.1));
 }
 
-/// `--threads` (and the server's `--workers`) take 0 (every core) to 256: more is
-/// refused up front with the limit named, not tried (each thread reserves a stack).
+/// `--threads` (and the server's `--workers`) take 0 (every core) to
+/// [`MAX_THREADS`]: more is refused up front with the limit named, not tried (each
+/// thread reserves a stack).
 #[test]
 fn threads_above_the_cap_are_refused() {
     // (The server's address and data directory are such that, were the cap not
@@ -311,6 +313,7 @@ fn threads_above_the_cap_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     let data = data.to_str().unwrap();
+    let (cap, above) = (MAX_THREADS.to_string(), (MAX_THREADS + 1).to_string());
     for cmd in [
         &[
             "simulate",
@@ -320,7 +323,7 @@ fn threads_above_the_cap_are_refused() {
             "--threads",
             "100000",
         ][..],
-        &["synthesize", "no-such-request.json", "--threads", "257"][..],
+        &["synthesize", "no-such-request.json", "--threads", &above][..],
         &[
             "serve",
             "--workers",
@@ -335,7 +338,7 @@ fn threads_above_the_cap_are_refused() {
         assert_eq!(code, 2, "{cmd:?}: {err}");
         assert!(out.is_empty(), "{cmd:?} ran: {out}");
         assert!(
-            err.contains("at most 256 threads (0: every core), got"),
+            err.contains(&format!("at most {cap} threads (0: every core), got")),
             "{cmd:?}: {err}"
         );
     }
@@ -348,7 +351,7 @@ fn threads_above_the_cap_are_refused() {
         "--runs",
         "2",
         "--threads",
-        "256",
+        &cap,
         "--json",
     ]);
     assert_eq!(code, 0, "{err}");

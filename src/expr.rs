@@ -109,12 +109,7 @@ impl TimeFn {
     #[inline]
     pub fn eval_block(&mut self, t: [f64; LANES]) -> [f64; LANES] {
         if self.block.is_none() {
-            // `compile_entry` checked that the text parses over blocks.
-            let Ok(ex) = BlockEx::parse(self.expr.unparse()) else {
-                return [f64::NAN; LANES];
-            };
-            let vars = self.vars.iter().map(|&v| Block([v; LANES])).collect();
-            self.block = Some(Box::new((ex, vars)));
+            self.parse_block();
         }
         let Some(block) = self.block.as_deref_mut() else {
             return [f64::NAN; LANES];
@@ -122,6 +117,19 @@ impl TimeFn {
         let (ex, vars) = block;
         vars[self.t_slot] = Block(t);
         ex.eval(vars).map_or([f64::NAN; LANES], |b| b.0)
+    }
+
+    /// The block form's one-off parse, out of line: exmex builds the expression in
+    /// place (tens of KB of stack), and inlined here that frame would be set up, and
+    /// its pages probed, on every call.
+    #[cold]
+    #[inline(never)]
+    fn parse_block(&mut self) {
+        // `compile_entry` checked that the text parses over blocks.
+        if let Ok(ex) = BlockEx::parse(self.expr.unparse()) {
+            let vars = self.vars.iter().map(|&v| Block([v; LANES])).collect();
+            self.block = Some(Box::new((ex, vars)));
+        }
     }
 }
 
@@ -1046,11 +1054,7 @@ impl TimeMatrix {
                 (i - first) as usize
             }
             _ => {
-                let ts: [f64; LANES] = std::array::from_fn(|l| t0 + (i + l as u64) as f64 * dt);
-                for (f, out) in self.fns.iter_mut().zip(&mut self.block_values) {
-                    *out = f.eval_block(ts);
-                }
-                self.block_grid = Some((grid.0, grid.1, i));
+                self.eval_blocks(t0, dt, i);
                 0
             }
         };
@@ -1062,6 +1066,18 @@ impl TimeMatrix {
             self.values[*idx] = v;
         }
         Ok(())
+    }
+
+    /// Every expression at grid points i .. i + LANES, into `block_values`. Out of
+    /// line, so that the steps served from the cache do not set up its frame (the
+    /// exmex evaluation's, a few KB).
+    #[inline(never)]
+    fn eval_blocks(&mut self, t0: f64, dt: f64, i: u64) {
+        let ts: [f64; LANES] = std::array::from_fn(|l| t0 + (i + l as u64) as f64 * dt);
+        for (f, out) in self.fns.iter_mut().zip(&mut self.block_values) {
+            *out = f.eval_block(ts);
+        }
+        self.block_grid = Some((t0.to_bits(), dt.to_bits(), i));
     }
 }
 

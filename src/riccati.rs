@@ -75,12 +75,14 @@ use crate::lanes::Lanes;
 use crate::linalg::{SparseRows, mat_mut, mirror, predict_cov, predict_work};
 
 /// The measurements used at one step, prepared for sequential (scalar) processing:
-/// Rv = L D Lᵀ (L unit lower triangular, D ≥ 0 diagonal), so the whitened
-/// measurements L⁻¹ Z have rows L⁻¹ C and independent noises of variance D. A
-/// diagonal Rv (the usual case: Γ = I or one noise per measurement) needs no whitening.
+/// P Rv Pᵀ = L D Lᵀ (P a permutation, L unit lower triangular, D ≥ 0 diagonal), so
+/// the whitened measurements L⁻¹ P Z have rows L⁻¹ P C and independent noises of
+/// variance D. A diagonal Rv (the usual case: Γ = I or one noise per measurement)
+/// needs no whitening.
 #[derive(Clone, Debug)]
 pub struct Prepared {
-    /// Measurements in use at this step (indices into 0..nm).
+    /// Measurements in use at this step (indices into 0..nm), in P's order when
+    /// whitened.
     pub idx: Vec<usize>,
     /// Their (whitened) rows, nk × n.
     rows: Vec<f64>,
@@ -92,6 +94,9 @@ pub struct Prepared {
     linv: Vec<f64>,
     whitened: bool,
     work: Vec<f64>,
+    /// P: the row of the factored matrix that became row j, and `idx` in that order.
+    perm: Vec<usize>,
+    permuted: Vec<usize>,
 }
 
 impl Prepared {
@@ -104,6 +109,8 @@ impl Prepared {
             linv: vec![0.0; nm * nm],
             whitened: false,
             work: vec![0.0; nm * nm],
+            perm: vec![0; nm],
+            permuted: Vec::with_capacity(nm),
         }
     }
 
@@ -134,14 +141,22 @@ impl Prepared {
             }
             self.whitened = false;
         } else {
-            // Rv_k = L D Lᵀ, then L⁻¹ by forward substitution, rows := L⁻¹ C.
+            // P Rv_k Pᵀ = L D Lᵀ, the measurements (and their rows of C) taken in P's
+            // order, then L⁻¹ by forward substitution, rows := L⁻¹ P C.
             let a = &mut self.work[..nk * nk];
             for (r, &i) in self.idx.iter().enumerate() {
                 for (s, &j) in self.idx.iter().enumerate() {
                     a[r * nk + s] = rv[i * nm + j];
                 }
             }
-            ldl(a, &mut self.d[..nk], nk)?;
+            ldl(a, &mut self.d[..nk], &mut self.perm[..nk], nk)?;
+            self.permuted.clear();
+            self.permuted
+                .extend(self.perm[..nk].iter().map(|&p| self.idx[p]));
+            std::mem::swap(&mut self.idx, &mut self.permuted);
+            for (r, &j) in self.idx.iter().enumerate() {
+                self.rows[r * n..r * n + n].copy_from_slice(&c[j * n..j * n + n]);
+            }
             let linv = &mut self.linv[..nk * nk];
             linv.fill(0.0);
             for j in 0..nk {
@@ -213,17 +228,53 @@ impl Prepared {
 /// read off the updated covariance instead of composed from the scalar gains.
 const DIRECT_GAIN_MAX_Q_OVER_D: f64 = 16.0;
 
-/// a = L D Lᵀ in place (strict lower triangle of `a` := L), for a symmetric positive
-/// semi-definite a; a zero pivot zeroes its column of L. Err(()) on a negative pivot.
-fn ldl(a: &mut [f64], d: &mut [f64], m: usize) -> Result<(), ()> {
+/// P a Pᵀ = L D Lᵀ in place (a full symmetric m × m; its strict lower triangle := L),
+/// for a positive semi-definite a, with diagonal pivoting: each step takes the largest
+/// pivot left (LAPACK's `pstrf` order), and `perm[j]` is the row of a that became row
+/// j. A zero pivot zeroes its column of L. Err(()) on a negative pivot beyond rounding.
+///
+/// A singular a (fewer noise sources than measurements: Γ Ψ² Γᵀ of rank M < n) has
+/// pivots that are 0 exactly and only near 0 in floating point. Without pivoting the
+/// last one is the small difference of terms divided by the earlier, possibly small,
+/// pivots (seen at −4e-12 of the scale); taken largest first, the zero pivots come
+/// last and stay within a few ε of the scale (Higham, *Accuracy and Stability of
+/// Numerical Algorithms*, §10.3). Pivots up to `tiny` are zeros. The negative bound
+/// is what the validator lets through: a covariance whose smallest eigenvalue is down
+/// to −1e-12 of its largest (`validate.rs`); no pivot is below the smallest
+/// eigenvalue, and the largest is at most m·scale.
+fn ldl(a: &mut [f64], d: &mut [f64], perm: &mut [usize], m: usize) -> Result<(), ()> {
     let scale = (0..m).map(|i| a[i * m + i].abs()).fold(0.0, f64::max);
     let tiny = 1e-14 * scale;
+    let negative_zero = tiny + 1e-12 * m as f64 * scale;
+    for (j, p) in perm.iter_mut().enumerate() {
+        *p = j;
+    }
     for j in 0..m {
-        let mut dj = a[j * m + j];
-        for k in 0..j {
-            dj -= a[j * m + k] * a[j * m + k] * d[k];
+        let pivot = |a: &[f64], i: usize| {
+            let mut di = a[i * m + i];
+            for k in 0..j {
+                di -= a[i * m + k] * a[i * m + k] * d[k];
+            }
+            di
+        };
+        let (mut p, mut dj) = (j, pivot(a, j));
+        for i in j + 1..m {
+            let di = pivot(a, i);
+            if di > dj {
+                (p, dj) = (i, di);
+            }
         }
-        if !dj.is_finite() || dj < -tiny {
+        if p != j {
+            // Rows j and p of L so far, and of a's remaining entries; columns j and p.
+            for c in 0..m {
+                a.swap(j * m + c, p * m + c);
+            }
+            for r in 0..m {
+                a.swap(r * m + j, r * m + p);
+            }
+            perm.swap(j, p);
+        }
+        if !dj.is_finite() || dj < -negative_zero {
             return Err(());
         }
         if dj <= tiny {

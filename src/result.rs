@@ -58,7 +58,8 @@ pub struct StepSelection {
 pub struct StepTrial {
     pub steps: u64,
     /// Time-averaged max_i |y_D − y_2D| / max|y| against the next refinement 2D
-    /// (null when 2D would exceed the cap).
+    /// (null when 2D would exceed the cap, or when a solution overflowed: Euler
+    /// unstable at this D, or the mean itself diverging).
     pub difference: Option<f64>,
 }
 

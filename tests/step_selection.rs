@@ -201,3 +201,32 @@ fn time_auto_with_integer_steps_is_reported_as_without_effect() {
         "time.auto has no effect: steps is 500, not \"auto\" (set steps to \"auto\" for the step-size selection, or leave time.auto out)"
     );
 }
+
+/// A stable but stiff model: Euler is unstable while |1 + aΔt| > 1, here for
+/// D ≤ 5000 over [0, 10] with a = −1000, and its solutions overflow. Those trials are
+/// not taken as converged (the overflowed differences are NaN, which `max` skips:
+/// D = 1000 used to pass with a difference of 0 and the analysis then failed); the
+/// selection refines to the first stable D and converges there.
+#[test]
+fn a_solution_that_overflows_is_refined_not_accepted() {
+    let mut model = scalar(
+        json!(-1000),
+        json!(1000),
+        json!({"tolerance": 1e-4, "initial_steps": 1000, "max_steps": 64000}),
+    );
+    model["time"]["t_end"] = json!(10.0);
+    model["system"]["y0"] = json!([0.0]); // (y = 1 is the equilibrium)
+    let (trials, converged, chosen) = selection(model);
+    // D = 1000, 2000 (|1 + aΔt| = 9, 4) overflow; 4000 (|1 + aΔt| = 1.5) too, over
+    // 4000 steps; 8000 (0.25) is stable.
+    assert_eq!(
+        trials[..3],
+        [(1000, None), (2000, None), (4000, None)],
+        "{trials:?}"
+    );
+    assert!(converged, "{trials:?}");
+    assert!(chosen >= 8000, "chose D = {chosen}: {trials:?}");
+    let (d, diff) = trials[trials.len() - 1];
+    assert_eq!(d, chosen);
+    assert!(diff.is_some_and(|x| x <= 1e-4), "{trials:?}");
+}

@@ -164,13 +164,27 @@ impl Inputs {
                 return Err(overflow("measurement", what, m, k, dt));
             }
             // A variance below f64's normal range keeps a few digits or none, and its
-            // whitening (1/√d) and the gain turn it into inf or NaN.
-            if let Some(j) = (0..nm)
-                .find(|&j| self.rv[j * nm + j] > 0.0 && self.rv[j * nm + j] < f64::MIN_POSITIVE)
-            {
+            // whitening (1/√d) and the gain turn it into inf or NaN. Below about
+            // 1e-162 it is 0 outright, and would pass for a noise-free measurement:
+            // so also when every term |γ_jl| ψ_l is non-zero only below √2.2e-308.
+            let squares_underflow = |j: usize| {
+                let big = (0..ms)
+                    .map(|l| self.gamma[j * ms + l].abs() * m.psi[l])
+                    .fold(0.0, f64::max);
+                big > 0.0 && big < f64::MIN_POSITIVE.sqrt()
+            };
+            if let Some(j) = (0..nm).find(|&j| {
+                (self.rv[j * nm + j] > 0.0 && self.rv[j * nm + j] < f64::MIN_POSITIVE)
+                    || squares_underflow(j)
+            }) {
+                let var = self.rv[j * nm + j];
+                let value = if var == 0.0 {
+                    "underflows to 0 (its terms |γ|ψ are below 1.5e-154)".to_string()
+                } else {
+                    format!("= {var:e}")
+                };
                 let what = format!(
-                    "the measurement-noise variance (Γ V Γᵀ)[{j}][{j}] = {:e} of \"{}\" is below f64's normal range (2.2e-308): the noise levels are too small to square; give 0 for a noise-free measurement, or rescale",
-                    self.rv[j * nm + j],
+                    "the measurement-noise variance (Γ V Γᵀ)[{j}][{j}] of \"{}\" {value}, below f64's normal range (2.2e-308): the noise levels are too small to square; give 0 for a noise-free measurement, or rescale",
                     m.measurements[j]
                 );
                 return Err(at_step("measurement", what, m, k, dt));

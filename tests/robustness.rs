@@ -174,9 +174,38 @@ fn overflowed_maxima_and_trace_values_are_named() {
 fn a_subnormal_measurement_noise_variance_is_an_error_at_its_step() {
     let mut v = scalar();
     v["measurement"]["gamma"] = json!([["1e-160*(1 + t)"]]);
-    let e = error_at(v, "measurement", "is below f64's normal range (2.2e-308)");
-    assert!(e.to_string().contains("(Γ V Γᵀ)[0][0] = "), "{e}");
+    let e = error_at(v, "measurement", "below f64's normal range (2.2e-308)");
+    assert!(
+        e.to_string().contains("(Γ V Γᵀ)[0][0] of \"z\" = 1."),
+        "{e}"
+    );
     assert!(e.to_string().contains("(at step 1, t = 0.01)"), "{e}");
+}
+
+/// Further down the same variance is 0 outright (1e-200² underflows), and a constant
+/// Γ of 1e-200 ran as a noise-free measurement: the covariance set all null and the
+/// bound's F_YZ 1.5e200, while the same variance through an expression was refused.
+/// Now both are the same error.
+#[test]
+fn a_measurement_noise_variance_that_underflows_to_zero_is_an_error() {
+    for gamma in [json!(1e-200), json!("1e-200*(1 + t)")] {
+        let mut v = scalar();
+        v["measurement"]["gamma"] = json!([[gamma]]);
+        let e = error_at(v, "measurement", "below f64's normal range (2.2e-308)");
+        assert!(
+            e.to_string()
+                .contains("of \"z\" underflows to 0 (its terms |γ|ψ are below 1.5e-154)"),
+            "{gamma}: {e}"
+        );
+    }
+    // A variance that is 0 because the noise cancels (γ in V's null space) is not
+    // an underflow: V = [[1, 1], [1, 1]], γ = [1, −1].
+    let mut v = scalar();
+    v["measurement"]["gamma"] = json!([[1, -1]]);
+    v["measurement"].as_object_mut().unwrap().remove("psi");
+    v["measurement"]["V"] = json!([[1, 1], [1, 1]]);
+    let r = run(v).expect("a cancelling noise is not an underflow");
+    assert_eq!(r.final_.measured_sko[0], 0.0);
 }
 
 /// A Monte Carlo of a diverging model (ẏ = 10 v) went on until the simulated process

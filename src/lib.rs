@@ -6,6 +6,7 @@
 //! is also how a caller cancels.
 
 pub mod analysis;
+pub mod cost;
 pub mod decimate;
 pub mod error;
 pub mod exec;

@@ -7,10 +7,10 @@
 //! plus one line in [`registry`].
 
 pub mod analysis;
-pub mod cost;
 pub mod simulation;
 pub mod synthesis;
 
+pub use kea_core::cost;
 use kea_core::{Error, Progress};
 use serde_json::Value;
 use std::sync::Arc;

@@ -1,12 +1,15 @@
 //! The work estimate: a cost model of the core's steps, in units of about a
 //! nanosecond of one core. The server's limits (`--sync-work-limit`, `--max-work`) and
-//! the command line's `--max-work` compare it, so it must follow what the engine
-//! does per step (src/analysis.rs, src/inputs.rs, src/simulation.rs), not only N.
+//! the command line's `--max-work` compare it, and the core spaces its progress
+//! reports (the callers' chance to cancel) by it
+//! ([`crate::analysis::steps_between_reports`]),
+//! so it must follow what the engine does per step (analysis.rs, inputs.rs,
+//! simulation.rs), not only N.
 //!
 //! An analysis step costs (units ≈ ns; N states, n measurements, L = columns of b,
 //! M = columns of Γ or g):
 //!
-//! - the engine, whatever varies: N³ + 16N² + 200 ([`kea_core::step_cost`]);
+//! - the engine, whatever varies: N³ + 16N² + 200 ([`crate::step_cost`]);
 //! - b(t) varying: re-forming B = bΔt W (bΔt)ᵀ, N·L²/4 (bΔt W, a vectorised product)
 //!   + N(N+1)/2·L (the symmetric product's dot products, ≈ 1 ns a term) + 2NL;
 //! - Γ(t) (or g(t)) varying: Γ V Γᵀ the same way, n·M²/4 + n(n+1)/2·M + 2nM (plus
@@ -30,11 +33,11 @@
 //! [`simulation_run_step`]); estimated 1.07–2.4 times the CPU time of the presets and of
 //! N = 10, L = M = 200 with 2 to 1000 runs.
 
-use kea_core::Model;
-use kea_core::model::Value;
-use kea_core::schedule::Availability;
-use kea_core::simulation::ModelError;
-use kea_core::validate::{CompiledModel, MeasurementNoise};
+use crate::Model;
+use crate::model::Value;
+use crate::schedule::Availability;
+use crate::simulation::ModelError;
+use crate::validate::{CompiledModel, MeasurementNoise};
 use std::collections::HashSet;
 
 /// The cost of the expressions in t of a model, per step.
@@ -165,7 +168,7 @@ impl AnalysisStep {
         }
         AnalysisStep {
             n: compiled.n_states(),
-            engine: kea_core::step_cost(compiled.n_states()),
+            engine: crate::step_cost(compiled.n_states()),
             inputs,
             expressions: Expressions::of(compiled, model),
         }
@@ -231,7 +234,7 @@ pub fn simulation_run_step(compiled: &CompiledModel, model_error: ModelError) ->
         ModelError::Constant => 0.0,
     };
     let ms = compiled.noise.sources() as f64;
-    let pattern = |m: &kea_core::expr::TimeMatrix, diag: bool| {
+    let pattern = |m: &crate::expr::TimeMatrix, diag: bool| {
         (0..m.rows * m.cols)
             .filter(|&i| (diag && i / m.cols == i % m.cols) || m.values[i] != 0.0 || m.varies(i))
             .count()
@@ -266,11 +269,11 @@ pub fn simulation_run_start(compiled: &CompiledModel, model_error: ModelError) -
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kea_core::Overrides;
+    use crate::Overrides;
 
     fn model(json: serde_json::Value) -> (Model, CompiledModel) {
-        let m = kea_core::model_from_value(json).unwrap();
-        let c = kea_core::validate::compile(&m, &Overrides::new()).unwrap();
+        let m = crate::model_from_value(json).unwrap();
+        let c = crate::validate::compile(&m, &Overrides::new()).unwrap();
         (m, c)
     }
 
@@ -293,7 +296,7 @@ mod tests {
         let step = AnalysisStep::of(&c, Some(&m));
         assert_eq!(step.inputs, 0.0);
         assert_eq!(step.expressions, Expressions::default());
-        assert_eq!(step.units(), kea_core::step_cost(2));
+        assert_eq!(step.units(), crate::step_cost(2));
     }
 
     #[test]

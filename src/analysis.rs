@@ -18,24 +18,69 @@ use crate::{Progress, riccati};
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
 
-/// Steps between progress reports / cancellation checks.
-pub const PROGRESS_EVERY: u64 = 1 << 14;
+/// The work ([`crate::cost`]'s units, about 1 ns of one core each) between two progress
+/// reports, which are also the callers' only chance to cancel, stop at a time limit or
+/// shut down: ≈ 1 ms, so even a step costing ten times its estimate is stopped within
+/// tens of milliseconds, while a report (an indirect call, a few atomic loads and a
+/// clock read in the server) stays far below 0.1 % of the work between two.
+pub const WORK_BETWEEN_REPORTS: f64 = (1u64 << 20) as f64;
 
-/// At every [`PROGRESS_EVERY`]-th step k, reports `fraction()` done; Err(Cancelled)
-/// when the caller cancels.
-#[inline(always)]
-pub(crate) fn checkpoint(
-    progress: &mut dyn Progress,
-    k: u64,
-    fraction: impl FnOnce() -> f64,
-) -> Result<(), Error> {
-    if k.is_multiple_of(PROGRESS_EVERY)
-        && let ControlFlow::Break(()) = progress.report(fraction())
-    {
-        return Err(Error::Cancelled);
-    }
-    Ok(())
+/// At most this many steps between progress reports, however cheap the steps.
+pub const MAX_STEPS_BETWEEN_REPORTS: u64 = 1 << 14;
+
+/// When a loop over steps reports progress: every `every` steps, `every` chosen so
+/// that the steps between two reports are about [`WORK_BETWEEN_REPORTS`] by the work
+/// estimate (at least 1, at most [`MAX_STEPS_BETWEEN_REPORTS`]). A step of a 200-state
+/// model reports every step; one of 2 states every few thousand. The check in the
+/// loop is one comparison of the step with the next report's.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Checkpoints {
+    next: u64,
+    every: u64,
 }
+
+impl Checkpoints {
+    /// Reports for steps k = 1, 2, … of `step_work` units each.
+    pub(crate) fn new(step_work: f64) -> Checkpoints {
+        let every = steps_between_reports(step_work);
+        Checkpoints { next: every, every }
+    }
+
+    /// Reports for the analysis's steps of `model` ([`crate::cost::AnalysisStep`]).
+    pub(crate) fn analysis(model: &CompiledModel) -> Checkpoints {
+        Checkpoints::new(crate::cost::AnalysisStep::of(model, None).units())
+    }
+
+    /// At the step k (called for every k = 1, 2, … in turn), reports `fraction()` done
+    /// when a report is due; Err(Cancelled) when the caller cancels.
+    #[inline(always)]
+    pub(crate) fn at(
+        &mut self,
+        progress: &mut dyn Progress,
+        k: u64,
+        fraction: impl FnOnce() -> f64,
+    ) -> Result<(), Error> {
+        if k == self.next {
+            self.next += self.every;
+            if let ControlFlow::Break(()) = progress.report(fraction()) {
+                return Err(Error::Cancelled);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// How many steps of `step_work` units make [`WORK_BETWEEN_REPORTS`] (1 to
+/// [`MAX_STEPS_BETWEEN_REPORTS`]).
+pub fn steps_between_reports(step_work: f64) -> u64 {
+    let steps = WORK_BETWEEN_REPORTS / step_work;
+    if steps >= 1.0 {
+        (steps as u64).min(MAX_STEPS_BETWEEN_REPORTS)
+    } else {
+        1 // (also for a NaN estimate)
+    }
+}
+
 /// The shortcut freezes the Riccati recursion once r_k is this close (relative) to
 /// the stationary solution r∞ of the DARE (rounding keeps a slowly contracting
 /// recursion from getting much closer).
@@ -498,6 +543,7 @@ impl<'m, const N: usize> Engine<'m, N> {
         // and how many steps had one.
         let mut cancelled: Option<(u64, f64, usize)> = None;
         let mut cancelled_steps = 0u64;
+        let mut checkpoints = Checkpoints::analysis(m);
 
         for k in 1..=self.steps {
             let t_k = t0 + k as f64 * dt;
@@ -591,7 +637,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             }
 
             if self.covariance_only {
-                checkpoint(progress, k, || k as f64 / self.steps as f64)?;
+                checkpoints.at(progress, k, || k as f64 / self.steps as f64)?;
                 continue;
             }
 
@@ -756,7 +802,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                 constants,
             });
 
-            checkpoint(progress, k, || k as f64 / self.steps as f64)?;
+            checkpoints.at(progress, k, || k as f64 / self.steps as f64)?;
         }
         if let Some(w) = written.take() {
             take_row(&mut row, &part, &mut running, &mut dec, n, w);

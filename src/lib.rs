@@ -38,8 +38,10 @@ use std::ops::ControlFlow;
 /// Parameter overrides (`--set name=value`): each must name an existing param.
 pub type Overrides = BTreeMap<String, f64>;
 
-/// Progress reports and cancellation: `report` is called every few thousand steps
-/// with the fraction done (0..1); returning `ControlFlow::Break(())` cancels.
+/// Progress reports and cancellation: `report` is called with the fraction done (0..1)
+/// after about every millisecond of work by the work estimate
+/// ([`analysis::WORK_BETWEEN_REPORTS`]: every step of a costly model, every few
+/// thousand of a cheap one); returning `ControlFlow::Break(())` cancels.
 pub trait Progress {
     fn report(&mut self, fraction: f64) -> ControlFlow<()>;
 }

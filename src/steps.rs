@@ -85,6 +85,9 @@ pub fn select_steps(
         let mut sum = 0.0;
         let mut ymax = yc.iter().fold(0.0f64, |a, b| a.max(b.abs()));
         let mut overflowed = false;
+        // (A trial's step is three mean steps, cheaper than the analysis's: reports
+        // come at most as far apart as the analysis's.)
+        let mut checkpoints = crate::analysis::Checkpoints::analysis(m);
         for k in 1..=d {
             mean_step(&mut ac, &mut uc, &mut yc, &mut tmp, m.t0, dtc, k)?;
             for h in 0..2u64 {
@@ -106,7 +109,7 @@ pub fn select_steps(
                 overflowed = true;
                 break;
             }
-            crate::analysis::checkpoint(progress, k, || 0.0)?;
+            checkpoints.at(progress, k, || 0.0)?;
         }
         if overflowed {
             history.push(StepTrial {

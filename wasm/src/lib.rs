@@ -60,7 +60,8 @@ pub fn check(model_json: &str, set_json: &str) -> String {
     serde_json::to_string(&errors).expect("errors serialise")
 }
 
-/// Run the analysis. `progress(fraction)` is called every few thousand steps; if it
+/// Run the analysis. `progress(fraction)` is called after about every millisecond of
+/// work (every few thousand steps of a small model, every step of a large one); if it
 /// returns `false` the run stops and this throws a `cancelled` error. Returns the
 /// result JSON, with `timing.wall_ms` measured here (the core has no clock).
 #[wasm_bindgen]

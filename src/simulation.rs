@@ -5,7 +5,9 @@
 //! `monte_carlo`; consistency (average NEES and NIS with their χ² bands, a verdict per
 //! state).
 //!
-//! Design: step-major. Time is cut into chunks of [`CHUNK_STEPS`] steps. For a chunk,
+//! Design: step-major. Time is cut into chunks of at most [`CHUNK_STEPS`] steps, fewer
+//! where a step is costly ([`chunk_steps`]: progress is reported, and a caller can
+//! cancel, between chunks). For a chunk,
 //! the [`Plan`] runs the Riccati recursion once (it is the same for every run) and
 //! stores that chunk's inputs and gains; then every block of runs advances through the
 //! chunk (in parallel through an [`Executor`]) and returns per-step sums; the sums are
@@ -31,8 +33,14 @@ use std::ops::ControlFlow;
 pub const MAX_RUNS: u64 = 100_000;
 /// Largest accepted work runs × steps × N² (about a minute on one core at 1e10).
 pub const MAX_WORK: f64 = 1e11;
-/// Steps per chunk: the Riccati is computed for a chunk, then all blocks advance.
+/// Most steps per chunk: the Riccati is computed for a chunk, then all blocks advance.
 pub const CHUNK_STEPS: usize = 256;
+/// The work of a chunk (the plan's steps and every run's, units of [`crate::cost`])
+/// at which chunks get shorter than [`CHUNK_STEPS`]: 16 times the analysis's
+/// [`crate::analysis::WORK_BETWEEN_REPORTS`], ≈ 17 ms of one core (less on several
+/// threads), so that handing the blocks to the executor stays a small share of a
+/// chunk.
+pub const CHUNK_WORK: f64 = 16.0 * crate::analysis::WORK_BETWEEN_REPORTS;
 /// At most this many blocks of runs (more runs make bigger blocks).
 const MAX_BLOCKS: usize = 64;
 /// At least this many runs per block.
@@ -323,16 +331,32 @@ pub fn run<E: Executor>(
     progress: &mut dyn Progress,
 ) -> Result<SimulationResult, Error> {
     check_request(req, model)?;
+    let chunk = chunk_steps(model, req);
     match model.n_states() {
-        1 => run_n::<1, E>(model, analysis, req, exec, progress),
-        2 => run_n::<2, E>(model, analysis, req, exec, progress),
-        3 => run_n::<3, E>(model, analysis, req, exec, progress),
-        4 => run_n::<4, E>(model, analysis, req, exec, progress),
-        5 => run_n::<5, E>(model, analysis, req, exec, progress),
-        6 => run_n::<6, E>(model, analysis, req, exec, progress),
-        7 => run_n::<7, E>(model, analysis, req, exec, progress),
-        8 => run_n::<8, E>(model, analysis, req, exec, progress),
-        _ => run_n::<0, E>(model, analysis, req, exec, progress),
+        1 => run_n::<1, E>(model, analysis, req, exec, progress, chunk),
+        2 => run_n::<2, E>(model, analysis, req, exec, progress, chunk),
+        3 => run_n::<3, E>(model, analysis, req, exec, progress, chunk),
+        4 => run_n::<4, E>(model, analysis, req, exec, progress, chunk),
+        5 => run_n::<5, E>(model, analysis, req, exec, progress, chunk),
+        6 => run_n::<6, E>(model, analysis, req, exec, progress, chunk),
+        7 => run_n::<7, E>(model, analysis, req, exec, progress, chunk),
+        8 => run_n::<8, E>(model, analysis, req, exec, progress, chunk),
+        _ => run_n::<0, E>(model, analysis, req, exec, progress, chunk),
+    }
+}
+
+/// Steps per chunk: as many as make [`CHUNK_WORK`] by the work estimate of a step
+/// (the plan's, [`crate::cost::simulation_plan_step`], and every run's,
+/// [`crate::cost::simulation_run_step`]), 1 to [`CHUNK_STEPS`]. A chunk's length never
+/// changes a result (each run's stream and sums go on across chunks).
+pub fn chunk_steps(model: &CompiledModel, req: &SimulationRequest) -> usize {
+    let step = crate::cost::simulation_plan_step(model, None)
+        + req.runs as f64 * crate::cost::simulation_run_step(model, req.model_error);
+    let steps = CHUNK_WORK / step;
+    if steps >= 1.0 {
+        (steps as usize).min(CHUNK_STEPS)
+    } else {
+        1 // (also for a NaN estimate)
     }
 }
 
@@ -1090,6 +1114,7 @@ fn run_n<const N: usize, E: Executor>(
     req: &SimulationRequest,
     exec: &E,
     progress: &mut dyn Progress,
+    chunk_len: usize,
 ) -> Result<SimulationResult, Error> {
     let steps = analysis.steps;
     let runs = req.runs as usize;
@@ -1178,13 +1203,13 @@ fn run_n<const N: usize, E: Executor>(
         chi: vec![0.0; n],
     };
 
-    let mut chunk = vec![0.0; CHUNK_STEPS * lay.size];
-    let mut pot = vec![0.0; CHUNK_STEPS * n];
-    let mut chi = vec![0.0; CHUNK_STEPS * n];
-    let mut open = vec![0.0; CHUNK_STEPS * n];
+    let mut chunk = vec![0.0; chunk_len * lay.size];
+    let mut pot = vec![0.0; chunk_len * n];
+    let mut chi = vec![0.0; chunk_len * n];
+    let mut open = vec![0.0; chunk_len * n];
     let mut k0 = 1u64;
     while k0 <= steps {
-        let len = (steps - k0 + 1).min(CHUNK_STEPS as u64) as usize;
+        let len = (steps - k0 + 1).min(chunk_len as u64) as usize;
         for s in 0..len {
             let k = k0 + s as u64;
             plan.step(k, &lay, &mut chunk[s * lay.size..(s + 1) * lay.size])?;
@@ -1511,4 +1536,37 @@ pub fn traces_csv(r: &SimulationResult) -> String {
         fields
     });
     crate::report::csv_text(header, rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A chunk's length changes no bit of the result: chunks of 1, 7 and 256 steps.
+    #[test]
+    fn the_chunk_length_changes_nothing() {
+        let mut json: serde_json::Value =
+            serde_json::from_str(crate::presets::get_json("seed-example").expect("preset"))
+                .unwrap();
+        json["time"]["steps"] = 2000.into();
+        let model = crate::model_from_value(json).unwrap();
+        let compiled = crate::validate::compile(&model, &Overrides::new()).unwrap();
+        let analysis = crate::analysis::run(&compiled, &mut crate::NoProgress).unwrap();
+        let req = SimulationRequest::new(40, 7);
+        let json = |chunk: usize| {
+            let r = run_n::<0, Sequential>(
+                &compiled,
+                &analysis,
+                &req,
+                &Sequential,
+                &mut crate::NoProgress,
+                chunk,
+            )
+            .unwrap();
+            serde_json::to_string(&r).unwrap()
+        };
+        let whole = json(CHUNK_STEPS);
+        assert_eq!(json(1), whole);
+        assert_eq!(json(7), whole);
+    }
 }

@@ -736,6 +736,27 @@ struct Ctx<'a> {
     total: u64,
     done: u64,
     steps: u64,
+    /// The work estimate of one analysis ([`crate::cost`]), which sizes the parts of
+    /// a batch between progress reports.
+    analysis_work: f64,
+}
+
+/// The work (units of [`crate::cost`]) a batch's part gives each thread between two
+/// progress reports: as a Monte Carlo chunk's, ≈ 17 ms of one core.
+const PART_WORK: f64 = crate::simulation::CHUNK_WORK;
+
+/// Points of a batch analysed between two progress reports: `threads` points
+/// (one each) at least, more while each thread's share stays within [`PART_WORK`].
+/// An analysis that runs beside others reports nothing, so a cancel waits for the
+/// part in hand: about [`PART_WORK`], or one analysis where that is more.
+fn part_points(analysis_work: f64, threads: usize) -> usize {
+    let threads = threads.max(1);
+    let each = PART_WORK / analysis_work;
+    if each >= 1.0 {
+        threads.saturating_mul(each.min(1e6) as usize)
+    } else {
+        threads // (also for a NaN estimate)
+    }
 }
 
 impl Ctx<'_> {
@@ -816,8 +837,9 @@ impl Ctx<'_> {
     }
 
     /// Analyse a batch of points, in order. A single point runs on the calling thread
-    /// with fine-grained progress; a larger batch goes to the executor, with progress
-    /// and cancellation checked between batches.
+    /// with fine-grained progress; a larger batch goes to the executor in parts of
+    /// about [`PART_WORK`] a thread ([`part_points`]), with progress and cancellation
+    /// checked between parts.
     fn batch<E: Executor>(
         &mut self,
         exec: &E,
@@ -831,11 +853,20 @@ impl Ctx<'_> {
             let mut sub = |f: f64| progress.report(((done + f) / total).min(1.0));
             vec![self.eval(&points[0], &mut sub)]
         } else {
-            if progress.report(self.done as f64 / total).is_break() {
-                return Err(Error::Cancelled);
+            // In parts, with a report (a chance to cancel) before each.
+            let part = part_points(self.analysis_work, exec.threads());
+            let mut results = Vec::with_capacity(points.len());
+            let mut points = points.into_iter().peekable();
+            while points.peek().is_some() {
+                let done = self.done + results.len() as u64;
+                if progress.report((done as f64 / total).min(1.0)).is_break() {
+                    return Err(Error::Cancelled);
+                }
+                let this = &*self;
+                let part: Vec<_> = points.by_ref().take(part).collect();
+                results.extend(exec.map(part, |p| this.eval(&p, &mut NoProgress)));
             }
-            let this = &*self;
-            exec.map(points, |p| this.eval(&p, &mut NoProgress))
+            results
         };
         self.done += n;
         let mut out = Vec::with_capacity(results.len());
@@ -945,6 +976,9 @@ pub fn synthesize<E: Executor>(
         total: planned_analyses(req),
         done: 0,
         steps: 0,
+        analysis_work: crate::validate::compile(&req.model, &req.set).map_or(f64::NAN, |c| {
+            c.max_steps() as f64 * crate::cost::AnalysisStep::of(&c, Some(&req.model)).units()
+        }),
     };
     let (status, message, answer, verification, details) = match &req.mode {
         Mode::SeedSearch(s) => seed_search(&mut ctx, exec, s, progress)?,

@@ -481,6 +481,85 @@ fn a_request_that_stops_arriving_times_out() {
     assert_eq!(s.get("/healthz").status, 200);
 }
 
+/// A body declared larger than `--max-body-bytes` is answered 413 at once, whether
+/// the client starts sending it or waits for `100 Continue`; the server waited for the
+/// body and answered 408 after `--read-timeout`.
+#[test]
+fn a_body_declared_too_large_is_refused_at_once() {
+    use std::io::{Read, Write};
+    let dir = tmp();
+    let s = Server::start(
+        dir.path(),
+        &["--max-body-bytes", "1000", "--read-timeout", "30"],
+    );
+    let host = s.base.trim_start_matches("http://");
+    for (expect, start_of_body) in [("", "{\"pad\": \""), ("Expect: 100-continue\r\n", "")] {
+        let mut tcp = std::net::TcpStream::connect(host).unwrap();
+        tcp.set_read_timeout(Some(Duration::from_secs(40))).unwrap();
+        write!(
+            tcp,
+            "POST /v1/models HTTP/1.1\r\nHost: {host}\r\nContent-Type: application/json\r\n\
+             Content-Length: 1000000000\r\n{expect}\r\n{start_of_body}"
+        )
+        .unwrap();
+        let started = std::time::Instant::now();
+        let mut answer = Vec::new();
+        let mut buf = [0u8; 4096];
+        while !String::from_utf8_lossy(&answer).contains("}") {
+            match tcp.read(&mut buf) {
+                Ok(0) => break,
+                Ok(n) => answer.extend_from_slice(&buf[..n]),
+                Err(e) => panic!("no answer after {:?}: {e}", started.elapsed()),
+            }
+        }
+        let answer = String::from_utf8_lossy(&answer);
+        assert!(answer.starts_with("HTTP/1.1 413"), "{expect}: {answer}");
+        assert!(
+            answer.contains("urn:kea:problem:body-too-large"),
+            "{answer}"
+        );
+        assert!(answer.contains("declared as 1000000000 bytes"), "{answer}");
+        assert!(
+            started.elapsed() < Duration::from_secs(10),
+            "{:?}",
+            started.elapsed()
+        );
+    }
+    assert_eq!(s.get("/healthz").status, 200);
+}
+
+/// `--queue-limit` holds under concurrent submissions: with the one worker busy, 20
+/// submissions at once queue exactly 2 (the count and the insert were two steps, and
+/// 3 got in).
+#[test]
+fn the_queue_limit_holds_under_concurrent_submissions() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &["--workers", "1", "--queue-limit", "2"]);
+    let (running, _) = start_long_job(&s);
+    let request = json!({"kind": "analysis", "model": long_model(4_000_000)});
+    let statuses: Vec<u16> = std::thread::scope(|scope| {
+        let submits: Vec<_> = (0..20)
+            .map(|_| scope.spawn(|| s.post("/v1/jobs", &request).status))
+            .collect();
+        submits.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let accepted = statuses.iter().filter(|&&c| c == 202).count();
+    assert_eq!(accepted, 2, "{statuses:?}");
+    assert!(
+        statuses.iter().all(|&c| c == 202 || c == 429),
+        "{statuses:?}"
+    );
+    let queued = s.get("/v1/jobs?status=queued").json()["items"]
+        .as_array()
+        .unwrap()
+        .len();
+    assert_eq!(queued, 2);
+    assert_eq!(
+        s.get(&format!("/v1/jobs/{running}")).json()["status"],
+        "running"
+    );
+}
+
 #[test]
 fn time_limit_fails_a_job() {
     let dir = tmp();
@@ -666,6 +745,101 @@ fn bad_request_corpus() {
     let r = s.delete("/v1/presets");
     assert_eq!(r.status, 405, "{}", r.text);
     assert_eq!(r.content_type, "application/problem+json");
+}
+
+/// A path parameter that percent-decodes to no UTF-8 text is a problem+json 400 that
+/// names the parameter and says what it should be (axum answered text/plain "Invalid
+/// URL: Invalid UTF-8 in `id`").
+#[test]
+fn a_path_parameter_that_is_not_utf8_is_a_problem() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    let cases = [
+        ("GET", "/v1/jobs/%ff", "id", "job id"),
+        ("DELETE", "/v1/jobs/%ff", "id", "job id"),
+        ("GET", "/v1/jobs/%ff/result", "id", "job id"),
+        ("GET", "/v1/jobs/%ff/traces.csv", "id", "job id"),
+        ("GET", "/v1/jobs/%ff/events", "id", "job id"),
+        ("GET", "/v1/models/%ff", "id", "model id"),
+        ("DELETE", "/v1/models/%ff", "id", "model id"),
+        ("GET", "/v1/presets/%ff%fe", "name", "preset name"),
+    ];
+    for (method, path, param, expected) in cases {
+        let r = match method {
+            "GET" => s.get(path),
+            _ => s.delete(path),
+        };
+        assert_eq!(r.status, 400, "{method} {path}: {}", r.text);
+        assert_eq!(r.content_type, "application/problem+json", "{}", r.text);
+        assert_eq!(r.error_paths(), vec![param], "{}", r.text);
+        let message = r.json()["errors"][0]["message"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        assert!(message.contains(expected), "{message}");
+        assert!(message.contains("UTF-8"), "{message}");
+    }
+}
+
+/// At most 100 errors are listed, then one entry at the top level counts the rest,
+/// and `detail` counts them all: for the server's own checks (300 unknown members gave
+/// 300 entries) as for the core's (the entry sat at `model` for `set` names, and
+/// `detail` said "(and 100 more)" of 400).
+#[test]
+fn at_most_100_errors_are_listed_and_the_rest_are_counted() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    let cv = preset("cv-tracker");
+    let many = |n: usize, value: Value| -> Value {
+        (0..n)
+            .map(|i| (format!("x{i:03}"), value.clone()))
+            .collect::<serde_json::Map<_, _>>()
+            .into()
+    };
+    let mut unknown_members = many(300, json!(1));
+    unknown_members["model"] = cv.clone();
+    let cases = [
+        ("unknown members", unknown_members, 300, "x000"),
+        (
+            "set values",
+            json!({"model": cv, "set": many(300, json!("x"))}),
+            300,
+            "set.x000",
+        ),
+        (
+            "set names",
+            json!({"model": cv, "set": many(400, json!(1))}),
+            400,
+            "set.x000",
+        ),
+    ];
+    for (what, body, total, first) in cases {
+        for route in ["/v1/analyze", "/v1/jobs"] {
+            let mut body = body.clone();
+            if route == "/v1/jobs" {
+                body["kind"] = json!("analysis");
+            }
+            let r = s.post(route, &body);
+            assert_eq!(r.status, 422, "{what}: {}", r.text);
+            let problem = r.json();
+            let errors = problem["errors"].as_array().unwrap();
+            assert_eq!(errors.len(), 101, "{what} at {route}");
+            assert_eq!(errors[0]["path"], first, "{what}");
+            assert_eq!(errors[100]["path"], "", "{what}");
+            let more = total - 100;
+            assert_eq!(
+                errors[100]["message"],
+                format!("… and {more} more errors (only the first 100 are listed)"),
+                "{what}"
+            );
+            let detail = problem["detail"].as_str().unwrap();
+            let all_but_one = total - 1;
+            assert!(
+                detail.ends_with(&format!("(and {all_but_one} more)")),
+                "{what}: {detail}"
+            );
+        }
+    }
 }
 
 type Headers = std::collections::BTreeMap<String, String>;

@@ -7,7 +7,7 @@ use super::request::{self, JsonBody};
 use super::state::AppState;
 use super::store::{ModelRecord, new_id, now_rfc3339};
 use axum::Json;
-use axum::extract::{Path, RawQuery, State};
+use axum::extract::{RawQuery, State};
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use kea_core::FieldError;
@@ -24,7 +24,9 @@ pub async fn list_presets() -> Json<Value> {
 }
 
 /// `GET /v1/presets/{name}`: the model JSON exactly as shipped.
-pub async fn get_preset(Path(name): Path<String>) -> Result<Response, Problem> {
+pub async fn get_preset(
+    request::PresetName(name): request::PresetName,
+) -> Result<Response, Problem> {
     let json = kea_core::presets::get_json(&name).ok_or_else(|| {
         Problem::not_found("preset", &name).detail(format!(
             "there is no preset `{name}`; known: {}",
@@ -52,8 +54,14 @@ pub async fn create_model(
     State(state): State<AppState>,
     JsonBody(body): JsonBody,
 ) -> Result<Response, Problem> {
-    let model = kea_core::model_from_value(body.clone()).map_err(Problem::from_core)?;
-    kea_core::check(&model, &Default::default()).map_err(Problem::from_core)?;
+    let (model, body) = tokio::task::spawn_blocking(move || {
+        let model = kea_core::model_from_value(body.clone())?;
+        kea_core::check(&model, &Default::default())?;
+        Ok::<_, kea_core::Error>((model, body))
+    })
+    .await
+    .map_err(Problem::internal)?
+    .map_err(Problem::from_core)?;
     let record = ModelRecord {
         id: new_id(),
         name: model.name.clone(),
@@ -88,7 +96,7 @@ pub async fn list_models(
 /// `GET /v1/models/{id}`.
 pub async fn get_model(
     State(state): State<AppState>,
-    Path(id): Path<String>,
+    request::ModelId(id): request::ModelId,
 ) -> Result<Json<Value>, Problem> {
     let key = id.clone();
     let record = state
@@ -107,7 +115,7 @@ pub async fn get_model(
 /// `DELETE /v1/models/{id}`: 204. Jobs submitted with this model keep their copy.
 pub async fn delete_model(
     State(state): State<AppState>,
-    Path(id): Path<String>,
+    request::ModelId(id): request::ModelId,
 ) -> Result<StatusCode, Problem> {
     let key = id.clone();
     if state.db(move |s| s.delete_model(&key)).await? {
@@ -152,6 +160,27 @@ pub async fn resolve_model_id(
     Ok(())
 }
 
+/// Validate and compile a request of the job kind `kind` (registered) on a blocking
+/// thread: a large model takes long enough to stall the async workers, and every
+/// other request (`/healthz` too) with them.
+pub async fn prepare(
+    state: &AppState,
+    kind: &str,
+    request: Value,
+) -> Result<Box<dyn PreparedJob>, Problem> {
+    let registry = state.registry.clone();
+    let kind = kind.to_string();
+    tokio::task::spawn_blocking(move || {
+        registry
+            .get(&kind)
+            .expect("a registered job kind")
+            .prepare(&request)
+    })
+    .await
+    .map_err(Problem::internal)?
+    .map_err(Problem::from_core)
+}
+
 /// Refuse work above `limit`; `advice` says what to do instead.
 pub fn check_work(
     work: &Work,
@@ -182,13 +211,7 @@ pub async fn analyze(
 ) -> Result<Response, Problem> {
     let mut obj = request::object(body)?;
     resolve_model_id(&state, &mut obj).await?;
-    let kind = state
-        .registry
-        .get("analysis")
-        .expect("the analysis kind is registered");
-    let prepared: Box<dyn PreparedJob> = kind
-        .prepare(&Value::Object(obj))
-        .map_err(Problem::from_core)?;
+    let prepared = prepare(&state, "analysis", Value::Object(obj)).await?;
     let limits = &state.config.limits;
     check_work(
         &prepared.work(),

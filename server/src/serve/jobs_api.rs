@@ -1,13 +1,13 @@
 //! Handlers for `/v1/jobs`: submit, inspect, list, cancel, results and progress events.
 
-use super::handlers::{check_work, raw_json, resolve_model_id};
+use super::handlers::{check_work, prepare, raw_json, resolve_model_id};
 use super::problem::{Problem, kind};
-use super::request::{self, JsonBody};
+use super::request::{self, JobId, JsonBody};
 use super::state::AppState;
-use super::store::{JobRecord, JobStatus, new_id, now_rfc3339};
+use super::store::{Enqueued, JobRecord, JobStatus, new_id, now_rfc3339};
 use super::worker::{CancelOutcome, Snapshot};
 use axum::Json;
-use axum::extract::{Path, RawQuery, State};
+use axum::extract::{RawQuery, State};
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
@@ -82,15 +82,16 @@ pub async fn submit(
             )]));
         }
     };
-    let Some(job_kind) = state.registry.get(&kind_name) else {
+    if state.registry.get(&kind_name).is_none() {
         return Err(Problem::invalid(vec![FieldError::new(
             "kind",
             format!("unknown job kind `{kind_name}`; known: {names}"),
         )]));
-    };
+    }
     resolve_model_id(&state, &mut obj).await?;
     let request = Value::Object(obj);
-    let prepared = job_kind.prepare(&request).map_err(Problem::from_core)?;
+    let request_json = request.to_string();
+    let prepared = prepare(&state, &kind_name, request).await?;
     let work = prepared.work();
     check_work(
         &work,
@@ -98,25 +99,12 @@ pub async fn submit(
         kind::TOO_MUCH_WORK,
         "reduce the steps or the state dimension (server option --max-work)",
     )?;
-    let queue_limit = state.config.limits.queue;
-    let queued = state.db(|s| s.count_jobs(JobStatus::Queued)).await?;
-    if queued >= queue_limit {
-        return Err(Problem::new(
-            StatusCode::TOO_MANY_REQUESTS,
-            kind::QUEUE_FULL,
-            "the job queue is full",
-        )
-        .detail(format!(
-            "{queued} jobs are waiting (limit {queue_limit}); retry later"
-        ))
-        .header(header::RETRY_AFTER, "5"));
-    }
     let job = JobRecord {
         id: new_id(),
         kind: kind_name,
         status: JobStatus::Queued,
         progress: 0.0,
-        request_json: request.to_string(),
+        request_json,
         work: work.units,
         created_at: now_rfc3339(),
         started_at: None,
@@ -127,9 +115,21 @@ pub async fn submit(
     };
     let pool = state.pool.clone();
     let stored = job.clone();
-    tokio::task::spawn_blocking(move || pool.submit(&stored))
+    let queue_limit = state.config.limits.queue;
+    let outcome = tokio::task::spawn_blocking(move || pool.submit(&stored, queue_limit))
         .await
         .map_err(Problem::internal)??;
+    if let Enqueued::Full { queued } = outcome {
+        return Err(Problem::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            kind::QUEUE_FULL,
+            "the job queue is full",
+        )
+        .detail(format!(
+            "{queued} jobs are waiting (limit {queue_limit}); retry later"
+        ))
+        .header(header::RETRY_AFTER, "5"));
+    }
     let mut res = (StatusCode::ACCEPTED, Json(job_view(&job, None))).into_response();
     res.headers_mut().insert(
         header::LOCATION,
@@ -139,10 +139,7 @@ pub async fn submit(
 }
 
 /// `GET /v1/jobs/{id}`.
-pub async fn get(
-    State(state): State<AppState>,
-    Path(id): Path<String>,
-) -> Result<Json<Value>, Problem> {
+pub async fn get(State(state): State<AppState>, JobId(id): JobId) -> Result<Json<Value>, Problem> {
     Ok(Json(load_view(&state, &id).await?))
 }
 
@@ -181,10 +178,7 @@ pub async fn list(
 
 /// `DELETE /v1/jobs/{id}`: cancel. 200 with the job (cancelled, or still running
 /// with the cancellation requested); 409 if it had already finished.
-pub async fn cancel(
-    State(state): State<AppState>,
-    Path(id): Path<String>,
-) -> Result<Response, Problem> {
+pub async fn cancel(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, Problem> {
     let pool = state.pool.clone();
     let key = id.clone();
     let outcome = tokio::task::spawn_blocking(move || pool.cancel(&key))
@@ -225,19 +219,13 @@ async fn finished(state: &AppState, id: &str) -> Result<(String, Option<String>)
 }
 
 /// `GET /v1/jobs/{id}/result`.
-pub async fn result(
-    State(state): State<AppState>,
-    Path(id): Path<String>,
-) -> Result<Response, Problem> {
+pub async fn result(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, Problem> {
     let (json, _) = finished(&state, &id).await?;
     Ok(raw_json(StatusCode::OK, json))
 }
 
 /// `GET /v1/jobs/{id}/traces.csv`.
-pub async fn traces(
-    State(state): State<AppState>,
-    Path(id): Path<String>,
-) -> Result<Response, Problem> {
+pub async fn traces(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, Problem> {
     let (_, csv) = finished(&state, &id).await?;
     let csv = csv.ok_or_else(|| {
         Problem::not_found("traces", &id).detail(format!("job `{id}`'s kind has no traces"))
@@ -264,7 +252,7 @@ pub async fn traces(
 /// with the whole job when it has finished; then the stream ends.
 pub async fn events(
     State(state): State<AppState>,
-    Path(id): Path<String>,
+    JobId(id): JobId,
 ) -> Result<Sse<impl Stream<Item = Result<Event, Infallible>>>, Problem> {
     // Subscribe before reading the store, so no change between the two is missed.
     let rx = state.pool.live(&id).map(|l| l.subscribe());

@@ -72,14 +72,15 @@ impl Problem {
         self
     }
 
-    /// 422 with the given field errors.
+    /// 422 with the given field errors, at most [`MAX_ERRORS`] of them (see [`capped`]).
     pub fn invalid(errors: Vec<FieldError>) -> Self {
         let mut p = Problem::new(
             StatusCode::UNPROCESSABLE_ENTITY,
             kind::INVALID,
             "the request is invalid",
         );
-        p.detail = Some(summary(&errors));
+        let (errors, omitted) = capped(errors);
+        p.detail = Some(summary(&errors, omitted));
         p.errors = errors;
         p
     }
@@ -119,7 +120,7 @@ impl Problem {
                     kind::NUMERICAL,
                     "the model cannot be computed",
                 );
-                p.detail = Some(summary(&errors));
+                p.detail = Some(summary(&errors, 0));
                 p.errors = errors;
                 p
             }
@@ -130,11 +131,59 @@ impl Problem {
     }
 }
 
-fn summary(errors: &[FieldError]) -> String {
+/// The most errors a problem lists: the core's cap, so every error list reads alike.
+pub const MAX_ERRORS: usize = kea_core::validate::MAX_REPORTED_ERRORS;
+
+/// The entry that ends a list cut at [`MAX_ERRORS`], at the top level (`""`), worded
+/// as the core words it.
+fn omitted_entry(omitted: usize) -> FieldError {
+    FieldError::new(
+        "",
+        format!("… and {omitted} more errors (only the first {MAX_ERRORS} are listed)"),
+    )
+}
+
+/// How many errors an entry of [`omitted_entry`]'s form (the core's or ours, at any
+/// path) stands for; `None` for an ordinary error.
+pub fn omitted_count(e: &FieldError) -> Option<usize> {
+    let rest = e.message.strip_prefix("… and ")?;
+    let (count, tail) = rest.split_once(' ')?;
+    if tail != format!("more errors (only the first {MAX_ERRORS} are listed)") {
+        return None;
+    }
+    count.parse().ok()
+}
+
+/// Errors from several sources (the server's own checks, the core's already-cut
+/// list) as one list of at most [`MAX_ERRORS`], with one entry at the top level for
+/// all that were left out; and how many were.
+pub fn capped(errors: Vec<FieldError>) -> (Vec<FieldError>, usize) {
+    let mut omitted = 0;
+    let mut listed = Vec::with_capacity(errors.len().min(MAX_ERRORS + 1));
+    for e in errors {
+        match omitted_count(&e) {
+            Some(n) => omitted += n,
+            None if listed.len() < MAX_ERRORS => listed.push(e),
+            None => omitted += 1,
+        }
+    }
+    if omitted > 0 {
+        listed.push(omitted_entry(omitted));
+    }
+    (listed, omitted)
+}
+
+/// The `detail` of a list of errors: the first, and how many more there are in all
+/// (`errors` may end with the [`omitted_entry`] for `omitted` of them).
+fn summary(errors: &[FieldError], omitted: usize) -> String {
+    let listed = errors.len() - usize::from(omitted > 0);
     match errors {
         [] => "the request is invalid".into(),
         [one] => one.to_string(),
-        [first, rest @ ..] => format!("{first} (and {} more)", rest.len()),
+        [first, ..] => match listed - 1 + omitted {
+            0 => first.to_string(),
+            more => format!("{first} (and {more} more)"),
+        },
     }
 }
 

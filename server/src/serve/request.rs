@@ -1,9 +1,12 @@
 //! Reading requests: the JSON body (size limit, media type, syntax), query strings,
 //! and the pieces every computation request shares (`model` | `model_id`, `set`).
 
-use super::problem::{Problem, kind};
+use super::problem::{Problem, kind, omitted_count};
 use super::state::AppState;
-use axum::extract::{FromRequest, Request};
+use axum::extract::path::ErrorKind;
+use axum::extract::rejection::PathRejection;
+use axum::extract::{FromRequest, FromRequestParts, Path, Request};
+use axum::http::request::Parts;
 use axum::http::{StatusCode, header};
 pub use kea_core::error::{got, json_kind};
 use kea_core::{FieldError, Overrides};
@@ -55,6 +58,17 @@ impl FromRequest<AppState> for JsonBody {
             }
         }
         let limits = &state.config.limits;
+        if let Some(declared) = declared_length(&req).filter(|&n| n > limits.max_body_bytes as u64)
+        {
+            // Answer now: waiting for a body that will be refused anyway held the
+            // connection until --read-timeout (and then said 408, not 413).
+            drain_in_background(req, limits.read_timeout);
+            return Err(too_large(limits.max_body_bytes)
+                .detail(format!(
+                    "the body is declared as {declared} bytes (Content-Length); the limit is {} bytes (server option --max-body-bytes)",
+                    limits.max_body_bytes
+                )));
+        }
         let bytes = read_limited(req, limits.max_body_bytes, limits.read_timeout).await?;
         kea_core::parse_json(&bytes).map(JsonBody).map_err(|e| {
             Problem::new(
@@ -114,16 +128,120 @@ async fn read_limited(
         }
     }
     if total > limit {
-        return Err(Problem::new(
-            StatusCode::PAYLOAD_TOO_LARGE,
-            kind::TOO_LARGE,
-            "the request body is too large",
-        )
-        .detail(format!(
-            "the limit is {limit} bytes (server option --max-body-bytes)"
-        )));
+        return Err(too_large(limit));
     }
     Ok(buf)
+}
+
+fn too_large(limit: usize) -> Problem {
+    Problem::new(
+        StatusCode::PAYLOAD_TOO_LARGE,
+        kind::TOO_LARGE,
+        "the request body is too large",
+    )
+    .detail(format!(
+        "the limit is {limit} bytes (server option --max-body-bytes)"
+    ))
+}
+
+/// The body's length as the request declares it (`Content-Length`), if it does.
+fn declared_length(req: &Request) -> Option<u64> {
+    req.headers()
+        .get(header::CONTENT_LENGTH)?
+        .to_str()
+        .ok()?
+        .trim()
+        .parse()
+        .ok()
+}
+
+/// Read and drop what a client sends of a body refused by its declared length, up to
+/// [`DRAIN_BEYOND_LIMIT`] bytes and `within`, so the answer (already on its way) is
+/// not lost to a connection reset. A client that waits for `100 Continue` sends
+/// nothing: its body is not asked for.
+fn drain_in_background(req: Request, within: std::time::Duration) {
+    use futures_util::StreamExt;
+    if req.headers().contains_key(header::EXPECT) {
+        return;
+    }
+    let mut stream = req.into_body().into_data_stream();
+    tokio::spawn(async move {
+        let drain = async {
+            let mut total = 0usize;
+            while let Some(Ok(chunk)) = stream.next().await {
+                total += chunk.len();
+                if total > DRAIN_BEYOND_LIMIT {
+                    break;
+                }
+            }
+        };
+        let _ = tokio::time::timeout(within, drain).await;
+    });
+}
+
+/// A route's text path parameter (`{id}`, `{name}`), read as axum's `Path<String>`
+/// but refused as a problem+json 400 naming the parameter and what it should be —
+/// `/v1/jobs/%ff` decodes to no UTF-8 text, which axum answers in text/plain.
+macro_rules! path_param {
+    ($(#[$doc:meta])* $ty:ident, $name:literal, $expected:literal) => {
+        $(#[$doc])*
+        pub struct $ty(pub String);
+
+        impl<S: Send + Sync> FromRequestParts<S> for $ty {
+            type Rejection = Problem;
+
+            async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Problem> {
+                path_param(parts, state, $name, $expected).await.map($ty)
+            }
+        }
+    };
+}
+
+path_param!(
+    /// `{id}` of `/v1/jobs/{id}…`.
+    JobId,
+    "id",
+    "a job id, as POST /v1/jobs returned it"
+);
+path_param!(
+    /// `{id}` of `/v1/models/{id}`.
+    ModelId,
+    "id",
+    "a model id, as POST /v1/models returned it"
+);
+path_param!(
+    /// `{name}` of `/v1/presets/{name}`.
+    PresetName,
+    "name",
+    "a preset name (GET /v1/presets lists them)"
+);
+
+async fn path_param<S: Send + Sync>(
+    parts: &mut Parts,
+    state: &S,
+    name: &str,
+    expected: &str,
+) -> Result<String, Problem> {
+    match Path::<String>::from_request_parts(parts, state).await {
+        Ok(Path(value)) => Ok(value),
+        Err(PathRejection::FailedToDeserializePathParams(e)) => {
+            let got = match e.kind() {
+                ErrorKind::InvalidUtf8InPathParam { .. } => {
+                    "bytes that are not UTF-8 text once percent-decoded".to_string()
+                }
+                other => other.to_string(),
+            };
+            let mut p = Problem::invalid(vec![FieldError::new(
+                name,
+                format!("expected {expected}; got {got}"),
+            )]);
+            p.status = StatusCode::BAD_REQUEST;
+            p.title = "invalid path parameter".into();
+            Err(p)
+        }
+        // The route table and the handler disagree: the server's fault.
+        Err(e) => Err(Problem::internal(e)),
+    }
 }
 
 /// The body as a JSON object, or a 422 at the root.
@@ -217,14 +335,16 @@ pub fn overrides(set: Option<&Value>) -> Result<Overrides, Vec<FieldError>> {
 }
 
 /// Locate a core error from `check`/`analyze` of (`model`, `set`) in the request body:
-/// paths about the overrides (`set.…`) stay, the rest are under `model`.
+/// paths about the overrides (`set.…`) stay, and so does the entry that counts the
+/// errors left out (it is about the whole list, at the top level); the rest are under
+/// `model`.
 pub fn locate(err: kea_core::Error) -> kea_core::Error {
     let under_set = |p: &str| p == "set" || p.starts_with("set.") || p.starts_with("set[");
     match err {
         kea_core::Error::Invalid(v) => kea_core::Error::Invalid(
             v.into_iter()
                 .map(|e| {
-                    if under_set(&e.path) {
+                    if under_set(&e.path) || omitted_count(&e).is_some() {
                         e
                     } else {
                         match kea_core::Error::Invalid(vec![e]).with_prefix("model") {
@@ -410,13 +530,14 @@ mod tests {
             FieldError::new("set.q", "unknown"),
             FieldError::new("system.a[0][1]", "bad"),
             FieldError::new("", "root"),
+            FieldError::new("", "… and 7 more errors (only the first 100 are listed)"),
         ]);
         let paths: Vec<String> = locate(e)
             .field_errors()
             .into_iter()
             .map(|e| e.path)
             .collect();
-        assert_eq!(paths, vec!["set.q", "model.system.a[0][1]", "model"]);
+        assert_eq!(paths, vec!["set.q", "model.system.a[0][1]", "model", ""]);
     }
 
     #[test]

@@ -7,7 +7,7 @@
 
 use super::jobs::Registry;
 use super::problem::{Problem, kind};
-use super::store::{JobRecord, JobStatus, Outcome, Store, now_rfc3339};
+use super::store::{Enqueued, JobRecord, JobStatus, Outcome, Store, now_rfc3339};
 use axum::http::StatusCode;
 use kea_core::Error;
 use std::cell::Cell;
@@ -142,18 +142,26 @@ impl Pool {
         Ok(pool)
     }
 
-    /// Store a new queued job and wake a worker.
-    pub fn submit(&self, job: &JobRecord) -> Result<(), super::store::StoreError> {
+    /// Store a new queued job, unless `queue_limit` jobs are queued already (checked
+    /// and inserted at once), and wake a worker.
+    pub fn submit(
+        &self,
+        job: &JobRecord,
+        queue_limit: u64,
+    ) -> Result<Enqueued, super::store::StoreError> {
         {
             let mut live = self.live.lock().unwrap();
-            self.store.insert_job(job)?;
+            let outcome = self.store.enqueue_job(job, queue_limit)?;
+            if outcome != Enqueued::Queued {
+                return Ok(outcome);
+            }
             live.insert(
                 job.id.clone(),
                 LiveJob::new(JobStatus::Queued, job.progress),
             );
         }
         self.wake_one();
-        Ok(())
+        Ok(Enqueued::Queued)
     }
 
     pub fn live(&self, id: &str) -> Option<Arc<LiveJob>> {

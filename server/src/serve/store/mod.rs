@@ -120,6 +120,16 @@ pub enum Outcome {
     Cancelled,
 }
 
+/// What [`Store::enqueue_job`] did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Enqueued {
+    Queued,
+    /// Not inserted: this many jobs are queued (at least the limit).
+    Full {
+        queued: u64,
+    },
+}
+
 /// One page of a listing, newest first; `next_cursor` continues it.
 #[derive(Clone, Debug)]
 pub struct Page<T> {
@@ -138,6 +148,9 @@ pub trait Store: Send + Sync + 'static {
     fn delete_model(&self, id: &str) -> Result<bool>;
 
     fn insert_job(&self, job: &JobRecord) -> Result<()>;
+    /// Insert a queued job unless `queue_limit` jobs are queued already: the count and
+    /// the insert in one transaction, so concurrent submissions cannot pass the limit.
+    fn enqueue_job(&self, job: &JobRecord, queue_limit: u64) -> Result<Enqueued>;
     fn get_job(&self, id: &str) -> Result<Option<JobRecord>>;
     /// Newest first, optionally only one status.
     fn list_jobs(

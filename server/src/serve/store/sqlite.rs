@@ -2,9 +2,10 @@
 //! schema versioned by `PRAGMA user_version` and migrated forward on open.
 
 use super::{
-    JobRecord, JobStatus, ModelRecord, ModelSummary, Outcome, Page, Result, Store, StoreError,
+    Enqueued, JobRecord, JobStatus, ModelRecord, ModelSummary, Outcome, Page, Result, Store,
+    StoreError,
 };
-use rusqlite::{Connection, OptionalExtension, Row, params};
+use rusqlite::{Connection, OptionalExtension, Row, TransactionBehavior, params};
 use std::path::Path;
 use std::sync::Mutex;
 
@@ -224,6 +225,38 @@ impl Store for SqliteStore {
                 ],
             )
             .map(|_| ())
+        })
+    }
+
+    fn enqueue_job(&self, j: &JobRecord, queue_limit: u64) -> Result<Enqueued> {
+        self.with(|c| {
+            // IMMEDIATE: the write lock before the count, so another process sharing
+            // the file cannot insert between the two either.
+            let tx = c.transaction_with_behavior(TransactionBehavior::Immediate)?;
+            let queued = tx
+                .query_row(
+                    "SELECT count(*) FROM jobs WHERE status = 'queued'",
+                    [],
+                    |r| r.get::<_, i64>(0),
+                )?
+                .max(0) as u64;
+            if queued >= queue_limit {
+                return Ok(Enqueued::Full { queued });
+            }
+            tx.execute(
+                "INSERT INTO jobs (id, kind, status, progress, request_json, work, created_at)
+                 VALUES (?1, ?2, 'queued', ?3, ?4, ?5, ?6)",
+                params![
+                    j.id,
+                    j.kind,
+                    j.progress,
+                    j.request_json,
+                    j.work,
+                    j.created_at
+                ],
+            )?;
+            tx.commit()?;
+            Ok(Enqueued::Queued)
         })
     }
 

@@ -25,6 +25,27 @@ pub fn max_trace_rows(series: usize) -> usize {
 }
 /// The most field errors one response lists (then one line says how many more).
 pub const MAX_REPORTED_ERRORS: usize = 100;
+
+/// The entry that ends an error list cut at [`MAX_REPORTED_ERRORS`], at the top level
+/// (`""`): it stands for `omitted` errors left out. (The server caps its own lists with
+/// the same entry, and reads the count back with [`omitted_count`].)
+pub fn omitted_entry(omitted: usize) -> FieldError {
+    FieldError::new(
+        "",
+        format!("… and {omitted} more errors (only the first {MAX_REPORTED_ERRORS} are listed)"),
+    )
+}
+
+/// How many errors an entry of [`omitted_entry`]'s form (at any path) stands for;
+/// `None` for an ordinary error.
+pub fn omitted_count(e: &FieldError) -> Option<usize> {
+    let rest = e.message.strip_prefix("… and ")?;
+    let (count, tail) = rest.split_once(' ')?;
+    if tail != format!("more errors (only the first {MAX_REPORTED_ERRORS} are listed)") {
+        return None;
+    }
+    count.parse().ok()
+}
 /// Weights must sum to 1 within this.
 const WEIGHT_TOL: f64 = 1e-9;
 
@@ -136,12 +157,7 @@ impl Errors {
         let more = self.0.len().saturating_sub(MAX_REPORTED_ERRORS);
         if more > 0 {
             self.0.truncate(MAX_REPORTED_ERRORS);
-            self.0.push(FieldError::new(
-                "",
-                format!(
-                    "… and {more} more errors (only the first {MAX_REPORTED_ERRORS} are listed)"
-                ),
-            ));
+            self.0.push(omitted_entry(more));
         }
         Error::Invalid(self.0)
     }

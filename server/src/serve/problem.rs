@@ -134,25 +134,7 @@ impl Problem {
 /// The most errors a problem lists: the core's cap, so every error list reads alike.
 pub const MAX_ERRORS: usize = kea_core::validate::MAX_REPORTED_ERRORS;
 
-/// The entry that ends a list cut at [`MAX_ERRORS`], at the top level (`""`), worded
-/// as the core words it.
-fn omitted_entry(omitted: usize) -> FieldError {
-    FieldError::new(
-        "",
-        format!("… and {omitted} more errors (only the first {MAX_ERRORS} are listed)"),
-    )
-}
-
-/// How many errors an entry of [`omitted_entry`]'s form (the core's or ours, at any
-/// path) stands for; `None` for an ordinary error.
-pub fn omitted_count(e: &FieldError) -> Option<usize> {
-    let rest = e.message.strip_prefix("… and ")?;
-    let (count, tail) = rest.split_once(' ')?;
-    if tail != format!("more errors (only the first {MAX_ERRORS} are listed)") {
-        return None;
-    }
-    count.parse().ok()
-}
+pub use kea_core::validate::{omitted_count, omitted_entry};
 
 /// Errors from several sources (the server's own checks, the core's already-cut
 /// list) as one list of at most [`MAX_ERRORS`], with one entry at the top level for

@@ -574,3 +574,114 @@ fn a_set_name_given_twice_is_refused() {
     ]);
     assert_eq!(code, 0, "{err}");
 }
+
+/// A model that diverges: A = 1 + aΔt = 1 − 10⁴ at Δt = 0.01, so its covariance
+/// overflows within a few dozen steps and the run fails (exit 1).
+const DIVERGING_MODEL: &str = r#"{
+  "time": {"t0": 0, "t_end": 1, "steps": 100},
+  "system": {"states": ["x"], "a": [[-1e6]], "b": [[1]], "y0": [1], "eta0": [1], "phi": [1]},
+  "measurement": {"names": ["z"], "c": [[1]], "gamma": [[1]], "psi": [1]}
+}"#;
+
+/// The names in a directory, sorted (to see that no temporary file is left behind).
+fn names_in(dir: &std::path::Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// A `--csv` file is replaced only by a finished run's CSV: a run that fails, or is
+/// killed, leaves the file it named as it was (no truncation up front) and no
+/// temporary file beside it — for analyze and simulate alike.
+#[test]
+fn a_failed_or_killed_run_leaves_the_csv_file_as_it_was() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("diverging.json");
+    std::fs::write(&model, DIVERGING_MODEL).unwrap();
+    let csv = dir.path().join("traces.csv");
+    let before = "t,y:x\n0,1\n";
+    std::fs::write(&csv, before).unwrap();
+    let (model, csv_arg) = (model.to_str().unwrap(), csv.to_str().unwrap());
+    for args in [
+        &["analyze", model, "--csv", csv_arg][..],
+        &["simulate", model, "--runs", "20", "--csv", csv_arg],
+    ] {
+        let (code, out, err) = kea(args);
+        assert_eq!(code, 1, "{args:?}: the model should diverge: {out}{err}");
+        assert_eq!(std::fs::read_to_string(&csv).unwrap(), before, "{args:?}");
+        assert_eq!(
+            names_in(dir.path()),
+            ["diverging.json", "traces.csv"],
+            "{args:?}"
+        );
+    }
+
+    // Killed in the middle of a run of seconds (the seed example at 10⁷ steps).
+    let long = dir.path().join("long.json");
+    let mut value: Value = serde_json::from_str(&kea(&["preset", "seed-example"]).1).unwrap();
+    value["time"]["steps"] = json!(10_000_000);
+    std::fs::write(&long, value.to_string()).unwrap();
+    let mut child = Command::new(KEA)
+        .args(["analyze", long.to_str().unwrap(), "--csv", csv_arg])
+        .env_remove("KEA_MAX_WORK")
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("kea runs");
+    std::thread::sleep(std::time::Duration::from_millis(150));
+    let _ = child.kill();
+    let status = child.wait().unwrap();
+    assert!(!status.success(), "the run finished before it was killed");
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), before);
+    assert_eq!(
+        names_in(dir.path()),
+        ["diverging.json", "long.json", "traces.csv"]
+    );
+}
+
+/// A finished run replaces the `--csv` file whole: through a symbolic link the file
+/// it points to is written (the link stays), and an existing file keeps its mode.
+#[cfg(unix)]
+#[test]
+fn a_finished_run_replaces_the_csv_file_keeping_its_mode_and_links() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let real = dir.path().join("real.csv");
+    std::fs::write(&real, "old\n").unwrap();
+    std::fs::set_permissions(&real, std::fs::Permissions::from_mode(0o640)).unwrap();
+    let link = dir.path().join("link.csv");
+    std::os::unix::fs::symlink("real.csv", &link).unwrap();
+    let (code, expected, err) = kea(&["analyze", "preset:cv-tracker", "--csv", "-"]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = kea(&[
+        "analyze",
+        "preset:cv-tracker",
+        "--csv",
+        link.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(link.symlink_metadata().unwrap().file_type().is_symlink());
+    assert_eq!(std::fs::read_to_string(&real).unwrap(), expected);
+    let mode = real.metadata().unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode, 0o640);
+    assert_eq!(names_in(dir.path()), ["link.csv", "real.csv"]);
+    // A directory, or a file in one that is missing, is refused before the run; the
+    // message names the path given, not the temporary file.
+    let dir_arg = dir.path().to_str().unwrap();
+    let (code, out, err) = kea(&["analyze", "preset:cv-tracker", "--csv", dir_arg]);
+    assert_eq!(code, 2, "{err}");
+    assert!(out.is_empty(), "ran before refusing: {out}");
+    assert_eq!(err, format!("cannot write {dir_arg}: is a directory\n"));
+    let nowhere = dir.path().join("no/such/t.csv");
+    let nowhere = nowhere.to_str().unwrap();
+    let (code, _, err) = kea(&["analyze", "preset:cv-tracker", "--csv", nowhere]);
+    assert_eq!(code, 2, "{err}");
+    assert_eq!(
+        err,
+        format!("cannot write {nowhere}: No such file or directory (os error 2)\n")
+    );
+}

@@ -110,28 +110,16 @@ pub fn load_model(arg: &str) -> Result<kea_core::Model, ExitCode> {
     kea_core::model_from_value(value).map_err(|e| report_error(&e))
 }
 
-/// Create (truncate) the file an option names before a run, so that a path that
-/// cannot be created is refused up front (exit 2) rather than after the work.
-pub fn create_file(path: &Path) -> Result<std::fs::File, ExitCode> {
-    std::fs::File::create(path).map_err(|e| {
-        eprintln!("cannot write {}: {e}", path.display());
-        ExitCode::from(EXIT_INVALID)
-    })
-}
-
-/// Write `text` to a file made by [`create_file`]; on failure (a full disk…) say so
-/// (exit 1: the run is done, the input was not at fault).
-pub fn write_file(mut file: std::fs::File, path: &Path, text: &str) -> Result<(), ExitCode> {
-    file.write_all(text.as_bytes()).map_err(|e| {
-        eprintln!("cannot write {}: {e}", path.display());
-        ExitCode::from(EXIT_FAILURE)
-    })
-}
-
 /// Where a command's `--csv` goes.
 pub enum Csv {
-    /// A file, created up front.
-    File(PathBuf, std::fs::File),
+    /// A regular file (or one still to be made): the CSV is written whole to a
+    /// temporary file beside it and renamed over it only once the run is done
+    /// ([`write_replacing`]), so that a run that fails or is stopped leaves the file as
+    /// it was.
+    File(PathBuf),
+    /// Something that is not a regular file (`/dev/null`, a named pipe): opened up
+    /// front and written in place, as there is nothing to replace.
+    Device(PathBuf, std::fs::File),
     /// Stdout (`--csv -`), in place of the command's table.
     Stdout,
 }
@@ -139,8 +127,9 @@ pub enum Csv {
 impl Csv {
     /// Check a command's `--csv` against its model argument and `--json`, before any
     /// work: `-` is stdout, refused with `--json` (which prints there too); a path that
-    /// is the model file is refused, not overwritten; any other is created now
-    /// ([`create_file`]). A refusal is input to fix (exit 2).
+    /// is the model file is refused, not overwritten; any other must be writable now
+    /// ([`check_writable`]), but is not touched until the run is done. A refusal is
+    /// input to fix (exit 2).
     pub fn open(csv: Option<&Path>, model: &str, json: bool) -> Result<Option<Csv>, ExitCode> {
         let refuse = |message: String| {
             eprintln!("{message}");
@@ -167,16 +156,105 @@ impl Csv {
                 path.display()
             ));
         }
-        create_file(path).map(|file| Some(Csv::File(path.to_path_buf(), file)))
+        match std::fs::metadata(path) {
+            Ok(m) if !m.is_file() && !m.is_dir() => {
+                let file = std::fs::OpenOptions::new()
+                    .write(true)
+                    .open(path)
+                    .map_err(|e| cannot_write(path, &e, EXIT_INVALID))?;
+                Ok(Some(Csv::Device(path.to_path_buf(), file)))
+            }
+            _ => check_writable(path).map(|()| Some(Csv::File(path.to_path_buf()))),
+        }
     }
 
     /// Write the CSV text to its file or stdout.
     pub fn write(self, text: &str) -> Result<(), ExitCode> {
         match self {
-            Csv::File(path, file) => write_file(file, &path, text),
+            Csv::File(path) => write_replacing(&path, text),
+            Csv::Device(path, mut file) => file
+                .write_all(text.as_bytes())
+                .and_then(|()| file.flush())
+                .map_err(|e| cannot_write(&path, &e, EXIT_FAILURE)),
             Csv::Stdout => print_text(text),
         }
     }
+}
+
+/// Say on stderr that `path` cannot be written, and return `code`: [`EXIT_INVALID`]
+/// before a run (a path to fix), [`EXIT_FAILURE`] after it (a full disk…).
+fn cannot_write(path: &Path, e: &std::io::Error, code: u8) -> ExitCode {
+    // tempfile ends its errors with ` at path "…"`, the temporary file's name; the
+    // user named `path`, which is said first.
+    let text = e.to_string();
+    let reason = text
+        .split_once(" at path \"")
+        .map_or(text.as_str(), |(r, _)| r);
+    eprintln!("cannot write {}: {reason}", path.display());
+    ExitCode::from(code)
+}
+
+/// The file a written `path` really is: a symbolic link's target (which is replaced,
+/// not the link), or `path` itself when it does not exist yet.
+fn replaced_file(path: &Path) -> PathBuf {
+    path.canonicalize().unwrap_or_else(|_| path.to_path_buf())
+}
+
+/// A new temporary file beside `target` (hidden, named after it), with the mode a file
+/// created there would get (0666 less the umask) or, when `target` exists, its mode.
+fn temporary_beside(target: &Path) -> std::io::Result<tempfile::NamedTempFile> {
+    let dir = match target.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let prefix = format!(
+        ".{}.",
+        target.file_name().unwrap_or_default().to_string_lossy()
+    );
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(".tmp");
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    let file = builder.tempfile_in(dir)?;
+    if let Ok(m) = std::fs::metadata(target) {
+        file.as_file().set_permissions(m.permissions())?;
+    }
+    Ok(file)
+}
+
+/// Refuse up front (exit 2) an output path that could not be written after the run:
+/// a directory, a file without write permission, a directory that is missing or
+/// without write permission (where the temporary file goes). Nothing is left behind.
+fn check_writable(path: &Path) -> Result<(), ExitCode> {
+    let target = replaced_file(path);
+    if target.is_dir() {
+        let e = std::io::Error::from(std::io::ErrorKind::IsADirectory);
+        return Err(cannot_write(path, &e, EXIT_INVALID));
+    }
+    if target.exists() {
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open(&target)
+            .map_err(|e| cannot_write(path, &e, EXIT_INVALID))?;
+    }
+    temporary_beside(&target)
+        .map(drop)
+        .map_err(|e| cannot_write(path, &e, EXIT_INVALID))
+}
+
+/// Write `text` as the whole of the file `path` (after [`check_writable`]): into a
+/// temporary file beside it, flushed to disk, then renamed over `path`, so that `path`
+/// holds either its old contents or all of `text`, never a part. On failure (a full
+/// disk…) the temporary file is removed and the failure said (exit 1: the run is done,
+/// the input was not at fault).
+fn write_replacing(path: &Path, text: &str) -> Result<(), ExitCode> {
+    let target = replaced_file(path);
+    let written = temporary_beside(&target).and_then(|mut file| {
+        file.as_file_mut().write_all(text.as_bytes())?;
+        file.as_file().sync_all()?;
+        file.persist(&target).map(drop).map_err(|e| e.error)
+    });
+    written.map_err(|e| cannot_write(path, &e, EXIT_FAILURE))
 }
 
 /// Print a run's result: its CSV where `--csv` says, then the JSON (`--json`) or the

@@ -685,3 +685,41 @@ fn a_finished_run_replaces_the_csv_file_keeping_its_mode_and_links() {
         format!("cannot write {nowhere}: No such file or directory (os error 2)\n")
     );
 }
+
+/// A synthesis `--set` name that the request's own `set` also gives is refused
+/// (exit 2) with both places named, as a `--set` name given twice is, rather than
+/// the flag silently winning; a name only one of them gives is fine.
+#[test]
+fn synthesize_refuses_a_set_name_also_in_the_request() {
+    let dir = tempfile::tempdir().unwrap();
+    let request = dir.path().join("request.json");
+    let mut value: Value = serde_json::from_str(FOUND_REQUEST).unwrap();
+    value["set"] = json!({"q": 1});
+    std::fs::write(&request, value.to_string()).unwrap();
+    let request = request.to_str().unwrap();
+    let (code, out, err) = kea(&[
+        "synthesize",
+        request,
+        "--preset",
+        "cv-tracker",
+        "--set",
+        "q=2",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(out.is_empty(), "ran before refusing: {out}");
+    assert!(
+        err.contains("--set q=2") && err.contains("set.q = 1"),
+        "{err}"
+    );
+    value["set"] = json!({});
+    std::fs::write(request, value.to_string()).unwrap();
+    let (code, _, err) = kea(&[
+        "synthesize",
+        request,
+        "--preset",
+        "cv-tracker",
+        "--set",
+        "q=2",
+    ]);
+    assert_eq!(code, 0, "{err}");
+}

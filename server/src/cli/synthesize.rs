@@ -20,7 +20,8 @@ pub struct Args {
     /// Take the model from a preset (see `kea presets`): the same as `--model preset:NAME`.
     #[arg(long)]
     pub preset: Option<String>,
-    /// Override a model parameter at every point, e.g. `--set c=0.25` (repeatable).
+    /// Override a model parameter at every point, e.g. `--set c=0.25` (repeatable; not
+    /// a name the request's `set` gives too).
     #[arg(long = "set", value_name = "NAME=VALUE", value_parser = super::parse_override)]
     pub set: Vec<(String, f64)>,
     /// Threads for the analyses (default or 0: every core; at most 256). Answers do not
@@ -79,6 +80,16 @@ impl Run for Args {
                 .entry("set")
                 .or_insert_with(|| Value::Object(Default::default()));
             if let Value::Object(set) = set {
+                // As with a name given twice to --set: refused, not the last one winning.
+                for (name, value) in &overrides {
+                    if let Some(before) = set.get(name) {
+                        eprintln!(
+                            "--set {name}={} and the request's set.{name} = {before} both give {name}: give it once (drop one of them)",
+                            kea_core::report::short(*value)
+                        );
+                        return ExitCode::from(super::EXIT_INVALID);
+                    }
+                }
                 for (k, v) in overrides {
                     set.insert(k, v.into());
                 }

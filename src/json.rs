@@ -31,11 +31,17 @@ pub fn from_value_at<T: serde::de::DeserializeOwned>(
 
 /// JSON text as a value, refusing an object with the same key twice. serde_json keeps
 /// the last one silently, so `{"model": A, …, "model": B}` would run B unannounced;
-/// here it is an error with the key, line and column. Every way into kea (HTTP bodies,
+/// here it is an error with the key, line and column. A UTF-8 byte-order mark at the
+/// start (which Windows editors write) is skipped, as RFC 8259 §8.1 allows, rather than
+/// refused as "expected value at line 1 column 1". Every way into kea (HTTP bodies,
 /// the command line's files, the browser's worker) parses with this.
 pub fn parse_json(text: &[u8]) -> Result<serde_json::Value, serde_json::Error> {
+    let text = text.strip_prefix(UTF8_BOM).unwrap_or(text);
     serde_json::from_slice::<StrictValue>(text).map(|v| v.0)
 }
+
+/// U+FEFF, the byte-order mark, in UTF-8.
+const UTF8_BOM: &[u8] = b"\xEF\xBB\xBF";
 
 /// A [`serde_json::Value`] whose objects have distinct keys.
 struct StrictValue(serde_json::Value);
@@ -278,5 +284,25 @@ impl<'de> VariantAccess<'de> for Objects<'de> {
         visitor: V,
     ) -> Result<V::Value, serde_json::Error> {
         self.visit_object(visitor)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_json;
+    use serde_json::json;
+
+    #[test]
+    fn a_leading_utf8_byte_order_mark_is_skipped_and_only_there() {
+        assert_eq!(
+            parse_json(b"\xEF\xBB\xBF{\"a\": [1]}").unwrap(),
+            json!({"a": [1]})
+        );
+        // Anywhere else it is a character that JSON does not allow between tokens.
+        assert!(parse_json(b"{\"a\": \xEF\xBB\xBF[1]}").is_err());
+        assert!(parse_json(b"\xEF\xBB\xBF\xEF\xBB\xBF{}").is_err());
+        // The strict reader's checks still apply after it.
+        let e = parse_json(b"\xEF\xBB\xBF{\"a\": 1, \"a\": 2}").unwrap_err();
+        assert!(e.to_string().contains("appears twice"), "{e}");
     }
 }

@@ -723,3 +723,35 @@ fn synthesize_refuses_a_set_name_also_in_the_request() {
     ]);
     assert_eq!(code, 0, "{err}");
 }
+
+/// A model file that starts with a UTF-8 byte-order mark (as Windows editors write
+/// it) reads as the same file without one — from a file and from stdin.
+#[test]
+fn a_utf8_byte_order_mark_is_skipped() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = kea(&["preset", "cv-tracker"]).1;
+    let plain = dir.path().join("plain.json");
+    std::fs::write(&plain, &text).unwrap();
+    let with_bom = dir.path().join("bom.json");
+    std::fs::write(&with_bom, format!("\u{feff}{text}")).unwrap();
+    assert_eq!(analyze(&with_bom, None), analyze(&plain, None));
+
+    let mut child = Command::new(KEA)
+        .args(["analyze", "-"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("kea runs");
+    std::io::Write::write_all(
+        &mut child.stdin.take().unwrap(),
+        format!("\u{feff}{text}").as_bytes(),
+    )
+    .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -755,3 +755,26 @@ fn a_utf8_byte_order_mark_is_skipped() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// A grid without `cost_order` is a `table` (exit 0) when some cell meets the target,
+/// and `not_found` (exit 1) when none does, as with a cost order (docs/synthesis.md).
+#[test]
+fn a_grid_no_cell_of_which_meets_the_target_is_not_found() {
+    let dir = tempfile::tempdir().unwrap();
+    let request = dir.path().join("request.json");
+    let mut value: Value = serde_json::from_str(FOUND_REQUEST).unwrap();
+    for (threshold, code, status) in [(2.0, 0, "table"), (1e9, 1, "not_found")] {
+        value["target"]["threshold"] = json!(threshold);
+        std::fs::write(&request, value.to_string()).unwrap();
+        let (got, out, err) = kea(&[
+            "synthesize",
+            request.to_str().unwrap(),
+            "--preset",
+            "cv-tracker",
+            "--json",
+        ]);
+        assert_eq!(got, code, "threshold {threshold}: {err}");
+        let v: Value = serde_json::from_str(&out).expect("JSON result");
+        assert_eq!(v["status"], status, "threshold {threshold}");
+    }
+}

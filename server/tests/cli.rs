@@ -675,7 +675,10 @@ fn a_finished_run_replaces_the_csv_file_keeping_its_mode_and_links() {
     let (code, out, err) = kea(&["analyze", "preset:cv-tracker", "--csv", dir_arg]);
     assert_eq!(code, 2, "{err}");
     assert!(out.is_empty(), "ran before refusing: {out}");
-    assert_eq!(err, format!("cannot write {dir_arg}: is a directory\n"));
+    assert_eq!(
+        err,
+        format!("cannot write {dir_arg}: Is a directory (os error 21)\n")
+    );
     let nowhere = dir.path().join("no/such/t.csv");
     let nowhere = nowhere.to_str().unwrap();
     let (code, _, err) = kea(&["analyze", "preset:cv-tracker", "--csv", nowhere]);

@@ -227,15 +227,16 @@ fn temporary_beside(target: &Path) -> std::io::Result<tempfile::NamedTempFile> {
 /// without write permission (where the temporary file goes). Nothing is left behind.
 fn check_writable(path: &Path) -> Result<(), ExitCode> {
     let target = replaced_file(path);
-    if target.is_dir() {
-        let e = std::io::Error::from(std::io::ErrorKind::IsADirectory);
-        return Err(cannot_write(path, &e, EXIT_INVALID));
-    }
     if target.exists() {
+        // (a directory: "Is a directory", from the system where it says so)
         std::fs::OpenOptions::new()
             .write(true)
             .open(&target)
             .map_err(|e| cannot_write(path, &e, EXIT_INVALID))?;
+    }
+    if target.is_dir() {
+        let e = std::io::Error::from(std::io::ErrorKind::IsADirectory);
+        return Err(cannot_write(path, &e, EXIT_INVALID));
     }
     temporary_beside(&target)
         .map(drop)

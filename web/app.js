@@ -14,7 +14,9 @@ const service = new WasmWorker(); // presets, validation, CSV: never blocked by 
 const runners = { browser: new BrowserRunner(), server: new ServerRunner() };
 // keepUrl: the address names a model that could not be loaded; it stays as it is
 // (for the person to see or fix) until the model is changed here.
-const state = { preset: null, result: null, job: null, running: null, checkSeq: 0, keepUrl: false };
+// edits: how many times the model has changed, so that a run's result can tell whether
+// it still belongs to the model shown.
+const state = { preset: null, result: null, job: null, running: null, checkSeq: 0, keepUrl: false, edits: 0 };
 
 // ------------------------------------------------------------------ URL
 
@@ -77,6 +79,7 @@ const editor = new ModelEditor($('editor'), () => {
 
 /** The shown results belong to an earlier version of the model. */
 function markStale() {
+  state.edits++;
   if (!$('results').hidden) $('results').classList.add('stale');
   document.dispatchEvent(new Event('kea:model-changed')); // the Synthesis and Monte Carlo tabs
 }
@@ -199,14 +202,16 @@ async function run() {
     $('progress').value = p;
     if (state.running === runner) setStatus(`${label} ${Math.floor(p * 100)} %`);
   };
+  const edits = state.edits; // the model is serialised as the run starts
   try {
     const { result, job } = await runner.run(modelJson(), onProgress);
     $('progress').value = 1;
     const elapsed = performance.now() - started;
     state.result = result;
     state.job = job ?? null;
-    editor.showErrors([]);
-    showResult(result, where, elapsed);
+    const current = state.edits === edits;
+    if (current) editor.showErrors([]); // else the check of the edited model has the say
+    showResult(result, where, elapsed, current);
     setStatus(`Done in ${fmt(elapsed / 1000)} s (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`);
   } catch (e) {
     if (e.kind === 'cancelled') {
@@ -228,9 +233,10 @@ function cancel() {
   state.running?.cancel();
 }
 
-function showResult(r, where, elapsed) {
+/** Show a run's result; `current`: the model has not changed since the run started. */
+function showResult(r, where, elapsed, current) {
   $('results').hidden = false;
-  $('results').classList.remove('stale');
+  $('results').classList.toggle('stale', !current);
   const parts = [
     `D = ${r.steps.toLocaleString('en')} steps, Δt = ${fmt(r.dt)}`,
     `t ∈ [${fmt(r.t0)}, ${fmt(r.t_end)}]`,

@@ -28,6 +28,7 @@ export class SimulationView {
     this.root = root;
     this.ctx = ctx;
     this.result = null;
+    this.edits = 0; // model changes seen (markStale): a result is current if none came during its run
     this.plot = null;
     this.build();
   }
@@ -101,9 +102,11 @@ export class SimulationView {
       markControls(this.form, []);
       const invalid = await checkModel(request.model, this.ctx.pendingModelErrors?.() ?? []);
       if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
+      const edits = this.edits; // exec serialises the request at once
       const { result, job } = await exec(request);
-      this.ctx.showModelErrors([]);
-      this.show(result, where);
+      const current = this.edits === edits;
+      if (current) this.ctx.showModelErrors([]); // else the check of the edited model has the say
+      this.show(result, where, current);
       return job;
     } catch (e) {
       const own = routeErrors(e?.errors, this.ctx.showModelErrors);
@@ -113,13 +116,15 @@ export class SimulationView {
   }
 
   markStale() {
+    this.edits++;
     if (!this.out.hidden) this.out.classList.add('stale');
   }
 
-  show(r, where) {
+  /** Show a result; `current`: the model has not changed since the run started. */
+  show(r, where, current = true) {
     this.result = r;
     this.out.hidden = false;
-    this.out.classList.remove('stale');
+    this.out.classList.toggle('stale', !current);
     this.out.dataset.where = where;
     const q = r.request;
     const summary = el('p', {

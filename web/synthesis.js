@@ -40,6 +40,7 @@ export class SynthesisView {
     this.root = root;
     this.ctx = ctx;
     this.result = null;
+    this.edits = 0; // model changes seen (markStale): a result is current if none came during its run
     this.build();
   }
 
@@ -370,9 +371,11 @@ export class SynthesisView {
       if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
       const overridden = await checkOverrides(request.model, this.overrides(request));
       if (overridden.length) throw { kind: 'invalid', title: 'Invalid synthesis request', errors: overridden };
+      const edits = this.edits; // exec serialises the request at once
       const { result, job } = await exec(request);
-      this.ctx.showModelErrors([]);
-      this.show(result, where);
+      const current = this.edits === edits;
+      if (current) this.ctx.showModelErrors([]); // else the check of the edited model has the say
+      this.show(result, where, current);
       return job;
     } catch (e) {
       const own = routeErrors(e?.errors, this.ctx.showModelErrors);
@@ -383,10 +386,11 @@ export class SynthesisView {
 
   // ------------------------------------------------------------ result
 
-  show(r, where) {
+  /** Show a result; `current`: the model has not changed since the run started. */
+  show(r, where, current = true) {
     this.result = r;
     this.out.hidden = false;
-    this.out.classList.remove('stale');
+    this.out.classList.toggle('stale', !current);
     this.out.dataset.where = where;
     this.out.dataset.status = r.status;
     const t = r.target;
@@ -413,6 +417,7 @@ export class SynthesisView {
   }
 
   markStale() {
+    this.edits++;
     if (!this.out.hidden) this.out.classList.add('stale');
   }
 

@@ -84,6 +84,34 @@ export async function newPage(browser, errors) {
   return page;
 }
 
+/**
+ * Hold back the page's creation of server jobs (POST /v1/jobs) until `release()`, so that
+ * something can happen while a run is under way; `reached` resolves when one is held.
+ */
+export async function holdJobs(page) {
+  let reach;
+  let release;
+  let sent;
+  const reached = new Promise((r) => (reach = r));
+  const held = new Promise((r) => (release = r));
+  const continued = new Promise((r) => (sent = r));
+  await page.route('**/v1/jobs', async (route) => {
+    if (route.request().method() !== 'POST') return route.continue();
+    reach();
+    await held;
+    await route.continue();
+    sent();
+  });
+  return {
+    reached,
+    release: async () => {
+      release();
+      await continued;
+      await page.unroute('**/v1/jobs');
+    },
+  };
+}
+
 /** Run the `kea` CLI and return its stdout. */
 export function kea(...args) {
   return execFileSync(KEA_BIN, args, { cwd: ROOT, encoding: 'utf8', maxBuffer: 256 * 1024 * 1024 });

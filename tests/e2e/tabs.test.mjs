@@ -9,7 +9,7 @@ import assert from 'node:assert/strict';
 import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import path from 'node:path';
-import { kea, launchBrowser, newPage, relDiff, screenshot, startServer } from './lib.mjs';
+import { holdJobs, kea, launchBrowser, newPage, relDiff, screenshot, startServer } from './lib.mjs';
 
 const STEPS = 2000; // small D: the grid's 7 analyses and 200 runs take well under a second
 
@@ -378,6 +378,24 @@ test('synthesis inputs are refused at their control, in words', async () => {
   const message = await page.textContent('#syn-message');
   assert.match(message, /cost order/);
   assert.doesNotMatch(message, /cost_order/);
+});
+
+test('a result of a model edited during its run is shown as stale, on both tabs', async () => {
+  await smallSeedExample();
+  await page.click('#tab-simulation');
+  await page.fill('#mc-runs', '50');
+  await page.fill('#mc-trace-points', '');
+  for (const [tab, prefix] of [['simulation', 'mc'], ['synthesis', 'syn']]) {
+    await page.click(`#tab-${tab}`);
+    const jobs = await holdJobs(page); // the edit comes while the run is under way
+    const run = runView(prefix, 'server');
+    await jobs.reached;
+    await page.fill('input[data-path="params.c"]', tab === 'simulation' ? '0.6' : '0.7');
+    await jobs.release();
+    await run;
+    assert.ok(await page.$eval(`#${prefix}-result`, (e) => e.classList.contains('stale')), `${tab}: the result is marked stale`);
+    assert.ok(await page.isVisible(`#${prefix}-result .stale-note`), tab);
+  }
 });
 
 test('a Monte Carlo of a model with no trace points says so instead of a chart', async () => {

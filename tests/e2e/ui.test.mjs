@@ -7,7 +7,7 @@ import assert from 'node:assert/strict';
 import { readFileSync, writeFileSync } from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
-import { kea, launchBrowser, newPage, relDiff, screenshot, startServer } from './lib.mjs';
+import { holdJobs, kea, launchBrowser, newPage, relDiff, screenshot, startServer } from './lib.mjs';
 
 let server;
 let browser;
@@ -482,6 +482,23 @@ test('a server run cancelled before its job exists is cancelled on the server', 
   const items = jobs.items ?? jobs.jobs ?? jobs;
   assert.ok(!items.some((j) => ['queued', 'running'].includes(j.status)), JSON.stringify(items).slice(0, 500));
   await preset('seed-example');
+});
+
+test('a result of a model edited during its run is shown as stale', async () => {
+  await preset('seed-example');
+  const jobs = await holdJobs(page);
+  await forgetResult();
+  const run = runIn('server');
+  await jobs.reached; // the run has started, with the model as it was
+  await page.fill('input[data-path="params.c"]', '0.6');
+  await jobs.release();
+  await run;
+  assert.ok(await page.$eval('#results', (e) => e.classList.contains('stale')), 'the result is marked stale');
+  assert.ok(await page.isVisible('#results .stale-note'));
+  // A run of the model as it is now is current.
+  await forgetResult();
+  await runIn('server');
+  assert.equal(await page.$eval('#results', (e) => e.classList.contains('stale')), false);
 });
 
 test('at 390 px wide the page does not overflow sideways, on every tab', async () => {

@@ -77,10 +77,11 @@ const editor = new ModelEditor($('editor'), () => {
   markStale();
 });
 
-/** The shown results belong to an earlier version of the model. */
+/** The shown results, and a run's error, belong to an earlier version of the model. */
 function markStale() {
   state.edits++;
   if (!$('results').hidden) $('results').classList.add('stale');
+  if ($('status').classList.contains('error')) setStatus('');
   document.dispatchEvent(new Event('kea:model-changed')); // the Synthesis and Monte Carlo tabs
 }
 

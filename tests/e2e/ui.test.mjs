@@ -501,6 +501,27 @@ test('a result of a model edited during its run is shown as stale', async () => 
   assert.equal(await page.$eval('#results', (e) => e.classList.contains('stale')), false);
 });
 
+test("a run's error goes when the model changes", async () => {
+  const cell = 'input[data-path="system.a[0][0]"]';
+  const refused = async () => {
+    await page.check('input[name=mode][value=browser]');
+    await page.click('#run');
+    await page.waitForFunction(() => document.querySelector('#status').classList.contains('error'), null, { timeout: 10000 });
+  };
+  await preset('seed-example');
+  const original = await page.inputValue(cell);
+  await page.fill(cell, 's/m +* 1');
+  await refused();
+  const cleared = () => page.waitForFunction(() => document.querySelector('#status').textContent === '', null, { timeout: 5000 });
+  await page.fill(cell, original); // an edit
+  await cleared();
+  await page.fill(cell, 's/m +* 1');
+  await refused();
+  await page.selectOption('#preset', 'cv-tracker'); // another model
+  await cleared();
+  await preset('seed-example');
+});
+
 test('at 390 px wide the page does not overflow sideways, on every tab', async () => {
   await page.setViewportSize({ width: 390, height: 800 });
   try {

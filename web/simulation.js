@@ -206,7 +206,7 @@ export class SimulationView {
       );
     });
     table.append(body);
-    return table;
+    return el('div', { class: 'scroll' }, table);
   }
 
   criteriaTable(r) {

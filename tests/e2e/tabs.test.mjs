@@ -398,6 +398,32 @@ test('a result of a model edited during its run is shown as stale, on both tabs'
   }
 });
 
+test('at 390 px wide a Monte Carlo result does not overflow sideways, and no number breaks', async () => {
+  await smallSeedExample();
+  await page.setViewportSize({ width: 390, height: 844 });
+  try {
+    await page.click('#tab-simulation');
+    await page.fill('#mc-runs', '50');
+    await runView('mc', 'browser');
+    const [scroll, inner] = await page.evaluate(() => [document.documentElement.scrollWidth, window.innerWidth]);
+    assert.ok(scroll <= inner, `the page is ${scroll} px wide in a ${inner} px window`);
+    // Every number cell is one line: "94.9 %" and "[1.2217, 2.9671]" do not wrap.
+    const wrapped = await page.$$eval('#mc-result td.num', (cells) =>
+      cells
+        .filter((c) => {
+          const text = document.createRange();
+          text.selectNodeContents(c);
+          return text.getBoundingClientRect().height > 1.5 * parseFloat(getComputedStyle(c).lineHeight);
+        })
+        .map((c) => c.textContent),
+    );
+    assert.deepEqual(wrapped, []);
+    await screenshot(page, '17-monte-carlo-narrow');
+  } finally {
+    await page.setViewportSize({ width: 1440, height: 900 });
+  }
+});
+
 test('a Monte Carlo of a model with no trace points says so instead of a chart', async () => {
   await page.click('#tab-simulation');
   await page.fill('#mc-runs', '50');

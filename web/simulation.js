@@ -74,18 +74,25 @@ export class SimulationView {
   /** The request for the current model and form; throws {errors} for unreadable inputs. */
   request() {
     const errors = [];
-    const whole = (control, path, { optional = false, min = 0, seed = false } = {}) => {
+    // `below`: the message for a whole number under `min`.
+    const whole = (control, path, { optional = false, min = 0, seed = false, below } = {}) => {
       if (optional && control.value.trim() === '') return undefined;
       const problem = numberProblem(control.value, { integer: true, min });
       if (problem) {
-        const why = seed && /2\^53/.test(problem) ? problem : seed ? `${problem}; a seed is a whole number from 0 to 2^53 − 1 = ${MAX_SAFE}` : problem;
+        const x = toNumber(control.value);
+        const why =
+          below && Number.isInteger(x) && x < min ? `${below}, got ${x}`
+          : seed && /2\^53/.test(problem) ? problem
+          : seed ? `${problem}; a seed is a whole number from 0 to 2^53 − 1 = ${MAX_SAFE}`
+          : problem;
         errors.push({ path, message: why });
       }
       return toNumber(control.value);
     };
     const request = {
       model: this.ctx.model(),
-      runs: whole(this.runs, 'runs'),
+      // The core's rule and words (sample SKOs need two runs), here before a request.
+      runs: whole(this.runs, 'runs', { min: 2, below: 'at least 2 runs are needed for sample SKOs' }),
       seed: whole(this.seed, 'seed', { seed: true }),
       truth: this.truth.value,
       model_error: this.modelError.value,

@@ -313,6 +313,11 @@ test('an invalid request is marked at its control; a model error at its cell', a
   assert.equal(await page.getAttribute('#mc-runs', 'aria-invalid'), 'true');
   assert.match(await page.textContent('#mc-status'), /see the marked fields/);
   assert.doesNotMatch(await page.textContent('#mc-status'), /runs:/);
+  // One rule from the start: −5 gets the same words as 1 (not “must be ≥ 0”).
+  await page.fill('#mc-runs', '-5');
+  await page.click('#mc-run');
+  await page.waitForFunction(() => /-5/.test(document.querySelector('#mc-runs + .control-error')?.textContent));
+  assert.match(await page.textContent('#mc-runs + .control-error'), /^at least 2 runs are needed for sample SKOs, got -5$/);
   await page.fill('#mc-runs', '200');
   // A seed above 2^53 − 1 is refused at the field, in words (not serde's "expected u64").
   await page.fill('#mc-seed', '1e20');

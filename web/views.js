@@ -250,16 +250,29 @@ export function runError(e, ownErrors, modelCount, unplaced = []) {
   return new Error(parts.filter(Boolean).join(' — '));
 }
 
+/** Take a control's mark (and its messages) away. */
+function unmark(control) {
+  for (const m of control.parentElement?.querySelectorAll(':scope > .control-error') ?? []) m.remove();
+  control.removeAttribute('aria-invalid');
+  control.classList.remove('invalid');
+}
+
+/** Mark a control as invalid, with `error`'s message under it. */
+function mark(control, error) {
+  control.setAttribute('aria-invalid', 'true');
+  control.classList.add('invalid');
+  control.parentElement.append(
+    el('div', { class: 'cell-error control-error', role: 'alert', 'data-error-path': error.path ?? '', text: uiWords(error.message) }),
+  );
+}
+
 /**
  * Mark the view's controls named by error paths (data-request-path) as invalid, with
  * the message under the control. Returns the errors no control was found for.
  */
 export function markControls(root, errors) {
+  for (const c of root.querySelectorAll('[aria-invalid="true"]')) unmark(c);
   for (const m of root.querySelectorAll('.control-error')) m.remove();
-  for (const c of root.querySelectorAll('[aria-invalid="true"]')) {
-    c.removeAttribute('aria-invalid');
-    c.classList.remove('invalid');
-  }
   const unplaced = [];
   for (const e of errors) {
     let path = e.path ?? '';
@@ -272,11 +285,20 @@ export function markControls(root, errors) {
       unplaced.push(e);
       continue;
     }
-    control.setAttribute('aria-invalid', 'true');
-    control.classList.add('invalid');
-    control.parentElement.append(
-      el('div', { class: 'cell-error control-error', role: 'alert', 'data-error-path': e.path ?? '', text: uiWords(e.message) }),
-    );
+    mark(control, e);
   }
   return unplaced;
+}
+
+/**
+ * Re-check a control as it is edited, as the model editor does: its mark (from the last
+ * Run) is replaced by what the view's own check (`local()`: the errors of the fields as
+ * they read now) finds at it, or goes. The core's checks come with the next Run.
+ */
+export function recheckControl(control, local) {
+  const errors = local(); // first: it may renumber the paths of the rows
+  const path = control.dataset?.requestPath;
+  if (!path) return;
+  unmark(control);
+  for (const e of errors) if (e.path === path) mark(control, e);
 }

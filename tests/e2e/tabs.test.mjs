@@ -318,7 +318,9 @@ test('an invalid request is marked at its control; a model error at its cell', a
   await page.click('#mc-run');
   await page.waitForFunction(() => /-5/.test(document.querySelector('#mc-runs + .control-error')?.textContent));
   assert.match(await page.textContent('#mc-runs + .control-error'), /^at least 2 runs are needed for sample SKOs, got -5$/);
-  await page.fill('#mc-runs', '200');
+  await page.fill('#mc-runs', '200'); // a fixed field is re-checked as it is typed: the mark goes
+  assert.equal(await page.$('#mc-runs + .control-error'), null);
+  assert.equal(await page.getAttribute('#mc-runs', 'aria-invalid'), null);
   // A seed above 2^53 − 1 is refused at the field, in words (not serde's "expected u64").
   await page.fill('#mc-seed', '1e20');
   await page.click('#mc-run');
@@ -326,6 +328,7 @@ test('an invalid request is marked at its control; a model error at its cell', a
   assert.match(await page.textContent('#mc-seed + .control-error'), /2\^53 − 1 = 9007199254740991/);
   assert.match(await page.textContent('#mc-status'), /see the marked fields/);
   await page.fill('#mc-seed', '7');
+  assert.equal(await page.$('#mc-seed + .control-error'), null);
 
   await page.click('#tab-synthesis');
   await page.fill('input[data-path="system.a[0][0]"]', 's/m +* 1');
@@ -357,6 +360,7 @@ test('synthesis inputs are refused at their control, in words', async () => {
   await runRefused();
   assert.match(await page.textContent('#syn-bisect-low + .control-error'), /“abc” is not a number/);
   await page.fill('#syn-bisect-low', '20');
+  assert.equal(await page.$('#syn-bisect-low + .control-error'), null, 'the fixed field is re-checked as it is typed');
   await page.fill('#syn-bisect-high', '10');
   await runRefused();
   const shown = await page.$$eval('#synthesis-panel .control-error', (es) => es.map((e) => e.textContent));

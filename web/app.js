@@ -353,6 +353,16 @@ async function main() {
   // The link's tab (`&tab=synthesis` / `simulation`), kept in the URL as it changes.
   tabs.show(new URLSearchParams(location.hash.slice(1)).get('tab') ?? 'analysis');
   document.addEventListener('kea:tab-changed', saveToUrl);
+  // A link opened in this tab while kea is open (the address bar, a link elsewhere): its
+  // model or preset, and its tab. The page's own address updates (history.replaceState)
+  // fire no hashchange; an address that names what is shown already is left alone.
+  window.addEventListener('hashchange', async () => {
+    if (location.hash === (await linkHash())) return;
+    clearTimeout(urlTimer); // a pending update would write the model shown before
+    const params = new URLSearchParams(location.hash.slice(1));
+    if (params.has('model') || params.has('preset')) await loadFromUrl();
+    tabs.show(params.get('tab') ?? 'analysis');
+  });
   document.body.dataset.ready = 'true';
 }
 

@@ -522,6 +522,25 @@ test("a run's error goes when the model changes", async () => {
   await preset('seed-example');
 });
 
+test('a link opened in a tab where kea is open loads its model and its tab', async () => {
+  await preset('cv-tracker');
+  await page.fill('input[data-path="params.r"]', '0.125');
+  await page.waitForFunction(() => location.hash.startsWith('#model='));
+  const edited = new URL(page.url()).hash;
+  await preset('seed-example');
+  const open = (hash) => page.evaluate((h) => (location.hash = h), hash);
+  await open('#preset=cv-tracker&tab=simulation');
+  await page.waitForTimeout(600); // past the address's save delay: it is not written back over
+  assert.equal(await page.inputValue('#preset'), 'cv-tracker');
+  assert.equal(await page.getAttribute('#tab-simulation', 'aria-selected'), 'true');
+  assert.equal(new URL(page.url()).hash, '#preset=cv-tracker&tab=simulation');
+  await open(edited);
+  await page.waitForFunction(() => document.querySelector('input[data-path="params.r"]')?.value === '0.125', null, { timeout: 5000 });
+  assert.equal(await page.inputValue('#preset'), '');
+  assert.equal(await page.getAttribute('#tab-analysis', 'aria-selected'), 'true');
+  await preset('seed-example');
+});
+
 test('at 390 px wide the page does not overflow sideways, on every tab', async () => {
   await page.setViewportSize({ width: 390, height: 800 });
   try {

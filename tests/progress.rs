@@ -96,7 +96,11 @@ fn a_costly_monte_carlo_reports_within_a_chunk_of_steps_and_stops_when_told() {
     let first_own = seen.iter().position(|&f| f > 0.05).unwrap() + 1;
     let (seen, outcome) = reports_of(Some(first_own), simulate);
     assert!(matches!(outcome, Err(Error::Cancelled)), "{outcome:?}");
-    assert!(seen[first_own - 1] < 0.5, "stopped at {}", seen[first_own - 1]);
+    assert!(
+        seen[first_own - 1] < 0.5,
+        "stopped at {}",
+        seen[first_own - 1]
+    );
 }
 
 #[test]

@@ -214,13 +214,10 @@ pub fn plain_serde_error(e: FieldError, hints: &[(&str, &str)]) -> FieldError {
             .strip_prefix(prefix)
             .and_then(|m| m.rsplit_once(", expected "))
         {
+            let got = got_kind(got);
             return FieldError::new(
                 path,
-                format!(
-                    "expected {}, got {}",
-                    expected_kind(expected),
-                    got_kind(got)
-                ),
+                format!("expected {}, got {got}", expected_kind(expected, &got)),
             );
         }
     }
@@ -253,11 +250,27 @@ fn one_of(expected: &str) -> String {
     }
 }
 
-/// serde's name of what it expected, in the words of JSON and kea.
-fn expected_kind(expected: &str) -> String {
+/// serde's name of what it expected, in the words of JSON and kea; `got` (as
+/// [`got_kind`] words it) adds the largest value where a whole number was too large.
+fn expected_kind(expected: &str, got: &str) -> String {
+    let whole = |max: f64| {
+        if got.parse::<f64>().is_ok_and(|x| x > max) {
+            let max = if max < 1e15 {
+                format!("{max}")
+            } else {
+                format!("{max:.1e}") // (2⁶⁴ − 1 in full is 20 digits)
+            };
+            format!("a whole number from 0 to {max}")
+        } else {
+            "a whole number ≥ 0".into()
+        }
+    };
     match expected {
         "f64" | "f32" => "a number".into(),
-        "u64" | "u32" | "u16" | "u8" | "usize" => "a whole number ≥ 0".into(),
+        "u64" | "usize" => whole(u64::MAX as f64),
+        "u32" => whole(u32::MAX as f64),
+        "u16" => whole(u16::MAX as f64),
+        "u8" => whole(u8::MAX as f64),
         "i64" | "i32" | "isize" => "a whole number".into(),
         "a sequence" => "an array".into(),
         "a boolean" => "true or false".into(),
@@ -376,6 +389,15 @@ mod tests {
         assert_eq!(
             message::<u64>("1.5"),
             "expected a whole number ≥ 0, got 1.5"
+        );
+        // Too large for the type: the range, not "≥ 0", which it is.
+        assert_eq!(
+            message::<u64>("1e20"),
+            "expected a whole number from 0 to 1.8e19, got 1e+20"
+        );
+        assert_eq!(
+            message::<u32>("5000000000"),
+            "expected a whole number from 0 to 4294967295, got 5000000000"
         );
         assert_eq!(
             message::<Vec<f64>>(r#""a, expected b""#),

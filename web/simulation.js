@@ -135,6 +135,8 @@ export class SimulationView {
   markStale() {
     this.edits++;
     if (!this.out.hidden) this.out.classList.add('stale');
+    // A run's error was about the model before (as on the Analysis tab).
+    if (this.bar.status.classList.contains('error')) this.bar.setStatus('');
   }
 
   /** Show a result; `current`: the model has not changed since the run started. */

@@ -486,39 +486,44 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         (Some(gm), None) => {
             let mcols = gm.first().map(|r| r.len()).unwrap_or(0);
             if mcols == 0 && gm.len() == nm {
+                // (Only this: the shape check would add "0 entries, expected 1".)
                 errs.at(
                     "measurement.gamma[0]",
                     "gamma needs at least one column (M ≥ 1)",
                 );
+                None
+            } else {
+                Some(MeasurementNoise::Gamma(time_matrix(
+                    gm,
+                    nm,
+                    Some(mcols.max(1)),
+                    "measurement.gamma",
+                    "n",
+                    &params,
+                    t0,
+                    &mut exprs,
+                    &mut errs,
+                )))
             }
-            Some(MeasurementNoise::Gamma(time_matrix(
-                gm,
-                nm,
-                Some(mcols.max(1)),
-                "measurement.gamma",
-                "n",
-                &params,
-                t0,
-                &mut exprs,
-                &mut errs,
-            )))
         }
         (None, Some(g)) => {
             let mcols = g.first().map(|r| r.len()).unwrap_or(0);
             if mcols == 0 && g.len() == n {
                 errs.at("measurement.g[0]", "g needs at least one column (M ≥ 1)");
+                None
+            } else {
+                Some(MeasurementNoise::SeedG(time_matrix(
+                    g,
+                    n,
+                    Some(mcols.max(1)),
+                    "measurement.g",
+                    "N",
+                    &params,
+                    t0,
+                    &mut exprs,
+                    &mut errs,
+                )))
             }
-            Some(MeasurementNoise::SeedG(time_matrix(
-                g,
-                n,
-                Some(mcols.max(1)),
-                "measurement.g",
-                "N",
-                &params,
-                t0,
-                &mut exprs,
-                &mut errs,
-            )))
         }
     };
     let m_sources = noise.as_ref().map(|x| x.sources()).unwrap_or(1);

@@ -892,3 +892,37 @@ fn a_key_given_twice_is_refused() {
         serde_json::from_str::<Value>(numbers).unwrap()
     );
 }
+
+/// A Γ (or the seed's g) with no columns gets one error, that it needs a column,
+/// not a second, contradictory one at the same row ("0 entries, expected 1").
+#[test]
+fn a_noise_matrix_without_columns_is_one_error() {
+    for (member, path) in [("gamma", "measurement.gamma[0]"), ("g", "measurement.g[0]")] {
+        let mut v = good();
+        let meas = v["measurement"].as_object_mut().unwrap();
+        meas.remove("gamma");
+        meas.insert(
+            member.into(),
+            if member == "g" {
+                json!([[], []])
+            } else {
+                json!([[]])
+            },
+        );
+        let err = match model_from_value(v) {
+            Err(e) => e,
+            Ok(m) => analyze(&m, &Overrides::new(), &mut NoProgress).unwrap_err(),
+        };
+        let Error::Invalid(errors) = err else {
+            panic!("{member}: expected invalid, got {err}");
+        };
+        let here: Vec<_> = errors.iter().filter(|e| e.path == path).collect();
+        assert_eq!(here.len(), 1, "{member}: {errors:?}");
+        assert!(
+            here[0]
+                .message
+                .contains("needs at least one column (M ≥ 1)"),
+            "{here:?}"
+        );
+    }
+}

@@ -479,9 +479,17 @@ impl<'m, const N: usize> Engine<'m, N> {
         };
         let mut warnings = Vec::new();
         if invariant && r_inf.is_none() {
-            warnings.push(
-                "the stationary Riccati solution could not be computed (no stabilising solution?): the full recursion was run and no steady state is reported".to_string(),
-            );
+            // The doubling needs Rv⁻¹: a noise-free measurement, or fewer noise
+            // sources than measurements, is no reason to suspect the model.
+            let rv = nalgebra::DMatrix::from_row_slice(nm, nm, &inp.rv);
+            let why = if nm > 0 && rv.cholesky().is_none() {
+                "is not computed where the measurement-noise covariance Γ V Γᵀ is singular (its doubling algorithm needs the inverse)"
+            } else {
+                "could not be computed (no stabilising solution?)"
+            };
+            warnings.push(format!(
+                "the stationary Riccati solution {why}: the full recursion was run and no steady state is reported"
+            ));
         }
 
         // --- state

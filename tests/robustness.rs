@@ -206,6 +206,14 @@ fn a_measurement_noise_variance_that_underflows_to_zero_is_an_error() {
     v["measurement"]["V"] = json!([[1, 1], [1, 1]]);
     let r = run(v).expect("a cancelling noise is not an underflow");
     assert_eq!(r.final_.measured_sko[0], 0.0);
+    // Without a steady state for the reason it has, not for a suspected model.
+    assert!(
+        r.warnings.iter().any(|w| w.starts_with(
+            "the stationary Riccati solution is not computed where the measurement-noise covariance Γ V Γᵀ is singular"
+        )),
+        "{:?}",
+        r.warnings
+    );
 }
 
 /// A Monte Carlo of a diverging model (ẏ = 10 v) went on until the simulated process

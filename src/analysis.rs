@@ -598,7 +598,12 @@ impl<'m, const N: usize> Engine<'m, N> {
                     }
                 }
                 if !joseph.step::<N, L>(n, &mut big_r, &inp.e, &inp.big_b, &prep) {
-                    return Err(not_positive(&big_r, k, t_k));
+                    return Err(match cancelled {
+                        Some((j, t_j, i)) if all_finite(&big_r) => {
+                            lost_precision(k, t_k, j, t_j, &m.states[i])
+                        }
+                        _ => not_positive(&big_r, k, t_k),
+                    });
                 }
                 for i in 0..n {
                     pot[i] = big_r[i * n + i];
@@ -1062,6 +1067,21 @@ fn not_positive(big_r: &[f64], k: u64, t: f64) -> Error {
         t,
         path: "system".into(),
         message: "the filter's covariance overflowed f64 (a variance above 1.8e308): the noise levels or the initial SKOs are too large to square".into(),
+    }
+}
+
+/// An innovation covariance ≤ 0 at step k after the update had cancelled a variance
+/// to rounding level from step j on: the covariance's precision, not the model, gave
+/// out (an SKO far above the measurement's: `eta0 = 1e150` against `psi = 1`).
+fn lost_precision(k: u64, t: f64, j: u64, t_j: f64, state: &str) -> Error {
+    Error::Numerical {
+        step: k,
+        t,
+        path: "system".into(),
+        message: format!(
+            "the filter's covariance lost its precision: from step {j} (t = {}) the update cancelled the variance of \"{state}\" to 1e-12 of its predicted variance or less (the small difference of large terms), and here the innovation covariance q = C r Cᵀ + Γ V Γᵀ came out ≤ 0 by rounding; an initial SKO (eta0) or a model-error SKO (phi) many orders of magnitude above the measurement's (psi) does this: bring them nearer, or rescale the units",
+            crate::validate::num(t_j)
+        ),
     }
 }
 

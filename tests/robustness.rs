@@ -675,3 +675,25 @@ fn mutated_presets_give_errors_or_finite_results() {
         "{errors} errors, {results} results"
     );
 }
+
+/// An initial SKO 150 orders of magnitude above the measurement's (cv-tracker with
+/// eta0 = 1e150, inside the SKOs' range): the update cancels the position's variance
+/// to rounding level at once, and two steps later q comes out ≤ 0. That was reported
+/// as a singular innovation covariance ("a measurement has no error…"), naming the
+/// measurement; now as the precision it is, from the step it began.
+#[test]
+fn an_innovation_covariance_lost_to_rounding_says_so() {
+    let mut v: Value =
+        serde_json::from_str(kea_core::presets::get_json("cv-tracker").unwrap()).unwrap();
+    v["system"]["eta0"] = json!([1e150, 1e150]);
+    let e = error_at(
+        v,
+        "system",
+        "the filter's covariance lost its precision: from step 1 (t = 0.1) the update cancelled the variance of \"position\"",
+    );
+    assert!(
+        e.to_string()
+            .contains("bring them nearer, or rescale the units"),
+        "{e}"
+    );
+}

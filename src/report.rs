@@ -1,6 +1,7 @@
 //! Plain-text and CSV renderings of a result, shared by the CLI, the server and wasm.
 
 use crate::result::{AnalysisResult, CriteriaSet};
+use crate::validate::num;
 use std::fmt::Write;
 
 /// Width of the table's number columns.
@@ -192,8 +193,10 @@ pub fn traces_csv(r: &AnalysisResult) -> String {
     }
     let header = std::iter::once("t".to_string()).chain(cols.iter().map(|(n, _)| n.clone()));
     let rows = tr.t.iter().enumerate().map(|(k, t)| {
-        std::iter::once(t.to_string()).chain(cols.iter().map(move |(_, v)| match v.get(k) {
-            Some(Some(x)) => x.to_string(),
+        // (Plain, or in exponent form outside [1e-4, 1e15): never 300 digits for 1e300.
+        // Either form reads back to the same f64.)
+        std::iter::once(num(*t)).chain(cols.iter().map(move |(_, v)| match v.get(k) {
+            Some(Some(x)) => num(*x),
             _ => String::new(),
         }))
     });

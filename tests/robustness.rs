@@ -697,3 +697,32 @@ fn an_innovation_covariance_lost_to_rounding_says_so() {
         "{e}"
     );
 }
+
+/// The analysis's traces CSV wrote f64's plain form: 1e200 as a 201-digit number,
+/// 1e-150 with 150 zeros. Values outside [1e-4, 1e15) are now in exponent form, and
+/// every cell still reads back to the result's value.
+#[test]
+fn the_traces_csv_writes_extreme_values_in_exponent_form() {
+    let mut v = scalar();
+    v["system"]["a"] = json!([[0]]);
+    v["system"]["y0"] = json!([1e200]);
+    v["system"]["eta0"] = json!([1e-150]);
+    let r = run(v).unwrap();
+    let csv = kea_core::report::traces_csv(&r);
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let y = header
+        .iter()
+        .position(|h| *h == "y:x")
+        .expect("a y:x column");
+    let mut rows = 0;
+    for (k, line) in lines.enumerate() {
+        let cells: Vec<&str> = line.split(',').collect();
+        assert!(cells.iter().all(|c| c.len() <= 24), "row {k}: {line}");
+        let want = r.traces.states[0].y[k];
+        assert_eq!(cells[y].parse::<f64>().unwrap(), want, "row {k}");
+        rows += 1;
+    }
+    assert!(rows > 2);
+    assert!(csv.contains(",1e200,"), "{csv}");
+}

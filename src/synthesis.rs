@@ -1152,7 +1152,7 @@ fn bisect<E: Executor>(
     let probes = ctx.batch(exec, xs.iter().map(|&x| at(x)).collect(), progress)?;
     let mut evals: Vec<(f64, Point)> = xs.iter().copied().zip(probes).collect();
     let crit = crit_name(ctx.target);
-    let thr = ctx.target.threshold;
+    let thr = crate::validate::num(ctx.target.threshold); // (for messages: 1e308 not in 309 digits)
     let out = |evals: &[(f64, Point)], side, bracket, iterations| {
         Details::Bisect(BisectOut {
             param: name.clone(),
@@ -1376,7 +1376,7 @@ fn grid<E: Executor>(
     }
     let qualifying = cells.iter().filter(|c| c.point.meets).count();
     let crit = crit_name(ctx.target);
-    let thr = ctx.target.threshold;
+    let thr = crate::validate::num(ctx.target.threshold); // (for messages)
     let cheapest = g.cost_order.as_ref().and_then(|order| {
         cells
             .iter()

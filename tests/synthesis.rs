@@ -381,6 +381,16 @@ fn infeasible_targets_say_so_and_advise() {
     assert_eq!(r.status, Status::NotFound);
     assert!(r.message.contains("widen the range or lower the target"));
 
+    // A huge target is written as a number is in the other messages (it was printed
+    // in full: 309 digits).
+    let r = run(&request(
+        &model,
+        json!({"criterion": "yx", "threshold": 1e308}),
+        json!({"grid": {"params": [{"name": "psi", "values": [1e-6, 1e-5]}]}}),
+    ));
+    assert_eq!(r.status, Status::NotFound);
+    assert!(r.message.contains("≥ 1e308"), "{}", r.message);
+
     // A target met everywhere: the boundary is outside the range.
     let r = run(&request(
         &model,

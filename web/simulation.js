@@ -8,7 +8,7 @@ import uPlot from './vendor/uplot/uPlot.esm.js';
 import { MAX_SAFE, numberProblem, toNumber } from './numbers.js';
 import { valueAxis } from './plot.js';
 import { noTraces } from './results.js';
-import { RunBar, checkModel, el, field, fmt, input, markControls, recheckControl, routeErrors, runError, select, wasmCall } from './views.js';
+import { RunBar, checkModel, el, field, fmt, input, markControls, recheckControl, requestErrors, routeErrors, runError, select, wasmCall } from './views.js';
 
 const SETS = ['bound', 'covariance', 'monte_carlo'];
 const CRITERIA = [
@@ -43,7 +43,7 @@ export class SimulationView {
     this.tracePoints = input('mc-trace-points', '', { inputmode: 'numeric', placeholder: 'model’s', 'data-request-path': 'trace_points' });
     this.form = el(
       'form',
-      { class: 'view-form', novalidate: true, onsubmit: (e) => e.preventDefault(), oninput: (e) => recheckControl(e.target, () => this.localErrors()) },
+      { class: 'view-form', novalidate: true, onsubmit: (e) => e.preventDefault(), oninput: (e) => recheckControl(e.target, () => requestErrors(() => this.request())) },
       el(
         'fieldset',
         { class: 'section' },
@@ -69,16 +69,6 @@ export class SimulationView {
     this.log.addEventListener('change', () => this.draw());
     new ResizeObserver(() => this.plot?.setSize({ width: this.width(), height: 320 })).observe(this.chart);
     this.root.append(this.form, this.bar.root, this.out);
-  }
-
-  /** The errors of the form's own fields as they read now (those request() throws). */
-  localErrors() {
-    try {
-      this.request();
-      return [];
-    } catch (e) {
-      return e.errors ?? [];
-    }
   }
 
   /** The request for the current model and form; throws {errors} for unreadable inputs. */

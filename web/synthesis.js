@@ -4,7 +4,7 @@
 // `synthesis`; the result as grid tables or as the answer with its verification.
 
 import { numberProblem, toNumber } from './numbers.js';
-import { RunBar, checkModel, checkOverrides, el, field, fmt, input, markControls, recheckControl, routeErrors, runError, select, uiWords } from './views.js';
+import { RunBar, checkModel, checkOverrides, el, field, fmt, input, markControls, recheckControl, requestErrors, routeErrors, runError, select, uiWords } from './views.js';
 
 const CRITERIA = [
   ['yz', 'F_YZ (measured vs a-priori)'],
@@ -188,7 +188,7 @@ export class SynthesisView {
       kind: 'synthesis',
       onRun: (where, exec) => this.run(where, exec),
     });
-    this.form = el('form', { class: 'view-form', novalidate: true, onsubmit: (e) => e.preventDefault(), oninput: (e) => recheckControl(e.target, () => this.localErrors()) }, target, modeSet);
+    this.form = el('form', { class: 'view-form', novalidate: true, onsubmit: (e) => e.preventDefault(), oninput: (e) => recheckControl(e.target, () => requestErrors(() => this.request())) }, target, modeSet);
     this.out = el('div', { id: 'syn-result', class: 'view-result', hidden: true });
     this.root.append(this.form, this.bar.root, this.out);
     this.refreshChoices();
@@ -276,16 +276,6 @@ export class SynthesisView {
   }
 
   // ------------------------------------------------------------ request
-
-  /** The errors of the form's own fields as they read now (those request() throws). */
-  localErrors() {
-    try {
-      this.request();
-      return [];
-    } catch (e) {
-      return e.errors ?? [];
-    }
-  }
 
   /** The request for the current model and form; throws {errors} for unreadable inputs. */
   request() {

@@ -290,6 +290,16 @@ export function markControls(root, errors) {
   return unplaced;
 }
 
+/** The errors `request()` throws for a form's own fields as they read now ([] if none). */
+export function requestErrors(request) {
+  try {
+    request();
+    return [];
+  } catch (e) {
+    return e.errors ?? [];
+  }
+}
+
 /**
  * Re-check a control as it is edited, as the model editor does: its mark (from the last
  * Run) is replaced by what the view's own check (`local()`: the errors of the fields as

@@ -969,7 +969,7 @@ fn noise_cov(
 
 /// A number for a message: plain in [1e-4, 1e15), else in exponent form (never 300
 /// digits). (Also the report's, for times.)
-pub(crate) fn num(x: f64) -> String {
+pub fn num(x: f64) -> String {
     if x == 0.0 || (1e-4..1e15).contains(&x.abs()) {
         format!("{x}")
     } else {

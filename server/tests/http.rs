@@ -613,6 +613,19 @@ fn bad_request_corpus() {
             422,
             vec!["set"],
         ),
+        // A value that makes a valid model invalid: where (φ), and that `set` did it.
+        (
+            "/v1/analyze",
+            json!({"model": cv, "set": {"q": -3}}),
+            422,
+            vec!["model.system.phi[0]", "set"],
+        ),
+        (
+            "/v1/jobs",
+            json!({"kind": "simulation", "runs": 2, "model": cv, "set": {"q": -3}}),
+            422,
+            vec!["model.system.phi[0]", "set"],
+        ),
         (
             "/v1/analyze",
             json!({"model": cv, "set": {"nope": 1}}),

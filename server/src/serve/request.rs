@@ -334,6 +334,37 @@ pub fn overrides(set: Option<&Value>) -> Result<Overrides, Vec<FieldError>> {
     }
 }
 
+/// Validate and compile `model` with `set`. Where the model is valid without `set`
+/// (and no error is about `set` itself: an unknown name), its errors are the values' doing (`set: {q: -3}` makes `phi[0]` negative): one more
+/// entry, at `set`, names them, so that a request naming only `model_id` and `set`
+/// learns what it sent wrong. Paths are the core's (see [`locate`]).
+pub fn compile(
+    model: &kea_core::Model,
+    set: &Overrides,
+) -> Result<kea_core::validate::CompiledModel, kea_core::Error> {
+    match kea_core::validate::compile(model, set) {
+        Err(kea_core::Error::Invalid(mut errors))
+            if !set.is_empty()
+                && !errors.iter().any(|e| e.path.starts_with("set"))
+                && kea_core::validate::compile(model, &Overrides::new()).is_ok() =>
+        {
+            let values: Vec<String> = set
+                .iter()
+                .map(|(k, v)| format!("{k} = {}", kea_core::validate::num(*v)))
+                .collect();
+            errors.push(FieldError::new(
+                "set",
+                format!(
+                    "the model is valid without `set`; with {} it is not (the other errors say where)",
+                    values.join(", ")
+                ),
+            ));
+            Err(kea_core::Error::Invalid(errors))
+        }
+        r => r,
+    }
+}
+
 /// Locate a core error from `check`/`analyze` of (`model`, `set`) in the request body:
 /// paths about the overrides (`set.…`) stay, and so does the entry that counts the
 /// errors left out (it is about the whole list, at the top level); the rest are under

@@ -36,7 +36,7 @@ impl JobKind for Analysis {
 /// command line's `--max-work` compare (paths relative to the request). Validates the
 /// model.
 pub fn work(model: &Model, set: &Overrides) -> Result<Work, Error> {
-    let compiled = kea_core::validate::compile(model, set)?;
+    let compiled = request::compile(model, set)?;
     Ok(work_of(&compiled, Some(model)))
 }
 

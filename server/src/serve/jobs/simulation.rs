@@ -123,7 +123,7 @@ impl JobKind for Simulation {
         if !errors.is_empty() {
             return Err(Error::Invalid(errors));
         }
-        let compiled = kea_core::validate::compile(&model, &set).map_err(request::locate)?;
+        let compiled = request::compile(&model, &set).map_err(request::locate)?;
         kea_core::simulation::check_request(&sim, &compiled)?;
         let work = work_of(&compiled, Some(&model), &sim);
         Ok(Box::new(Prepared {

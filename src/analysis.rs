@@ -573,7 +573,18 @@ impl<'m, const N: usize> Engine<'m, N> {
                 |m, y| if y.abs() > m { y.abs() } else { m },
             );
             if !all_finite(&y[..n]) {
-                return Err(overflowed("the mean state", "system.a", k, t_k));
+                let span = m.t_end - m.t0;
+                return Err(
+                    match euler_unstable(&inp.dense_a(), n, dt, span, self.steps) {
+                        Some(message) => Error::Numerical {
+                            step: k,
+                            t: t_k,
+                            path: "system.a".into(),
+                            message,
+                        },
+                        None => overflowed("the mean state", "system.a", k, t_k),
+                    },
+                );
             }
 
             if frozen_at.is_none() {
@@ -1052,6 +1063,33 @@ pub(crate) fn overflowed(what: &str, path: &str, k: u64, t: f64) -> Error {
             "{what} overflowed: the model diverges faster than f64 can follow on this interval"
         ),
     }
+}
+
+/// The error where the mean overflows although the model is stable: Euler's step
+/// y + (a y + u)Δt is unstable at this Δt. A mode λ of a (μ = 1 + λΔt of A) decays when Re λ < 0, but
+/// the step multiplies it by |μ| > 1 unless Δt < −2 Re λ / |λ|² (METHOD §1.2's
+/// discretisation as the seed has it). The hint names the worst such mode and the
+/// steps that would make every one stable.
+fn euler_unstable(a: &[f64], n: usize, dt: f64, span: f64, steps: u64) -> Option<String> {
+    let mu = nalgebra::DMatrix::from_row_slice(n, n, a).complex_eigenvalues();
+    let mut worst: Option<(f64, f64)> = None; // (Δt_max, Re λ)
+    for m in mu.iter() {
+        let (re, im) = ((m.re - 1.0) / dt, m.im / dt);
+        if re < 0.0 && m.re.hypot(m.im) > 1.0 {
+            let dt_max = -2.0 * re / (re * re + im * im);
+            if worst.is_none_or(|(d, _)| dt_max < d) {
+                worst = Some((dt_max, re));
+            }
+        }
+    }
+    let (dt_max, re) = worst?;
+    let needed = (span / dt_max).floor() as u64 + 1;
+    Some(format!(
+        "the mean state overflowed, though the model is stable here: Euler's step y + (a y + u)Δt is not. A mode of a with real part {} decays, but each step of Δt = {} multiplies it by more than 1 (Euler is stable for it only with Δt < {}); give time.steps ≥ {needed} (now {steps}), or \"auto\"",
+        crate::validate::num(re),
+        crate::validate::num(dt),
+        crate::validate::num(dt_max)
+    ))
 }
 
 /// The error for an innovation covariance that is not positive definite: an overflow

@@ -726,3 +726,31 @@ fn the_traces_csv_writes_extreme_values_in_exponent_form() {
     assert!(rows > 2);
     assert!(csv.contains(",1e200,"), "{csv}");
 }
+
+/// A stable but stiff model whose Euler step is unstable (a = −1e6, Δt = 0.01:
+/// |1 + aΔt| ≈ 1e4) overflowed as "the model diverges faster than f64 can follow",
+/// blaming the model. Now the error says the model is stable, the step is not, and
+/// how many steps would do; a model that truly diverges keeps its message.
+#[test]
+fn an_unstable_euler_step_of_a_stable_model_says_how_many_steps_would_do() {
+    let mut v = scalar();
+    v["system"]["a"] = json!([[-1e6]]);
+    let e = error_at(
+        v,
+        "system.a",
+        "the mean state overflowed, though the model is stable here",
+    );
+    assert!(
+        e.to_string().contains(
+            "(Euler is stable for it only with Δt < 2e-6); give time.steps ≥ 500001 (now 100)"
+        ),
+        "{e}"
+    );
+    let mut v = scalar();
+    v["system"]["a"] = json!([[1e6]]);
+    error_at(
+        v,
+        "system.a",
+        "the model diverges faster than f64 can follow",
+    );
+}

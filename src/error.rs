@@ -215,10 +215,20 @@ pub fn plain_serde_error(e: FieldError, hints: &[(&str, &str)]) -> FieldError {
             .and_then(|m| m.rsplit_once(", expected "))
         {
             let got = got_kind(got);
-            return FieldError::new(
-                path,
-                format!("expected {}, got {got}", expected_kind(expected, &got)),
-            );
+            // An enum written as {"variant": …} with no member or several: its hint
+            // (by the member's name) names the variants.
+            let expected = if expected == "map with a single key" {
+                let leaf = path.rsplit('.').next().unwrap_or(&path);
+                hints
+                    .iter()
+                    .find(|(name, _)| *name == leaf)
+                    .map_or("an object with exactly one member".into(), |(_, h)| {
+                        h.to_string()
+                    })
+            } else {
+                expected_kind(expected, &got)
+            };
+            return FieldError::new(path, format!("expected {expected}, got {got}"));
         }
     }
     if let Some((got, expected)) = message

@@ -291,6 +291,10 @@ pub const HINTS: &[(&str, &str)] = &[
     ),
     ("criterion", "the criterion to reach, one of: yz, zx, yx"),
     (
+        "mode",
+        "the search, an object with exactly one member: seed_search, bisect or grid",
+    ),
+    (
         "threshold",
         "the least value the criterion must reach (a number > 0)",
     ),

@@ -508,6 +508,19 @@ fn invalid_requests_name_the_field() {
             "mode": {"grid": {"params": [{"name": "c", "values": [1]}]}}})),
         ["set.zz"]
     );
+    // No mode, or two: the message names the three (serde said "expected map with a
+    // single key").
+    for mode in [json!({}), json!({"grid": {}, "bisect": {}})] {
+        let err =
+            synthesis::request_from_value(json!({"model": model, "target": target, "mode": mode}))
+                .unwrap_err();
+        assert!(
+            err.to_string().contains(
+                "mode: expected the search, an object with exactly one member: seed_search, bisect or grid"
+            ),
+            "{err}"
+        );
+    }
 }
 
 /// What the model would refuse during the run is refused with the request, at the

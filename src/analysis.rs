@@ -73,12 +73,7 @@ impl Checkpoints {
 /// How many steps of `step_work` units make [`WORK_BETWEEN_REPORTS`] (1 to
 /// [`MAX_STEPS_BETWEEN_REPORTS`]).
 pub fn steps_between_reports(step_work: f64) -> u64 {
-    let steps = WORK_BETWEEN_REPORTS / step_work;
-    if steps >= 1.0 {
-        (steps as u64).min(MAX_STEPS_BETWEEN_REPORTS)
-    } else {
-        1 // (also for a NaN estimate)
-    }
+    crate::cost::fitting(WORK_BETWEEN_REPORTS, step_work, MAX_STEPS_BETWEEN_REPORTS)
 }
 
 /// The shortcut freezes the Riccati recursion once r_k is this close (relative) to

@@ -40,6 +40,14 @@ use crate::simulation::ModelError;
 use crate::validate::{CompiledModel, MeasurementNoise};
 use std::collections::HashSet;
 
+/// How many items of `each` units fit in `budget` units: 1 to `max` (1 also where
+/// `each` exceeds the budget, or is NaN). What spaces the progress reports, the Monte
+/// Carlo's chunks and a synthesis batch's parts.
+pub fn fitting(budget: f64, each: f64, max: u64) -> u64 {
+    let n = budget / each;
+    if n >= 1.0 { (n as u64).min(max) } else { 1 }
+}
+
 /// The cost of the expressions in t of a model, per step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Expressions {
@@ -270,6 +278,15 @@ pub fn simulation_run_start(compiled: &CompiledModel, model_error: ModelError) -
 mod tests {
     use super::*;
     use crate::Overrides;
+
+    #[test]
+    fn fitting_counts_whole_items_from_one_to_the_cap() {
+        assert_eq!(fitting(100.0, 30.0, 10), 3);
+        assert_eq!(fitting(100.0, 1.0, 10), 10);
+        assert_eq!(fitting(100.0, 300.0, 10), 1);
+        assert_eq!(fitting(100.0, f64::NAN, 10), 1);
+        assert_eq!(fitting(100.0, 0.0, 10), 10);
+    }
 
     fn model(json: serde_json::Value) -> (Model, CompiledModel) {
         let m = crate::model_from_value(json).unwrap();

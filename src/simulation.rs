@@ -352,12 +352,7 @@ pub fn run<E: Executor>(
 pub fn chunk_steps(model: &CompiledModel, req: &SimulationRequest) -> usize {
     let step = crate::cost::simulation_plan_step(model, None)
         + req.runs as f64 * crate::cost::simulation_run_step(model, req.model_error);
-    let steps = CHUNK_WORK / step;
-    if steps >= 1.0 {
-        (steps as usize).min(CHUNK_STEPS)
-    } else {
-        1 // (also for a NaN estimate)
-    }
+    crate::cost::fitting(CHUNK_WORK, step, CHUNK_STEPS as u64) as usize
 }
 
 /// Dimensions shared by the plan and the blocks.

@@ -754,13 +754,8 @@ const PART_WORK: f64 = crate::simulation::CHUNK_WORK;
 /// An analysis that runs beside others reports nothing, so a cancel waits for the
 /// part in hand: about [`PART_WORK`], or one analysis where that is more.
 fn part_points(analysis_work: f64, threads: usize) -> usize {
-    let threads = threads.max(1);
-    let each = PART_WORK / analysis_work;
-    if each >= 1.0 {
-        threads.saturating_mul(each.min(1e6) as usize)
-    } else {
-        threads // (also for a NaN estimate)
-    }
+    let each = crate::cost::fitting(PART_WORK, analysis_work, 1_000_000);
+    threads.max(1).saturating_mul(each as usize)
 }
 
 impl Ctx<'_> {

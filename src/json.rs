@@ -36,8 +36,42 @@ pub fn from_value_at<T: serde::de::DeserializeOwned>(
 /// refused as "expected value at line 1 column 1". Every way into kea (HTTP bodies,
 /// the command line's files, the browser's worker) parses with this.
 pub fn parse_json(text: &[u8]) -> Result<serde_json::Value, serde_json::Error> {
+    if let Some(form) = utf16(text) {
+        return Err(de::Error::custom(format!(
+            "the text is UTF-16 ({form}), and JSON is read as UTF-8 (RFC 8259 §8.1): save it as UTF-8"
+        )));
+    }
     let text = text.strip_prefix(UTF8_BOM).unwrap_or(text);
+    if let Err(e) = std::str::from_utf8(text) {
+        let before = &text[..e.valid_up_to()];
+        let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
+        let line_start = before
+            .iter()
+            .rposition(|&b| b == b'\n')
+            .map_or(0, |i| i + 1);
+        let column = String::from_utf8_lossy(&before[line_start..])
+            .chars()
+            .count()
+            + 1;
+        return Err(de::Error::custom(format!(
+            "the text is not UTF-8: the byte 0x{:02X} at line {line} column {column} is not valid UTF-8 there, and JSON is read as UTF-8 (RFC 8259 §8.1): save it as UTF-8 (a file from a Windows editor may be in a code page such as Windows-1252)",
+            text[e.valid_up_to()]
+        )));
+    }
     serde_json::from_slice::<StrictValue>(text).map(|v| v.0)
+}
+
+/// Whether the text is UTF-16 (as Windows editors and PowerShell's `>` write it),
+/// and which byte order: a byte-order mark, or JSON's first character (ASCII) with a
+/// zero byte beside it.
+fn utf16(text: &[u8]) -> Option<&'static str> {
+    match text {
+        [0xFF, 0xFE, ..] => Some("little-endian, with a byte-order mark"),
+        [0xFE, 0xFF, ..] => Some("big-endian, with a byte-order mark"),
+        [a, 0, ..] if *a != 0 => Some("little-endian"),
+        [0, b, ..] if *b != 0 => Some("big-endian"),
+        _ => None,
+    }
 }
 
 /// U+FEFF, the byte-order mark, in UTF-8.
@@ -110,6 +144,43 @@ pub fn whole_u64(v: &Value) -> Option<u64> {
         Some(x) if x.fract() == 0.0 && (0.0..1.8e19).contains(&x) => Some(x as u64),
         _ => None,
     }
+}
+
+/// A whole-number member whose kea range is `MIN..=MAX`: reads any whole number ≥ 0
+/// (the range is checked with the request's other rules, so that every error is
+/// reported at once), but a value of the wrong type (`2.5`, `-3`, `"9"`) is refused
+/// naming the range — "expected a whole number from 2 to 64, got 2.5" — where a plain
+/// integer's error would only say "≥ 0". For `#[serde(deserialize_with = …)]`.
+pub fn whole_in<'de, D, T, const MIN: u64, const MAX: u64>(d: D) -> Result<T, D::Error>
+where
+    D: Deserializer<'de>,
+    T: TryFrom<u64>,
+{
+    struct Whole<const MIN: u64, const MAX: u64>;
+    impl<const MIN: u64, const MAX: u64> Visitor<'_> for Whole<MIN, MAX> {
+        type Value = u64;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            write!(f, "a whole number from {MIN} to {MAX}")
+        }
+        fn visit_u64<E: de::Error>(self, v: u64) -> Result<u64, E> {
+            Ok(v)
+        }
+        fn visit_i64<E: de::Error>(self, v: i64) -> Result<u64, E> {
+            u64::try_from(v).map_err(|_| E::invalid_value(Unexpected::Signed(v), &self))
+        }
+        fn visit_f64<E: de::Error>(self, v: f64) -> Result<u64, E> {
+            let whole = v.fract() == 0.0 && (0.0..1.8e19).contains(&v);
+            if whole {
+                Ok(v as u64)
+            } else {
+                Err(E::invalid_type(Unexpected::Float(v), &self))
+            }
+        }
+    }
+    let v = d.deserialize_u64(Whole::<MIN, MAX>)?;
+    // (Beyond T's range only for a usize on a 32-bit target: wasm.)
+    T::try_from(v)
+        .map_err(|_| de::Error::invalid_value(Unexpected::Unsigned(v), &Whole::<MIN, MAX>))
 }
 
 /// A JSON value read as serde_json reads a [`Value`], except that a struct (or a
@@ -304,5 +375,53 @@ mod tests {
         // The strict reader's checks still apply after it.
         let e = parse_json(b"\xEF\xBB\xBF{\"a\": 1, \"a\": 2}").unwrap_err();
         assert!(e.to_string().contains("appears twice"), "{e}");
+    }
+
+    /// A UTF-16 text (PowerShell's `>` writes one) or a code-page text was reported
+    /// by the CLI as "stream did not contain valid UTF-8", with no place and no cause.
+    #[test]
+    fn a_text_that_is_not_utf8_is_named_with_its_encoding_or_place() {
+        let message = |bytes: &[u8]| parse_json(bytes).unwrap_err().to_string();
+        let le: Vec<u8> = "{\"a\": 1}"
+            .encode_utf16()
+            .flat_map(u16::to_le_bytes)
+            .collect();
+        let be: Vec<u8> = "{\"a\": 1}"
+            .encode_utf16()
+            .flat_map(u16::to_be_bytes)
+            .collect();
+        for (bytes, form) in [
+            (
+                [&[0xFF, 0xFE][..], &le].concat(),
+                "little-endian, with a byte-order mark",
+            ),
+            (
+                [&[0xFE, 0xFF][..], &be].concat(),
+                "big-endian, with a byte-order mark",
+            ),
+            (le, "little-endian"),
+            (be, "big-endian"),
+        ] {
+            assert!(
+                message(&bytes).starts_with(&format!(
+                    "the text is UTF-16 ({form}), and JSON is read as UTF-8"
+                )),
+                "{}",
+                message(&bytes)
+            );
+        }
+        // é in Windows-1252 (0xE9) after é in UTF-8 (two bytes, one column).
+        let m = message(b"{\n  \"a\": \"\xC3\xA9\xE9\"}");
+        assert!(
+            m.starts_with(
+                "the text is not UTF-8: the byte 0xE9 at line 2 column 10 is not valid UTF-8 there"
+            ),
+            "{m}"
+        );
+        // Valid UTF-8 beyond ASCII is read.
+        assert_eq!(
+            parse_json("{\"é\": \"Φ\"}".as_bytes()).unwrap(),
+            json!({"é": "Φ"})
+        );
     }
 }

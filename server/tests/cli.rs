@@ -759,6 +759,31 @@ fn a_utf8_byte_order_mark_is_skipped() {
     );
 }
 
+/// A model saved as UTF-16 (PowerShell's `>` writes it so) was refused with "stream
+/// did not contain valid UTF-8"; now the message says what the text is and what to do.
+#[test]
+fn a_utf16_file_is_named_as_such() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = kea(&["preset", "cv-tracker"]).1;
+    let path = dir.path().join("utf16.json");
+    let bytes: Vec<u8> = "\u{feff}"
+        .chars()
+        .chain(text.chars())
+        .collect::<String>()
+        .encode_utf16()
+        .flat_map(u16::to_le_bytes)
+        .collect();
+    std::fs::write(&path, bytes).unwrap();
+    let (code, _, err) = kea(&["analyze", path.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(
+            "not valid JSON: the text is UTF-16 (little-endian, with a byte-order mark), and JSON is read as UTF-8 (RFC 8259 §8.1): save it as UTF-8"
+        ),
+        "{err}"
+    );
+}
+
 /// A grid without `cost_order` is a `table` (exit 0) when some cell meets the target,
 /// and `not_found` (exit 1) when none does, as with a cost order (docs/synthesis.md).
 #[test]

@@ -77,14 +77,15 @@ pub fn read_json(arg: &str) -> Result<serde_json::Value, ExitCode> {
         return kea_core::parse_json(text.as_bytes())
             .map_err(|e| invalid(format!("preset {name}: not valid JSON: {e}")));
     }
+    // (Read as bytes: the parser names the encoding of a text that is not UTF-8.)
     if arg == "-" {
-        let mut text = String::new();
-        std::io::Read::read_to_string(&mut std::io::stdin(), &mut text)
+        let mut text = Vec::new();
+        std::io::Read::read_to_end(&mut std::io::stdin(), &mut text)
             .map_err(|e| invalid(format!("cannot read stdin: {e}")))?;
-        return kea_core::parse_json(text.as_bytes())
+        return kea_core::parse_json(&text)
             .map_err(|e| invalid(format!("stdin: not valid JSON: {e}")));
     }
-    let text = std::fs::read_to_string(arg).map_err(|e| {
+    let text = std::fs::read(arg).map_err(|e| {
         let hint = if kea_core::presets::get_json(arg).is_some() {
             format!(" (for the preset, write preset:{arg})")
         } else {
@@ -92,8 +93,7 @@ pub fn read_json(arg: &str) -> Result<serde_json::Value, ExitCode> {
         };
         invalid(format!("cannot read {arg}: {e}{hint}"))
     })?;
-    kea_core::parse_json(text.as_bytes())
-        .map_err(|e| invalid(format!("{arg}: not valid JSON: {e}")))
+    kea_core::parse_json(&text).map_err(|e| invalid(format!("{arg}: not valid JSON: {e}")))
 }
 
 /// The one wording of an unknown preset, with the list.

@@ -81,6 +81,7 @@ pub const DEFAULT_SEED: u64 = 1;
 #[serde(deny_unknown_fields)]
 pub struct SimulationRequest {
     /// Number of runs R.
+    #[serde(deserialize_with = "crate::json::whole_in::<_, _, 2, MAX_RUNS>")]
     pub runs: u64,
     /// Seed of the random streams; the same seed gives bit-identical results
     /// ([`DEFAULT_SEED`] when absent).

@@ -124,7 +124,10 @@ pub struct Bisect {
     pub rel_tol: f64,
     /// Log-spaced points (ends included) analysed first to bracket the boundary and
     /// check monotonicity.
-    #[serde(default = "default_probes")]
+    #[serde(
+        default = "default_probes",
+        deserialize_with = "crate::json::whole_in::<_, _, 2, 64>"
+    )]
     pub probes: usize,
 }
 
@@ -369,7 +372,14 @@ pub fn validate(req: &SynthesisRequest) -> Result<(), Error> {
             }
             continue;
         }
-        if compiled.is_err() || !req.model.params.contains_key(name) || !value.is_finite() {
+        // (A value the mode's own rule refuses — seed_search's and bisect's bounds are
+        // > 0 — is reported there, once.)
+        let mode_refuses = !matches!(req.mode, Mode::Grid(_)) && value <= 0.0;
+        if compiled.is_err()
+            || !req.model.params.contains_key(name)
+            || !value.is_finite()
+            || mode_refuses
+        {
             continue;
         }
         let mut set = req.set.clone();
@@ -515,7 +525,7 @@ pub fn validate(req: &SynthesisRequest) -> Result<(), Error> {
             if !(2..=64).contains(&b.probes) {
                 errs.push(FieldError::new(
                     format!("{base}.probes"),
-                    "expected 2..=64 (log-spaced points, ends included)",
+                    format!("expected a whole number from 2 to 64 (log-spaced points, ends included), got {}", b.probes),
                 ));
             }
         }

@@ -378,6 +378,22 @@ fn requests_are_validated_with_field_paths() {
     let mut req = request(10, 0, Truth::Process);
     req.trace_points = Some(0);
     assert_eq!(bad(req)[0].path, "trace_points");
+    // A runs that is not a whole number is refused naming the range (it said "a whole
+    // number ≥ 0", though 0 and 1 are refused too).
+    use serde_json::json;
+    let read = |runs: serde_json::Value| {
+        kea_core::from_value_at::<SimulationRequest>(json!({ "runs": runs }), &[])
+            .map(|r| r.runs)
+            .map_err(|e| e.to_string())
+    };
+    let range = "expected a whole number from 2 to 100000";
+    assert_eq!(read(json!(2.5)), Err(format!("runs: {range}, got 2.5")));
+    assert_eq!(read(json!(-1)), Err(format!("runs: {range}, got -1")));
+    assert_eq!(
+        read(json!("9")),
+        Err(format!("runs: {range}, got a string (\"9\")"))
+    );
+    assert_eq!(read(json!(1e3)), Ok(1000));
 }
 
 /// The NEES/NIS bands' χ² quantiles (kea's own, on libm, so that wasm gives the

@@ -492,6 +492,46 @@ fn invalid_requests_name_the_field() {
             "mode.grid.cost_order[0].name"
         ]
     );
+    // A low the bisection refuses is one error: the model was also checked at it
+    // ("the model is invalid with psi = -1"), a second error at the same path.
+    assert_eq!(
+        paths(json!({"model": model, "target": target,
+            "mode": {"bisect": {"param": "psi", "low": -1, "high": 1e-5}}})),
+        ["mode.bisect.low"]
+    );
+    // probes: its range in both messages (a non-whole number said "a whole number ≥ 0").
+    let message = |probes: Value| {
+        let v = json!({"model": model, "target": target,
+            "mode": {"bisect": {"param": "psi", "low": 1e-6, "high": 1e-5, "probes": probes}}});
+        let err = match synthesis::request_from_value(v) {
+            Err(e) => e,
+            Ok(req) => synthesis::validate(&req).expect_err("invalid"),
+        };
+        err.to_string()
+    };
+    assert_eq!(
+        message(json!(2.5)),
+        "mode.bisect.probes: expected a whole number from 2 to 64, got 2.5"
+    );
+    assert_eq!(
+        message(json!(-3)),
+        "mode.bisect.probes: expected a whole number from 2 to 64, got -3"
+    );
+    assert_eq!(
+        message(json!(1)),
+        "mode.bisect.probes: expected a whole number from 2 to 64 (log-spaced points, ends included), got 1"
+    );
+    assert_eq!(
+        synthesis::request_from_value(json!({"model": model, "target": target,
+            "mode": {"bisect": {"param": "psi", "low": 1e-6, "high": 1e-5, "probes": 5.0}}}))
+        .map(|r| match r.mode {
+            synthesis::Mode::Bisect(b) => b.probes,
+            _ => 0,
+        })
+        .ok(),
+        Some(5),
+        "a whole number written as a float is read"
+    );
     let p = paths(json!({"model": model, "target": target,
         "mode": {"bisect": {"param": "psi", "lo": 1e-7, "high": 1e-5}}}));
     assert_eq!(p.len(), 1);

@@ -538,7 +538,8 @@ impl<'m, const N: usize> Engine<'m, N> {
         let mut frozen_at: Option<u64> = None;
         // The bound (|A| element-wise) or the open-loop covariance can overflow while
         // the filter itself is fine; the affected criteria then become null.
-        let mut bound_diverged: Option<(u64, f64)> = None;
+        // (step, t, whether η — the a-priori bound — overflowed, not only χ)
+        let mut bound_diverged: Option<(u64, f64, bool)> = None;
         let mut open_diverged: Option<(u64, f64)> = None;
         let mut steady_at: Option<u64> = None;
         let mut steady_cov: Option<(Vec<f64>, Vec<f64>)> = None;
@@ -594,7 +595,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                 if k == 1 || inp.rv_changed || mask_changed {
                     let mask = (!all).then_some(&avail[..]);
                     prep.prepare(&m.c, &inp.rv, mask, n, nm)
-                        .map_err(|()| not_positive(&big_r, k, t_k))?;
+                        .map_err(|()| not_positive(&big_r, &inp.dense_a(), n, dt, k, t_k))?;
                     avail_prev.copy_from_slice(&avail);
                     if k == 1 || mask_changed {
                         for (h, p) in has_meas.iter_mut().zip(pair) {
@@ -608,7 +609,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                         Some((j, t_j, i)) if all_finite(&big_r) => {
                             lost_precision(k, t_k, j, t_j, &m.states[i])
                         }
-                        _ => not_positive(&big_r, k, t_k),
+                        _ => not_positive(&big_r, &inp.dense_a(), n, dt, k, t_k),
                     });
                 }
                 for i in 0..n {
@@ -624,7 +625,16 @@ impl<'m, const N: usize> Engine<'m, N> {
                     cancelled_steps += 1;
                 }
                 if !all_finite(&pot[..n]) {
-                    return Err(overflowed("the filtered covariance", "system", k, t_k));
+                    let otherwise =
+                        "the model diverges faster than f64 can follow on this interval";
+                    return Err(covariance_overflowed(
+                        &inp.dense_a(),
+                        n,
+                        dt,
+                        k,
+                        t_k,
+                        otherwise,
+                    ));
                 }
                 for p in &mut pot[..n] {
                     *p = p.max(0.0).sqrt();
@@ -702,7 +712,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                 }
                 zip_update(&mut chi[..n], &pz, |c, p| c + p);
                 if !(all_finite(&eta[..n]) & all_finite(&chi[..n])) {
-                    bound_diverged = Some((k, t_k));
+                    bound_diverged = Some((k, t_k, !all_finite(&eta[..n])));
                 }
             }
             let bound_ok = bound_diverged.is_none();
@@ -841,13 +851,29 @@ impl<'m, const N: usize> Engine<'m, N> {
         }
         let lambda = laplace_lambda(m.confidence);
         let (bound, cov) = running.into_sets(n);
-        let bound_why = bound_diverged.map(|(k, t)| format!(
-            "the bound (modulus procedure) overflowed at step {k} (t = {}): |A| taken element-wise grows where A does not (oscillatory or feedback dynamics), so the bound is not informative here; see the covariance set", crate::report::short(t)
-        ));
+        // An open-loop covariance that overflows with A growing: the model is unstable
+        // on this interval, and a bound on the a-priori error rightly grows with it.
+        let unstable = open_diverged.is_some() && growth_per_step(&inp.dense_a(), n) > 1.0;
+        let bound_why = bound_diverged.map(|(k, t, eta_too)| {
+            let why = if eta_too && unstable {
+                "the model is unstable on this interval (a mode of A grows, and the open-loop covariance overflowed too), so the a-priori error and its bound grow beyond f64's range; shorten the interval, or see the covariance set's ZX"
+            } else {
+                "|A| taken element-wise grows where A does not (oscillatory or feedback dynamics), so the bound is not informative here; see the covariance set"
+            };
+            format!(
+                "the bound (modulus procedure) overflowed at step {k} (t = {}): {why}",
+                crate::report::short(t)
+            )
+        });
         let open_why = open_diverged.map(|(k, t)| {
             format!(
-                "the open-loop (a-priori) covariance overflowed at step {k} (t = {})",
-                crate::report::short(t)
+                "the open-loop (a-priori) covariance overflowed at step {k} (t = {}){}",
+                crate::report::short(t),
+                if unstable {
+                    ": the model is unstable on this interval (a mode of A grows)"
+                } else {
+                    ""
+                }
             )
         });
         if let Some(w) = &bound_why {
@@ -1091,16 +1117,77 @@ fn euler_unstable(a: &[f64], n: usize, dt: f64, span: f64, steps: u64) -> Option
 /// where the filter's covariance left f64's range (huge initial SKOs), else singular.
 /// (Noise covariances that leave f64's range are refused where `Inputs::at` computes
 /// them, before the step.)
-fn not_positive(big_r: &[f64], k: u64, t: f64) -> Error {
+///
+/// The overflow names its likely cause from A = I + aΔt (`a`, dense n × n) at step k:
+/// an entry so large that one step multiplies the covariance beyond reason, else a
+/// growing mode (|μ| > 1) that the measurements do not hold, else the input levels.
+fn not_positive(big_r: &[f64], a: &[f64], n: usize, dt: f64, k: u64, t: f64) -> Error {
     if all_finite(big_r) {
         return singular(k, t);
     }
+    let otherwise = "the noise levels or the initial SKOs are too large to square";
+    covariance_overflowed(a, n, dt, k, t, otherwise)
+}
+
+/// The error for the filter's covariance leaving f64's range at step k: the cause A
+/// shows ([`covariance_growth`]), else `otherwise`.
+fn covariance_overflowed(a: &[f64], n: usize, dt: f64, k: u64, t: f64, otherwise: &str) -> Error {
+    let (path, cause) = covariance_growth(a, n, dt, k)
+        .unwrap_or_else(|| ("system".to_string(), otherwise.to_string()));
     Error::Numerical {
         step: k,
         t,
-        path: "system".into(),
-        message: "the filter's covariance overflowed f64 (a variance above 1.8e308): the noise levels or the initial SKOs are too large to square".into(),
+        path,
+        message: format!(
+            "the filter's covariance overflowed f64 (a variance above 1.8e308): {cause}"
+        ),
     }
+}
+
+/// The spectral radius of A (dense n × n): the most a mode grows in one step.
+fn growth_per_step(a: &[f64], n: usize) -> f64 {
+    let mu = nalgebra::DMatrix::from_row_slice(n, n, a).complex_eigenvalues();
+    mu.iter().map(|m| m.re.hypot(m.im)).fold(0.0, f64::max)
+}
+
+/// Why the filter's covariance A R Aᵀ + B left f64's range, when A says so:
+/// (path, cause). `HUGE` bounds |A_ij| of any model f64 can follow for many steps.
+fn covariance_growth(a: &[f64], n: usize, dt: f64, k: u64) -> Option<(String, String)> {
+    const HUGE: f64 = 1e10;
+    // (Four significant digits: these are magnitudes, not values to copy.)
+    let num = |x: f64| crate::validate::num(format!("{x:.3e}").parse().unwrap_or(x));
+    let (big, at) = a
+        .iter()
+        .enumerate()
+        .map(|(i, x)| (x.abs(), i))
+        .fold((0.0, 0), |m, x| if x.0 > m.0 { x } else { m });
+    if big >= HUGE {
+        let (i, j) = (at / n, at % n);
+        let entry = (a[at] - if i == j { 1.0 } else { 0.0 }) / dt;
+        return Some((
+            format!("system.a[{i}][{j}]"),
+            format!(
+                "A = I + aΔt has an entry of {} here (a[{i}][{j}] = {}, Δt = {}), and each step multiplies the covariance by about its square: rescale the states or the time unit",
+                num(a[at]),
+                num(entry),
+                num(dt)
+            ),
+        ));
+    }
+    if k < 2 {
+        return None;
+    }
+    let grow = growth_per_step(a, n);
+    (grow > 1.0).then(|| {
+        (
+            "system.a".to_string(),
+            format!(
+                "a mode of A = I + aΔt grows (by {} a step, rate {} per unit of t) and the measurements do not hold it: C does not see it, or sees it through too much noise; measure that mode, or shorten the interval",
+                num(grow),
+                num(grow.ln() / dt)
+            ),
+        )
+    })
 }
 
 /// An innovation covariance ≤ 0 at step k after the update had cancelled a variance

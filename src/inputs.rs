@@ -115,13 +115,22 @@ impl Inputs {
                 self.b_phi[i] = (0..nl).map(|l| self.bd[i * nl + l].abs() * m.phi[l]).sum();
             }
             // B (1.15) and |bΔt| φ (3.16) must be finite (noise levels too large).
-            if !finite(&self.big_b) {
-                let what = "the process-noise covariance B = bΔt W (bΔt)ᵀ overflowed f64 (a variance above 1.8e308)";
-                return Err(overflow("system", what, m, k, dt));
-            }
-            if !finite(&self.b_phi) {
-                let what = "the bound's model-error SKO |bΔt| φ overflowed f64 (above 1.8e308)";
-                return Err(overflow("system", what, m, k, dt));
+            if !(finite(&self.big_b) && finite(&self.b_phi)) {
+                let what = if finite(&self.b_phi) {
+                    "the process-noise covariance B = bΔt W (bΔt)ᵀ overflowed f64 (a variance above 1.8e308)"
+                } else {
+                    "the bound's model-error SKO |bΔt| φ overflowed f64 (above 1.8e308)"
+                };
+                let (i, l, x) = largest_term(&self.bd, nl, &m.phi);
+                let what = format!(
+                    "{what}; its largest term |bΔt| φ is {} (state \"{}\", noise source {l}: b[{i}][{l}] = {}, Δt = {}, φ = {})",
+                    crate::report::short(x),
+                    m.states[i],
+                    crate::report::short(self.b_fn.values[i * nl + l]),
+                    crate::report::short(dt),
+                    crate::report::short(m.phi[l]),
+                );
+                return Err(overflow(&format!("system.b[{i}][{l}]"), &what, m, k, dt));
             }
         }
         if first || !self.u_fn.is_constant() {
@@ -154,14 +163,25 @@ impl Inputs {
             }
             // (Checked here, not only where the filter fails on it: a measurement that
             // is never available would carry an infinite SKO into the result.)
-            if !finite(&self.rv) {
-                let what = "the measurement-noise covariance Γ V Γᵀ overflowed f64 (a variance above 1.8e308)";
-                return Err(overflow("measurement", what, m, k, dt));
-            }
-            if !finite(&self.zeta) {
-                let what =
-                    "the bound's measurement SKO ζ = |Γ| ψ (3.17) overflowed f64 (above 1.8e308)";
-                return Err(overflow("measurement", what, m, k, dt));
+            if !(finite(&self.rv) && finite(&self.zeta)) {
+                let what = if finite(&self.zeta) {
+                    "the measurement-noise covariance Γ V Γᵀ overflowed f64 (a variance above 1.8e308)"
+                } else {
+                    "the bound's measurement SKO ζ = |Γ| ψ (3.17) overflowed f64 (above 1.8e308)"
+                };
+                let (j, l, x) = largest_term(&self.gamma, ms, &m.psi);
+                let (path, gamma) = match &self.noise_fn {
+                    MeasurementNoise::Gamma(_) => (format!("measurement.gamma[{j}][{l}]"), "Γ"),
+                    MeasurementNoise::SeedG(_) => (format!("measurement.c[{j}]"), "Γ = c g"),
+                };
+                let what = format!(
+                    "{what}; its largest term |Γ| ψ is {} (measurement \"{}\", noise source {l}: {gamma} = {}, ψ = {})",
+                    crate::report::short(x),
+                    m.measurements[j],
+                    crate::report::short(self.gamma[j * ms + l]),
+                    crate::report::short(m.psi[l]),
+                );
+                return Err(overflow(&path, &what, m, k, dt));
             }
             // A variance below f64's normal range keeps a few digits or none, and its
             // whitening (1/√d) and the gain turn it into inf or NaN. Below about
@@ -211,6 +231,22 @@ impl Inputs {
             a[i * n + j] += v;
         }
     }
+}
+
+/// The largest |x_il| σ_l of a row-major matrix with `cols` columns and the sources'
+/// SKOs σ: (row, column, value) — the term that put a noise covariance out of range.
+fn largest_term(x: &[f64], cols: usize, sko: &[f64]) -> (usize, usize, f64) {
+    let mut best = (0, 0, -1.0);
+    for (i, row) in x.chunks_exact(cols.max(1)).enumerate() {
+        for (l, (v, s)) in row.iter().zip(sko).enumerate() {
+            let term = v.abs() * s;
+            // (NaN-safe: a term that is not a number is never the largest.)
+            if term > best.2 {
+                best = (i, l, term);
+            }
+        }
+    }
+    best
 }
 
 fn finite(v: &[f64]) -> bool {

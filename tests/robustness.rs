@@ -56,7 +56,7 @@ fn an_overflowing_noise_covariance_is_an_error_even_when_never_used() {
     v["measurement"]["schedule"] = json!([{"when": "-1 - t"}]);
     let e = error_at(
         v,
-        "measurement",
+        "measurement.gamma[0][0]",
         "the measurement-noise covariance Γ V Γᵀ overflowed f64",
     );
     match e {
@@ -71,7 +71,7 @@ fn an_overflowing_noise_covariance_is_an_error_even_when_never_used() {
     v["measurement"]["gamma"] = Value::Null;
     v["measurement"]["g"] = json!([["max(t - 0.025, 0)*1e300"]]);
     v["measurement"]["schedule"] = json!([{"when": -1}]);
-    let e = error_at(v, "measurement", "Γ V Γᵀ overflowed f64");
+    let e = error_at(v, "measurement.c[0]", "Γ V Γᵀ overflowed f64");
     assert!(e.to_string().contains("(at step 3, t = 0.03)"), "{e}");
 }
 

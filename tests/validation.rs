@@ -673,6 +673,99 @@ fn noise_sources_are_limited_before_anything_is_sized_by_them() {
     );
 }
 
+/// A measurement whose row of c is 0 measures nothing; with no noise either its
+/// innovation variance is 0 at every step. It was found only at step 1 as a singular
+/// innovation covariance (exit 1 in the CLI, after compiling and starting the run);
+/// now the model is refused at the row. With noise it is legal (noise only, weight 0),
+/// and a warning says so.
+#[test]
+fn a_measurement_of_nothing_is_named_at_its_row() {
+    // The seed's form Z = c (y + gΦ): the noise is scaled by c, so it is 0 too.
+    expect(
+        |v| {
+            v["measurement"]["gamma"] = Value::Null;
+            v["measurement"]["g"] = json!([["t"], [1]]);
+            v["measurement"]["c"] = json!([[0, "0*s"]]);
+        },
+        &[],
+        "measurement.c[0]",
+        "measurement \"zx\" measures nothing: its row of c is 0, and so is its noise",
+    );
+    // gamma: a constant 0 row, or a row whose sources have variance 0.
+    let mut v = good();
+    v["measurement"]["c"] = json!([[0, 0]]);
+    v["measurement"]["gamma"] = json!([[0]]);
+    let e = model_from_value(v).map(|m| kea_core::check(&m, &Overrides::new()));
+    match e {
+        Ok(Err(e)) => common::assert_error_at(&e, "measurement.c[0]", "it has no noise"),
+        other => panic!("expected an error at measurement.c[0], got {other:?}"),
+    }
+    expect(
+        |v| {
+            v["measurement"]["c"] = json!([[0, 0]]);
+            v["measurement"]["psi"] = json!([0]);
+        },
+        &[],
+        "measurement.c[0]",
+        "it has no noise",
+    );
+    // With a noise that varies in t the row is not known to be 0: the run decides.
+    let mut v = good();
+    v["measurement"]["c"] = json!([[0, 0]]);
+    v["measurement"]["gamma"] = json!([["1 + t"]]);
+    let m = model_from_value(v).unwrap();
+    let r = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap();
+    let note = "measurement.c[0]: measurement \"zx\" measures no state (its row of c is 0): it is noise only, and the filter gives it no weight";
+    assert!(r.warnings.iter().any(|w| w == note), "{:?}", r.warnings);
+    // Its gain is 0: the filtered covariance is the open-loop one.
+    assert!(
+        r.final_.gain.iter().flatten().all(|&g| g == 0.0),
+        "{:?}",
+        r.final_.gain
+    );
+}
+
+/// An a so large that one step multiplies the covariance beyond f64 was reported as
+/// "the noise levels or the initial SKOs are too large to square", at `system`. Now
+/// the entry is named, with A's entry and Δt. An unstable model's overflowing bound
+/// was put down to "|A| grows where A does not", which is false for it.
+#[test]
+fn an_overflow_from_a_names_the_entry_or_the_instability() {
+    expect(
+        |v| v["system"]["a"][1][0] = json!("-s/m*1e300"),
+        &[],
+        "system.a[1][0]",
+        "the filter's covariance overflowed f64 (a variance above 1.8e308): A = I + aΔt has an entry of -3.717e297 here (a[1][0] = -3.717e299, Δt = 0.01)",
+    );
+    // x' = 50 x, measured: the filter holds it, but the open-loop covariance grows
+    // as e^{100 t} and overflows at t ≈ 7.1, and the a-priori bound as e^{50 t}, at
+    // t ≈ 14.2.
+    let mut v = good();
+    v["time"]["t_end"] = json!(20.0);
+    v["time"]["steps"] = json!(200_000);
+    v["system"]["a"] = json!([[50, 0], [0, -1]]);
+    v["system"]["u"] = json!([0, 0]);
+    v["system"]["y0"] = json!([0, 1]);
+    let m = model_from_value(v).unwrap();
+    let r = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap();
+    let has = |what: &str| r.warnings.iter().any(|w| w.contains(what));
+    assert!(
+        has("the open-loop (a-priori) covariance overflowed at step ")
+            && has(": the model is unstable on this interval (a mode of A grows)"),
+        "{:?}",
+        r.warnings
+    );
+    assert!(
+        has("the bound (modulus procedure) overflowed at step ")
+            && has(
+                "the model is unstable on this interval (a mode of A grows, and the open-loop covariance overflowed too)"
+            ),
+        "{:?}",
+        r.warnings
+    );
+    assert!(!has("grows where A does not"), "{:?}", r.warnings);
+}
+
 /// Numbers too large to square, and time grids f64 cannot step through, are named at
 /// their field — not reported as a singular innovation covariance (an infinite one was)
 /// nor run with Δt = 0.
@@ -693,14 +786,14 @@ fn overflows_and_unresolvable_grids() {
     expect(
         |v| v["measurement"]["gamma"] = json!([["1e200*(1 + t)"]]),
         &[],
-        "measurement",
-        "measurement-noise covariance Γ V Γᵀ overflowed",
+        "measurement.gamma[0][0]",
+        "measurement-noise covariance Γ V Γᵀ overflowed f64 (a variance above 1.8e308); its largest term |Γ| ψ is 1.01e199 (measurement \"zx\", noise source 0: Γ = 1.01e200, ψ = 0.1)",
     );
     expect(
         |v| v["system"]["b"] = json!([[0], ["1e300*(1 + t)"]]),
         &[],
-        "system",
-        "process-noise covariance B = bΔt W (bΔt)ᵀ overflowed",
+        "system.b[1][0]",
+        "process-noise covariance B = bΔt W (bΔt)ᵀ overflowed f64 (a variance above 1.8e308); its largest term |bΔt| φ is 5e297 (state \"v\", noise source 0: b[1][0] = 1e300, Δt = 0.01, φ = 0.5)",
     );
     expect(
         |v| v["time"]["t_end"] = json!(5e-324),

@@ -7,6 +7,7 @@ import { api } from './api.js';
 import { BrowserRunner, ServerRunner, WasmWorker } from './runner.js';
 import { TraceChart, criteriaTable, finalTable, fmt } from './results.js';
 import { mountTabs } from './tabs.js';
+import { modelErrorsText } from './views.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -218,9 +219,11 @@ async function run() {
     if (e.kind === 'cancelled') {
       setStatus('Cancelled.');
     } else {
+      // The errors at their cells, and the first here, named as the editor names its
+      // place (the core's title says `system.phi[0]`: the grids count from 1).
       const errors = e.errors ?? [];
       if (errors.length) editor.showErrors(errors);
-      setStatus(errors.length ? `${e.title ?? 'Invalid model'} (see the marked fields)` : e.title ?? String(e), true);
+      setStatus(errors.length ? `${modelErrorsText(errors)} (see the marked fields)` : e.title ?? String(e), true);
     }
     $('progress').value = 0;
   } finally {

@@ -116,9 +116,9 @@ export class SimulationView {
       this.show(result, where, current);
       return job;
     } catch (e) {
-      const own = routeErrors(e?.errors, this.ctx.showModelErrors);
+      const { own, model } = routeErrors(e?.errors, this.ctx.showModelErrors);
       const unplaced = markControls(this.form, own);
-      throw runError(e, own, (e?.errors?.length ?? 0) - own.length, unplaced);
+      throw runError(e, own, model, unplaced);
     }
   }
 

@@ -195,12 +195,13 @@ export async function checkOverrides(model, checks) {
   return out;
 }
 
-/** A model path as the editor names it: `system.phi[0]` → “φ [1]: ”. */
+/** A model path as the editor names it: `system.phi[0]` → “φ [1]: ” (indices from 1, as the grids number them). */
 export function modelPlace(path) {
   const names = {
     'system.a': 'a', 'system.b': 'b', 'system.u': 'u', 'system.y0': 'y₀', 'system.eta0': 'η₀',
     'system.phi': 'φ', 'system.W': 'W', 'measurement.c': 'C', 'measurement.gamma': 'Γ',
     'measurement.g': 'g', 'measurement.psi': 'ψ', 'measurement.V': 'V',
+    'system.states': 'state names', 'measurement.names': 'measurement names',
   };
   const m = (path ?? '').match(/^([a-z]+\.[A-Za-z0-9_]+)((\[\d+\])*)$/);
   if (!m || !names[m[1]]) return path ? `${path}: ` : '';
@@ -208,14 +209,34 @@ export function modelPlace(path) {
   return `${names[m[1]]}${idx.length ? ` [${idx.join(', ')}]` : ''}: `;
 }
 
-/** The core's words for the view's: API names become the controls' labels. */
+/**
+ * A run's errors at model paths (without the request's `model.`) as a status line says
+ * them: the first, its place named as the editor names it, and how many more there are
+ * (the editor shows each at its cell).
+ */
+export function modelErrorsText(errors) {
+  const [first, ...rest] = errors;
+  if (!first) return '';
+  const text = `${modelPlace(first.path)}${first.message}`;
+  return rest.length ? `${text} (and ${rest.length} more)` : text;
+}
+
+// A model path in the core's text (`model.system.phi[0]: an SKO …`, from a title or a
+// message that quotes a model's error), to be named as the editor names it.
+const MODEL_PATH = /(?:\bmodel\.)?\b((?:system|measurement)\.[A-Za-z0-9_]+(?:\[\d+\])*): /g;
+
+/** The core's words for the view's: API names become the controls' labels, model paths the editor's places. */
 export function uiWords(text) {
-  return String(text ?? '').replaceAll('give `cost_order`', 'choose a cost order (the “cost” column)').replaceAll('`cost_order`', 'the cost order');
+  return String(text ?? '')
+    .replaceAll('give `cost_order`', 'choose a cost order (the “cost” column)')
+    .replaceAll('`cost_order`', 'the cost order')
+    .replace(MODEL_PATH, (_, path) => modelPlace(path));
 }
 
 /**
  * Split a run's errors: those under `model.` go to the model editor (paths without
- * the prefix), the rest (target, mode, runs, …) stay with the view. Returns the view's.
+ * the prefix), the rest (target, mode, runs, …) stay with the view. Returns both:
+ * {own, model}.
  */
 export function routeErrors(errors, showModelErrors) {
   const model = [];
@@ -227,14 +248,16 @@ export function routeErrors(errors, showModelErrors) {
     } else own.push(e);
   }
   showModelErrors(model);
-  return own;
+  return { own, model };
 }
 
 /**
  * A failed run as an Error whose message names the problem and where to look.
- * `unplaced`: the view's errors no control shows (said here, with their paths).
+ * `modelErrors`: those the editor shows (the first is said here, at its place as the
+ * editor names it); `unplaced`: the view's errors no control shows (said here, with
+ * their paths).
  */
-export function runError(e, ownErrors, modelCount, unplaced = []) {
+export function runError(e, ownErrors, modelErrors, unplaced = []) {
   if (e?.kind === 'cancelled') return e;
   const parts = [];
   if (ownErrors.length) {
@@ -244,9 +267,9 @@ export function runError(e, ownErrors, modelCount, unplaced = []) {
         : 'Invalid request',
     );
     if (ownErrors.length > unplaced.length) parts.push('see the marked fields of this tab');
-  } else if (!modelCount) parts.push(uiWords(e?.title ?? String(e)), e?.detail && e.detail !== e.title ? uiWords(e.detail) : null);
-  else parts.push(e?.title && !e.title.includes(': ') ? e.title : 'Invalid model');
-  if (modelCount) parts.push('see the marked model fields');
+  } else if (!modelErrors.length) parts.push(uiWords(e?.title ?? String(e)), e?.detail && e.detail !== e.title ? uiWords(e.detail) : null);
+  else parts.push(modelErrorsText(modelErrors));
+  if (modelErrors.length) parts.push('see the marked model fields');
   return new Error(parts.filter(Boolean).join(' — '));
 }
 

@@ -346,6 +346,46 @@ test('an invalid request is marked at its control; a model error at its cell', a
   assert.equal(await page.textContent('#syn-status'), '');
 });
 
+test("a run's model error names the model's cell as the editor does, counting from 1, on both tabs", async () => {
+  await page.selectOption('#preset', 'cv-tracker'); // t from 0 to 100
+  await page.waitForFunction(() => /^#preset=cv-tracker(&|$)/.test(location.hash));
+  // Finite at t₀ (the model is valid), not past t = 50: only a run finds it, at system.a[1][0].
+  await page.fill('input[data-path="system.a[1][0]"]', '0*sqrt(50 - t)');
+  await page.click('#tab-simulation');
+  await page.fill('#mc-runs', '20');
+  await page.fill('#mc-trace-points', '');
+  await page.click('#tab-synthesis');
+  await page.selectOption('#syn-mode', 'grid');
+  for (const [tab, prefix] of [['simulation', 'mc'], ['synthesis', 'syn']]) {
+    await page.click(`#tab-${tab}`);
+    for (const where of ['browser', 'server']) {
+      await page.check(`input[name=${prefix}-where][value=${where}]`);
+      await page.evaluate((p) => document.getElementById(`${p}-status`).classList.remove('error'), prefix);
+      await page.click(`#${prefix}-run`);
+      await page.waitForFunction((p) => document.getElementById(`${p}-status`).classList.contains('error'), prefix, { timeout: 30000 });
+      const status = await page.textContent(`#${prefix}-status`);
+      assert.match(status, /^a \[2, 1\]: the expression is not finite here .*\(at step \d+, t = 50\.\d+\) — see the marked model fields$/, `${tab} in ${where}`);
+      assert.doesNotMatch(status, /system\.|model\.|Invalid model/, `${tab} in ${where}`);
+      await page.waitForSelector('td[data-path="system.a[1][0]"] .cell-error');
+    }
+  }
+  // A grid value that makes the model invalid, beyond the 64 values checked here before
+  // a request: the core's message quotes the model's error, at the place the editor names.
+  await page.fill('input[data-path="system.a[1][0]"]', '0');
+  await page.check('input[name=syn-where][value=browser]');
+  await page.selectOption('#syn-grid-param-0', 'q');
+  await page.fill('#syn-grid-values-0', [...Array.from({ length: 64 }, (_, i) => 1 + i / 64), -1].join(', '));
+  await page.selectOption('#syn-grid-param-1', '');
+  await page.selectOption('#syn-grid-param-2', '');
+  await page.click('#syn-run');
+  await page.waitForSelector('#syn-grid-values-0 + .control-error', { timeout: 30000 });
+  const message = await page.textContent('#syn-grid-values-0 + .control-error');
+  assert.match(message, /q = -1: φ \[1\]: an SKO must be ≥ 0/);
+  assert.doesNotMatch(message, /system\.|model\./);
+  await page.selectOption('#preset', 'seed-example');
+  await page.waitForFunction(() => /^#preset=seed-example(&|$)/.test(location.hash));
+});
+
 test('synthesis inputs are refused at their control, in words', async () => {
   await smallSeedExample();
   await page.click('#tab-synthesis');

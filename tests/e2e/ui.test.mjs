@@ -522,6 +522,36 @@ test("a run's error goes when the model changes", async () => {
   await preset('seed-example');
 });
 
+test("a run's error names the model's cell as the editor does, counting from 1, in the browser and on the server", async () => {
+  /** Run in `where` until the status says an error; returns it. */
+  const refused = async (where) => {
+    await page.check(`input[name=mode][value=${where}]`);
+    await page.evaluate(() => document.getElementById('status').classList.remove('error'));
+    await page.click('#run');
+    await page.waitForFunction(() => document.querySelector('#status').classList.contains('error'), null, { timeout: 30000 });
+    return page.textContent('#status');
+  };
+  await preset('cv-tracker'); // t from 0 to 100
+  // Finite at t₀, so the check as it is typed lets it be; not finite past t = 50: the
+  // run finds it, and the core's error is at system.a[1][0].
+  await page.fill('input[data-path="system.a[1][0]"]', '0*sqrt(50 - t)');
+  await page.waitForTimeout(300); // the core's check has answered
+  assert.equal(await page.$$eval('#editor .cell-error', (es) => es.length), 0, 'no mark before the run');
+  const inBrowser = await refused('browser');
+  assert.match(inBrowser, /^a \[2, 1\]: the expression is not finite here \(at step \d+, t = 50\.\d+\) \(see the marked fields\)$/);
+  assert.equal((await messagesAt('system.a[1][0]')).length, 1, 'the cell is marked');
+  assert.equal(await refused('server'), inBrowser, 'a server run says the same');
+  // A model the core refuses as a whole (two negative SKOs): the first error, at φ's
+  // first cell (system.phi[0]), and how many more the editor marks.
+  await preset('cv-tracker');
+  await page.fill('input[data-path="system.phi[0]"]', '-1');
+  await page.fill('input[data-path="measurement.psi[0]"]', '-1');
+  const invalid = await refused('browser');
+  assert.match(invalid, /^φ \[1\]: an SKO must be ≥ 0.* \(and 1 more\) \(see the marked fields\)$/);
+  assert.doesNotMatch(invalid, /system\.|\[0\]/);
+  await preset('seed-example');
+});
+
 test('a link opened in a tab where kea is open loads its model and its tab', async () => {
   await preset('cv-tracker');
   await page.fill('input[data-path="params.r"]', '0.125');

@@ -333,6 +333,14 @@ async function main() {
   });
   $('trace-state').addEventListener('change', () => chart.draw());
   $('trace-log').addEventListener('change', () => chart.draw());
+  // On one column the run bar of the tab shown sticks to the window's bottom (style.css):
+  // a control the focus moves to behind it (Tab through the editor) is scrolled above it.
+  document.addEventListener('focusin', (e) => {
+    const bar = [...document.querySelectorAll('.run-controls')].find((b) => b.offsetParent !== null);
+    if (!bar || bar.contains(e.target) || getComputedStyle(bar).position !== 'sticky') return;
+    const [at, under] = [e.target.getBoundingClientRect(), bar.getBoundingClientRect()];
+    if (at.bottom > under.top && at.top < under.bottom) window.scrollBy(0, at.bottom - under.top);
+  });
   document.addEventListener('keydown', (e) => {
     if (($('results-pane').dataset.tab ?? 'analysis') !== 'analysis') return; // tabs.js handles the others
     if ((e.ctrlKey || e.metaKey) && e.key === 'Enter') run();

@@ -595,6 +595,70 @@ test('at 390 px wide the page does not overflow sideways, on every tab', async (
   }
 });
 
+test('at 390 × 844 the Run button is in the window on load, on every tab, and covers no content for good', async () => {
+  const errors = [];
+  const phone = await newPage(browser, errors);
+  await phone.setViewportSize({ width: 390, height: 844 });
+  const inWindow = async (selector) => {
+    const box = await phone.locator(selector).boundingBox();
+    assert.ok(box && box.x >= 0 && box.y >= 0 && box.x + box.width <= 390 && box.y + box.height <= 844, `${selector} at ${JSON.stringify(box)} in a 390 × 844 window`);
+    // Nothing covers it there: the point at its middle is the button.
+    const hit = await phone.evaluate((s) => {
+      const r = document.querySelector(s).getBoundingClientRect();
+      return document.elementFromPoint(r.x + r.width / 2, r.y + r.height / 2)?.closest(s) !== null;
+    }, selector);
+    assert.ok(hit, `${selector} is not covered`);
+  };
+  try {
+    await phone.goto(`${server.url}/#preset=helicopter-range`);
+    await phone.waitForSelector('body[data-ready=true]', { timeout: 30000 });
+    const editor = await phone.locator('#editor-pane').boundingBox();
+    assert.ok(editor.height > 844, `the editor is taller than the window (${editor.height} px): the test means something`);
+    await inWindow('#run');
+    // Clicked where it is, without scrolling, it runs.
+    await phone.click('#run');
+    await phone.waitForFunction(() => document.querySelector('#summary')?.dataset.where === 'browser', null, { timeout: 60000 });
+    assert.equal(await phone.evaluate(() => window.scrollY), 0, 'no scrolling was needed');
+    await screenshot(phone, '09-narrow-run-bar');
+    for (const [tab, id] of [['synthesis', '#syn-run'], ['simulation', '#mc-run']]) {
+      await phone.evaluate((t) => (location.hash = `#preset=helicopter-range&tab=${t}`), tab);
+      await phone.waitForFunction((t) => document.getElementById(`tab-${t}`).getAttribute('aria-selected') === 'true', tab);
+      await inWindow(id);
+    }
+    // The bar covers no field for good: each of the editor's fields, focused in turn (as
+    // Tab does), is seen uncovered.
+    const covered = await phone.evaluate(() =>
+      [...document.querySelectorAll('#editor input, #editor select, #editor textarea, #editor button')]
+        .filter((c) => c.getClientRects().length > 0)
+        .filter((c) => {
+          c.focus();
+          const r = c.getBoundingClientRect();
+          const hit = document.elementFromPoint(r.x + r.width / 2, r.y + r.height / 2);
+          return !(hit === c || c.contains(hit) || hit?.contains(c));
+        })
+        .map((c) => c.dataset.path ?? c.id ?? c.textContent),
+    );
+    assert.deepEqual(covered, []);
+    // At the end of the page the bar is in its place, after the editor.
+    await phone.evaluate(() => window.scrollTo(0, document.documentElement.scrollHeight));
+    const [bar, pane] = await phone.evaluate(() => [document.querySelector('#simulation-panel .run-controls').getBoundingClientRect().top, document.getElementById('editor-pane').getBoundingClientRect().bottom]);
+    assert.ok(bar >= pane, `the bar (top ${bar}) is below the editor (bottom ${pane})`);
+  } finally {
+    await phone.context().close();
+  }
+  assert.deepEqual(errors, []);
+  // The wide layout is as it was: two columns, the run bar in its place near the top.
+  const wide = await page.evaluate(() => ({
+    position: getComputedStyle(document.querySelector('#results-pane > .run-controls')).position,
+    editor: document.getElementById('editor-pane').getBoundingClientRect().top,
+    results: document.getElementById('results-pane').getBoundingClientRect().top,
+    run: document.getElementById('run').getBoundingClientRect().bottom + window.scrollY,
+  }));
+  assert.equal(wide.position, 'static');
+  assert.equal(wide.editor, wide.results, 'the editor and the run pane side by side');
+  assert.ok(wide.run < 900, `Run ends ${wide.run} px down the page, in a 900 px window`);
+});
+
 test('the page logged no console errors', () => {
   assert.deepEqual(consoleErrors, []);
 });

@@ -1,6 +1,7 @@
 // kea's web UI: wires the preset picker, the model editor, the run toggle (browser
 // wasm worker or server job) and the results. The model lives in the URL (#model=…,
-// deflated and base64url-encoded) so any state can be shared as a link.
+// deflated and base64url-encoded), with the tab, so they can be shared as a link; the
+// Synthesis and Monte Carlo tabs' fields are kept for the browser tab only (KeptFields).
 
 import { ModelEditor, modelProblem } from './editor.js';
 import { api } from './api.js';

@@ -8,7 +8,7 @@ import uPlot from './vendor/uplot/uPlot.esm.js';
 import { MAX_SAFE, numberProblem, toNumber } from './numbers.js';
 import { valueAxis } from './plot.js';
 import { noTraces } from './results.js';
-import { RunBar, checkModel, el, field, fmt, input, markControls, recheckControl, requestErrors, routeErrors, runError, select, wasmCall } from './views.js';
+import { KeptFields, RunBar, checkModel, el, field, fmt, input, markControls, recheckControl, requestErrors, routeErrors, runError, select, wasmCall } from './views.js';
 
 const SETS = ['bound', 'covariance', 'monte_carlo'];
 const CRITERIA = [
@@ -69,6 +69,10 @@ export class SimulationView {
     this.log.addEventListener('change', () => this.draw());
     new ResizeObserver(() => this.plot?.setSize({ width: this.width(), height: 320 })).observe(this.chart);
     this.root.append(this.form, this.bar.root, this.out);
+    // The fields as they were before a reload (they do not depend on the model).
+    this.kept = new KeptFields('kea-simulation', [[this.runs], [this.seed], [this.truth], [this.modelError], [this.tracePoints]]);
+    this.kept.restore();
+    for (const type of ['input', 'change']) this.form.addEventListener(type, () => this.kept.save());
   }
 
   /** The request for the current model and form; throws {errors} for unreadable inputs. */

@@ -4,7 +4,7 @@
 // `synthesis`; the result as grid tables or as the answer with its verification.
 
 import { numberProblem, toNumber } from './numbers.js';
-import { RunBar, checkModel, checkOverrides, el, field, fmt, input, markControls, recheckControl, requestErrors, routeErrors, runError, select, uiWords } from './views.js';
+import { KeptFields, RunBar, checkModel, checkOverrides, el, field, fmt, input, markControls, recheckControl, requestErrors, routeErrors, runError, select, uiWords } from './views.js';
 
 const CRITERIA = [
   ['yz', 'F_YZ (measured vs a-priori)'],
@@ -191,6 +191,20 @@ export class SynthesisView {
     this.form = el('form', { class: 'view-form', novalidate: true, onsubmit: (e) => e.preventDefault(), oninput: (e) => recheckControl(e.target, () => requestErrors(() => this.request())) }, target, modeSet);
     this.out = el('div', { id: 'syn-result', class: 'view-result', hidden: true });
     this.root.append(this.form, this.bar.root, this.out);
+    // The fields as they were before a reload, put back once the model's params are
+    // choices (refreshChoices); a param and its values go together.
+    const one = (c) => [c];
+    const b = this.bisect;
+    this.kept = new KeptFields('kea-synthesis', [
+      ...[this.criterion, this.set, this.state, this.threshold, this.mode].map(one),
+      [b.param, b.low, b.high],
+      ...[b.rel_tol, b.probes].map(one),
+      ...this.grid.map((row) => [row.param, row.values, row.cheaper]),
+      ...this.seed.map((row) => [row.param, row.high, row.low, row.shrink]),
+      [this.batch],
+    ]);
+    this.restorePending = true;
+    for (const type of ['input', 'change']) this.form.addEventListener(type, () => this.kept.save());
     this.refreshChoices();
     this.showMode();
   }
@@ -228,6 +242,13 @@ export class SynthesisView {
     this.seed.forEach((row, i) => {
       if (fill(row.param, i === 0 ? ps : [['', '(none)'], ...ps], i === 0 ? preferred[0] : '')) this.defaultsSeed(i);
     });
+    if (this.restorePending) {
+      this.restorePending = false;
+      this.kept.restore();
+      this.showMode();
+      this.gridSummary();
+    }
+    this.kept.save(); // the choices (and a new model's defaults) as they are now
   }
 
   /** The grid's cells as the values fields read now: "f: 3 values (2, 4, 8) × … = 6 cells". */

@@ -1,7 +1,7 @@
 // Shared pieces of the Synthesis and Monte Carlo views (web/synthesis.js,
 // web/simulation.js): a DOM helper, a runner for a request of one kind — in this
 // browser (the wasm worker) or as a server job of the same kind (progress over SSE) —
-// and the run bar (where, Run, Cancel, progress, status).
+// the run bar (where, Run, Cancel, progress, status) and the fields kept over a reload.
 
 import { ServerRunner, WasmWorker } from './runner.js';
 import { fmt } from './results.js';
@@ -149,6 +149,47 @@ export class RunBar {
 
   cancel() {
     this.running?.cancel();
+  }
+}
+
+/**
+ * A view's request fields kept over a reload of the page: in sessionStorage under `key`,
+ * so for this browser tab only. Not in the URL: a link carries the model and the tab
+ * (app.js), what is shared; these are one person's work on it, as the server's token is
+ * (api.js), and a link opened elsewhere starts from the defaults. `groups`: controls kept
+ * together or not at all (a param and its values). A stored value a control cannot take
+ * (not a string, not one of a select's options: a param the model does not have) leaves
+ * its group at the defaults; storage that cannot be read or written keeps nothing.
+ */
+export class KeptFields {
+  constructor(key, groups) {
+    this.key = key;
+    this.groups = groups;
+  }
+
+  save() {
+    const values = Object.fromEntries(this.groups.flat().map((c) => [c.id, c.value]));
+    try {
+      sessionStorage.setItem(this.key, JSON.stringify(values));
+    } catch {
+      // storage off or full: the fields are not kept
+    }
+  }
+
+  /** Put the stored values back, group by group; returns whether any were stored. */
+  restore() {
+    let saved = null;
+    try {
+      saved = JSON.parse(sessionStorage.getItem(this.key));
+    } catch {
+      return false; // unreadable: the defaults stay
+    }
+    if (!saved || typeof saved !== 'object' || Array.isArray(saved)) return false;
+    const takes = (c, v) => typeof v === 'string' && (c.tagName !== 'SELECT' || [...c.options].some((o) => o.value === v));
+    for (const group of this.groups) {
+      if (group.every((c) => takes(c, saved[c.id]))) for (const c of group) c.value = saved[c.id];
+    }
+    return true;
   }
 }
 

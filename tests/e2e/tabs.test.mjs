@@ -509,6 +509,69 @@ test('a long Monte Carlo run is cancelled, in the browser and on the server', as
   assert.ok(items.some((j) => j.kind === 'simulation' && j.status === 'cancelled'), JSON.stringify(items).slice(0, 500));
 });
 
+test("the Synthesis and Monte Carlo tabs' fields are kept over a reload; stored values that do not fit are not", async () => {
+  const errors = [];
+  const other = await newPage(browser, errors); // a browser tab of its own: its own storage
+  const ready = () => other.waitForSelector('body[data-ready=true]', { timeout: 30000 });
+  // Every request field of the two tabs, by id.
+  const fields = () =>
+    other.$$eval('#synthesis-panel form :is(input, select), #simulation-panel form :is(input, select)', (cs) => Object.fromEntries(cs.map((c) => [c.id, c.value])));
+  try {
+    await other.goto(`${server.url}/#preset=seed-example&tab=synthesis`);
+    await ready();
+    const defaults = await fields();
+    await other.selectOption('#syn-criterion', 'zx');
+    await other.selectOption('#syn-set', 'covariance');
+    await other.fill('#syn-threshold', '3.5');
+    await other.selectOption('#syn-grid-param-1', 'c'); // a grid row, kept though another mode is shown
+    await other.fill('#syn-grid-values-1', '0.1, 0.2');
+    await other.selectOption('#syn-mode', 'bisect');
+    await other.selectOption('#syn-bisect-param', 'f');
+    await other.fill('#syn-bisect-low', '0.5');
+    await other.fill('#syn-bisect-high', '40');
+    await other.fill('#syn-bisect-probes', '5');
+    await other.click('#tab-simulation');
+    await other.fill('#mc-runs', '321');
+    await other.fill('#mc-seed', '42');
+    await other.selectOption('#mc-truth', 'mean');
+    await other.selectOption('#mc-model-error', 'constant');
+    await other.fill('#mc-trace-points', '77');
+    const filled = await fields();
+    assert.equal(filled['syn-bisect-param'], 'f');
+    assert.notDeepEqual(filled, defaults);
+
+    await other.reload();
+    await ready();
+    assert.deepEqual(await fields(), filled, 'every field is back');
+    await other.click('#tab-synthesis');
+    assert.ok(await other.isVisible('#syn-bisect-low'), "the kept mode's fields are shown");
+    assert.equal(await other.isVisible('#syn-grid-values-0'), false);
+    await other.selectOption('#syn-mode', 'grid');
+    assert.match(await other.textContent('#syn-grid-count'), /c: 2 values \(0\.1, 0\.2\)/);
+
+    // Stored values the page cannot take leave the defaults: text that is not JSON, a
+    // mode and a param that do not exist (the param's values go with it), a number where
+    // text is kept. What fits is still taken.
+    await other.evaluate(() => {
+      sessionStorage.setItem('kea-simulation', '{not json');
+      sessionStorage.setItem('kea-synthesis', JSON.stringify({
+        'syn-criterion': 'yz', 'syn-mode': 'nope', 'syn-threshold': 7,
+        'syn-bisect-param': 'no_such_param', 'syn-bisect-low': '1', 'syn-bisect-high': '2',
+      }));
+    });
+    await other.reload();
+    await ready();
+    assert.deepEqual(await fields(), { ...defaults, 'syn-criterion': 'yz' });
+    await other.evaluate(() => sessionStorage.setItem('kea-synthesis', '[1, 2]'));
+    await other.reload();
+    await ready();
+    assert.deepEqual(await fields(), defaults);
+  } finally {
+    await other.context().close();
+  }
+  assert.deepEqual(errors, []);
+});
+
 test('the page logged no console errors', () => {
   assert.deepEqual(consoleErrors, []);
 });

@@ -1167,7 +1167,7 @@ fn covariance_growth(a: &[f64], n: usize, dt: f64, k: u64) -> Option<(String, St
         return Some((
             format!("system.a[{i}][{j}]"),
             format!(
-                "A = I + aΔt has an entry of {} here (a[{i}][{j}] = {}, Δt = {}), and each step multiplies the covariance by about its square: rescale the states or the time unit",
+                "A = I + aΔt has an entry of {} here (a = {} there, Δt = {}), and each step multiplies the covariance by about its square: rescale the states or the time unit",
                 num(a[at]),
                 num(entry),
                 num(dt)

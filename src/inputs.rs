@@ -123,7 +123,7 @@ impl Inputs {
                 };
                 let (i, l, x) = largest_term(&self.bd, nl, &m.phi);
                 let what = format!(
-                    "{what}; its largest term |bΔt| φ is {} (state \"{}\", noise source {l}: b[{i}][{l}] = {}, Δt = {}, φ = {})",
+                    "{what}; its largest term |bΔt| φ is {} (state \"{}\": b = {}, Δt = {}, φ = {})",
                     crate::report::short(x),
                     m.states[i],
                     crate::report::short(self.b_fn.values[i * nl + l]),
@@ -175,7 +175,7 @@ impl Inputs {
                     MeasurementNoise::SeedG(_) => (format!("measurement.c[{j}]"), "Γ = c g"),
                 };
                 let what = format!(
-                    "{what}; its largest term |Γ| ψ is {} (measurement \"{}\", noise source {l}: {gamma} = {}, ψ = {})",
+                    "{what}; its largest term |Γ| ψ is {} (measurement \"{}\": {gamma} = {}, ψ = {})",
                     crate::report::short(x),
                     m.measurements[j],
                     crate::report::short(self.gamma[j * ms + l]),

@@ -735,7 +735,7 @@ fn an_overflow_from_a_names_the_entry_or_the_instability() {
         |v| v["system"]["a"][1][0] = json!("-s/m*1e300"),
         &[],
         "system.a[1][0]",
-        "the filter's covariance overflowed f64 (a variance above 1.8e308): A = I + aΔt has an entry of -3.717e297 here (a[1][0] = -3.717e299, Δt = 0.01)",
+        "the filter's covariance overflowed f64 (a variance above 1.8e308): A = I + aΔt has an entry of -3.717e297 here (a = -3.717e299 there, Δt = 0.01)",
     );
     // x' = 50 x, measured: the filter holds it, but the open-loop covariance grows
     // as e^{100 t} and overflows at t ≈ 7.1, and the a-priori bound as e^{50 t}, at
@@ -787,13 +787,13 @@ fn overflows_and_unresolvable_grids() {
         |v| v["measurement"]["gamma"] = json!([["1e200*(1 + t)"]]),
         &[],
         "measurement.gamma[0][0]",
-        "measurement-noise covariance Γ V Γᵀ overflowed f64 (a variance above 1.8e308); its largest term |Γ| ψ is 1.01e199 (measurement \"zx\", noise source 0: Γ = 1.01e200, ψ = 0.1)",
+        "measurement-noise covariance Γ V Γᵀ overflowed f64 (a variance above 1.8e308); its largest term |Γ| ψ is 1.01e199 (measurement \"zx\": Γ = 1.01e200, ψ = 0.1)",
     );
     expect(
         |v| v["system"]["b"] = json!([[0], ["1e300*(1 + t)"]]),
         &[],
         "system.b[1][0]",
-        "process-noise covariance B = bΔt W (bΔt)ᵀ overflowed f64 (a variance above 1.8e308); its largest term |bΔt| φ is 5e297 (state \"v\", noise source 0: b[1][0] = 1e300, Δt = 0.01, φ = 0.5)",
+        "process-noise covariance B = bΔt W (bΔt)ᵀ overflowed f64 (a variance above 1.8e308); its largest term |bΔt| φ is 5e297 (state \"v\": b = 1e300, Δt = 0.01, φ = 0.5)",
     );
     expect(
         |v| v["time"]["t_end"] = json!(5e-324),

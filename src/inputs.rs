@@ -116,21 +116,7 @@ impl Inputs {
             }
             // B (1.15) and |bΔt| φ (3.16) must be finite (noise levels too large).
             if !(finite(&self.big_b) && finite(&self.b_phi)) {
-                let what = if finite(&self.b_phi) {
-                    "the process-noise covariance B = bΔt W (bΔt)ᵀ overflowed f64 (a variance above 1.8e308)"
-                } else {
-                    "the bound's model-error SKO |bΔt| φ overflowed f64 (above 1.8e308)"
-                };
-                let (i, l, x) = largest_term(&self.bd, nl, &m.phi);
-                let what = format!(
-                    "{what}; its largest term |bΔt| φ is {} (state \"{}\": b = {}, Δt = {}, φ = {})",
-                    crate::report::short(x),
-                    m.states[i],
-                    crate::report::short(self.b_fn.values[i * nl + l]),
-                    crate::report::short(dt),
-                    crate::report::short(m.phi[l]),
-                );
-                return Err(overflow(&format!("system.b[{i}][{l}]"), &what, m, k, dt));
+                return Err(self.process_noise_overflow(m, k));
             }
         }
         if first || !self.u_fn.is_constant() {
@@ -164,24 +150,7 @@ impl Inputs {
             // (Checked here, not only where the filter fails on it: a measurement that
             // is never available would carry an infinite SKO into the result.)
             if !(finite(&self.rv) && finite(&self.zeta)) {
-                let what = if finite(&self.zeta) {
-                    "the measurement-noise covariance Γ V Γᵀ overflowed f64 (a variance above 1.8e308)"
-                } else {
-                    "the bound's measurement SKO ζ = |Γ| ψ (3.17) overflowed f64 (above 1.8e308)"
-                };
-                let (j, l, x) = largest_term(&self.gamma, ms, &m.psi);
-                let (path, gamma) = match &self.noise_fn {
-                    MeasurementNoise::Gamma(_) => (format!("measurement.gamma[{j}][{l}]"), "Γ"),
-                    MeasurementNoise::SeedG(_) => (format!("measurement.c[{j}]"), "Γ = c g"),
-                };
-                let what = format!(
-                    "{what}; its largest term |Γ| ψ is {} (measurement \"{}\": {gamma} = {}, ψ = {})",
-                    crate::report::short(x),
-                    m.measurements[j],
-                    crate::report::short(self.gamma[j * ms + l]),
-                    crate::report::short(m.psi[l]),
-                );
-                return Err(overflow(&path, &what, m, k, dt));
+                return Err(self.measurement_noise_overflow(m, k));
             }
             // A variance below f64's normal range keeps a few digits or none, and its
             // whitening (1/√d) and the gain turn it into inf or NaN. Below about
@@ -211,6 +180,55 @@ impl Inputs {
             }
         }
         Ok(())
+    }
+
+    /// B or |bΔt| φ left f64's range at step k: the error, naming the largest term.
+    /// (Cold and out of line, as the step loop's other error paths: `at` is inlined
+    /// into the loop.)
+    #[cold]
+    #[inline(never)]
+    fn process_noise_overflow(&self, m: &CompiledModel, k: u64) -> Error {
+        let (nl, dt) = (self.b_fn.cols, self.dt);
+        let what = if finite(&self.b_phi) {
+            "the process-noise covariance B = bΔt W (bΔt)ᵀ overflowed f64 (a variance above 1.8e308)"
+        } else {
+            "the bound's model-error SKO |bΔt| φ overflowed f64 (above 1.8e308)"
+        };
+        let (i, l, x) = largest_term(&self.bd, nl, &m.phi);
+        let what = format!(
+            "{what}; its largest term |bΔt| φ is {} (state \"{}\": b = {}, Δt = {}, φ = {})",
+            crate::report::short(x),
+            m.states[i],
+            crate::report::short(self.b_fn.values[i * nl + l]),
+            crate::report::short(dt),
+            crate::report::short(m.phi[l]),
+        );
+        overflow(&format!("system.b[{i}][{l}]"), &what, m, k, dt)
+    }
+
+    /// Γ V Γᵀ or ζ left f64's range at step k: the error, naming the largest term.
+    #[cold]
+    #[inline(never)]
+    fn measurement_noise_overflow(&self, m: &CompiledModel, k: u64) -> Error {
+        let ms = self.gamma.len() / self.nm.max(1);
+        let what = if finite(&self.zeta) {
+            "the measurement-noise covariance Γ V Γᵀ overflowed f64 (a variance above 1.8e308)"
+        } else {
+            "the bound's measurement SKO ζ = |Γ| ψ (3.17) overflowed f64 (above 1.8e308)"
+        };
+        let (j, l, x) = largest_term(&self.gamma, ms, &m.psi);
+        let (path, gamma) = match &self.noise_fn {
+            MeasurementNoise::Gamma(_) => (format!("measurement.gamma[{j}][{l}]"), "Γ"),
+            MeasurementNoise::SeedG(_) => (format!("measurement.c[{j}]"), "Γ = c g"),
+        };
+        let what = format!(
+            "{what}; its largest term |Γ| ψ is {} (measurement \"{}\": {gamma} = {}, ψ = {})",
+            crate::report::short(x),
+            m.measurements[j],
+            crate::report::short(self.gamma[j * ms + l]),
+            crate::report::short(m.psi[l]),
+        );
+        overflow(&path, &what, m, k, self.dt)
     }
 
     /// A = I + aΔt, dense (for the stationary solution).

@@ -48,7 +48,8 @@ impl Block {
 /// The expression language's operators for a value type, as exmex's `FloatOpsFactory`
 /// has them (the same names, priorities, commutativity and constants), with every
 /// function that is not exact IEEE arithmetic taken from the `libm` crate. `$un!(f)`
-/// and `$bin!(f)` lift an `f64` function to the type, `$k!(x)` a constant.
+/// and `$bin!(f)` lift an `f64` function to the type, `$k!(x)` a constant; `$sin` and
+/// `$cos` are the type's sin and cos.
 ///
 /// Why `libm`: the standard library's `sin`, `ln`, `powf`… call the platform's C
 /// library natively and a port of musl's in wasm, and the two differ in the last bit
@@ -56,7 +57,7 @@ impl Block {
 /// browser other bits than the server. One implementation on every target gives one
 /// answer. (abs, signum, floor, round, ceil, trunc, fract and sqrt are exact everywhere.)
 macro_rules! operators {
-    ($T:ty, $un:ident, $bin:ident, $k:ident) => {{
+    ($T:ty, $un:ident, $bin:ident, $k:ident, $sin:expr, $cos:expr) => {{
         use std::f64::consts::{E, PI, TAU};
         vec![
             Operator::make_bin(
@@ -132,8 +133,8 @@ macro_rules! operators {
                 "signum",
                 $un!(|a: f64| if a == 0.0 { a } else { a.signum() }),
             ),
-            Operator::make_unary("sin", $un!(libm::sin)),
-            Operator::make_unary("cos", $un!(libm::cos)),
+            Operator::make_unary("sin", $sin),
+            Operator::make_unary("cos", $cos),
             Operator::make_unary("tan", $un!(libm::tan)),
             Operator::make_unary("asin", $un!(libm::asin)),
             Operator::make_unary("acos", $un!(libm::acos)),
@@ -193,7 +194,10 @@ pub struct BlockOps;
 
 impl MakeOperators<Block> for BlockOps {
     fn make<'a>() -> Vec<Operator<'a, Block>> {
-        operators!(Block, block_un, block_bin, block_k)
+        // sin and cos: all lanes at once, as libm's bits (`trig`)
+        let sin = |a: Block| Block(crate::trig::sin_lanes(a.0));
+        let cos = |a: Block| Block(crate::trig::cos_lanes(a.0));
+        operators!(Block, block_un, block_bin, block_k, sin, cos)
     }
 }
 
@@ -203,7 +207,7 @@ pub struct ScalarOps;
 
 impl MakeOperators<f64> for ScalarOps {
     fn make<'a>() -> Vec<Operator<'a, f64>> {
-        operators!(f64, scalar_fn, scalar_fn, scalar_fn)
+        operators!(f64, scalar_fn, scalar_fn, scalar_fn, libm::sin, libm::cos)
     }
 }
 

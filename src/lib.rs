@@ -25,6 +25,7 @@ pub mod schedule;
 pub mod simulation;
 pub mod steps;
 pub mod synthesis;
+mod trig;
 pub mod validate;
 
 pub use error::{Error, FieldError};

@@ -141,9 +141,14 @@ impl<'de> serde::Deserialize<'de> for StrictValue {
 pub fn whole_u64(v: &Value) -> Option<u64> {
     match v.as_f64() {
         _ if v.is_u64() => v.as_u64(),
-        Some(x) if x.fract() == 0.0 && (0.0..1.8e19).contains(&x) => Some(x as u64),
-        _ => None,
+        Some(x) => whole_f64(x),
+        None => None,
     }
+}
+
+/// A float that is a whole number in u64's range, as that number.
+fn whole_f64(x: f64) -> Option<u64> {
+    (x.fract() == 0.0 && (0.0..1.8e19).contains(&x)).then_some(x as u64)
 }
 
 /// A whole-number member whose kea range is `MIN..=MAX`: reads any whole number ≥ 0
@@ -169,12 +174,7 @@ where
             u64::try_from(v).map_err(|_| E::invalid_value(Unexpected::Signed(v), &self))
         }
         fn visit_f64<E: de::Error>(self, v: f64) -> Result<u64, E> {
-            let whole = v.fract() == 0.0 && (0.0..1.8e19).contains(&v);
-            if whole {
-                Ok(v as u64)
-            } else {
-                Err(E::invalid_type(Unexpected::Float(v), &self))
-            }
+            whole_f64(v).ok_or_else(|| E::invalid_type(Unexpected::Float(v), &self))
         }
     }
     let v = d.deserialize_u64(Whole::<MIN, MAX>)?;

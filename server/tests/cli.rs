@@ -126,6 +126,11 @@ fn kea(args: &[&str]) -> (i32, String, String) {
     run(Command::new(KEA).args(args))
 }
 
+/// `kea analyze MODEL --csv CSV`: (exit code, stdout, stderr).
+fn analyze_csv(model: &str, csv: &std::path::Path) -> (i32, String, String) {
+    kea(&["analyze", model, "--csv", csv.to_str().unwrap()])
+}
+
 /// Run a `kea` command, `KEA_MAX_WORK` unset: (exit code, stdout, stderr).
 fn run(cmd: &mut Command) -> (i32, String, String) {
     let out = cmd.env_remove("KEA_MAX_WORK").output().expect("kea runs");
@@ -263,12 +268,7 @@ fn input_errors_name_their_source_and_exit_2_up_front() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     assert_eq!(piped, analyze(&root.join("presets/cv-tracker.json"), None));
     let nowhere = dir.path().join("no/such/dir/t.csv");
-    let (code, out, err) = kea(&[
-        "analyze",
-        "preset:seed-example",
-        "--csv",
-        nowhere.to_str().unwrap(),
-    ]);
+    let (code, out, err) = analyze_csv("preset:seed-example", &nowhere);
     assert_eq!(code, 2, "{err}");
     assert!(out.is_empty(), "ran before refusing: {out}");
     assert!(err.starts_with("cannot write"), "{err}");
@@ -485,12 +485,7 @@ fn simulation_report_numbers_are_readable_and_undefined_is_a_dash() {
 fn csv_to_stdout_and_never_over_the_model() {
     let dir = tempfile::tempdir().unwrap();
     let by_file = dir.path().join("traces.csv");
-    let (code, _, err) = kea(&[
-        "analyze",
-        "preset:cv-tracker",
-        "--csv",
-        by_file.to_str().unwrap(),
-    ]);
+    let (code, _, err) = analyze_csv("preset:cv-tracker", &by_file);
     assert_eq!(code, 0, "{err}");
     let (code, out, err) = run(Command::new(KEA)
         .args(["analyze", "preset:cv-tracker", "--csv", "-"])
@@ -657,12 +652,7 @@ fn a_finished_run_replaces_the_csv_file_keeping_its_mode_and_links() {
     std::os::unix::fs::symlink("real.csv", &link).unwrap();
     let (code, expected, err) = kea(&["analyze", "preset:cv-tracker", "--csv", "-"]);
     assert_eq!(code, 0, "{err}");
-    let (code, _, err) = kea(&[
-        "analyze",
-        "preset:cv-tracker",
-        "--csv",
-        link.to_str().unwrap(),
-    ]);
+    let (code, _, err) = analyze_csv("preset:cv-tracker", &link);
     assert_eq!(code, 0, "{err}");
     assert!(link.symlink_metadata().unwrap().file_type().is_symlink());
     assert_eq!(std::fs::read_to_string(&real).unwrap(), expected);

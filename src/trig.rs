@@ -116,29 +116,22 @@ fn simd() -> Simd {
     })
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn sin_avx2(x: [f64; LANES]) -> [f64; LANES] {
-    lanes!(x, sin_lane, libm::sin)
+/// `$name`: the loop of `$lane` (libm's `$exact` for the lanes it leaves) compiled
+/// with the target features `$features`.
+macro_rules! x86_build {
+    ($name:ident, $features:literal, $lane:ident, $exact:path) => {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $features)]
+        fn $name(x: [f64; LANES]) -> [f64; LANES] {
+            lanes!(x, $lane, $exact)
+        }
+    };
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn cos_avx2(x: [f64; LANES]) -> [f64; LANES] {
-    lanes!(x, cos_lane, libm::cos)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2")]
-fn sin_avx512(x: [f64; LANES]) -> [f64; LANES] {
-    lanes!(x, sin_lane, libm::sin)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2")]
-fn cos_avx512(x: [f64; LANES]) -> [f64; LANES] {
-    lanes!(x, cos_lane, libm::cos)
-}
+x86_build!(sin_avx2, "avx2", sin_lane, libm::sin);
+x86_build!(cos_avx2, "avx2", cos_lane, libm::cos);
+x86_build!(sin_avx512, "avx512f,avx2", sin_lane, libm::sin);
+x86_build!(cos_avx512, "avx512f,avx2", cos_lane, libm::cos);
 
 #[cold]
 #[inline(never)]

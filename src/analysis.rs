@@ -594,8 +594,9 @@ impl<'m, const N: usize> Engine<'m, N> {
                 let mask_changed = avail_prev != avail;
                 if k == 1 || inp.rv_changed || mask_changed {
                     let mask = (!all).then_some(&avail[..]);
-                    prep.prepare(&m.c, &inp.rv, mask, n, nm)
-                        .map_err(|()| not_positive(&big_r, &inp, k, t_k))?;
+                    prep.prepare(&m.c, &inp.rv, mask, n, nm).map_err(|()| {
+                        not_positive(&big_r, &joseph.r_pred, &inp, k, t_k, &m.states)
+                    })?;
                     avail_prev.copy_from_slice(&avail);
                     if k == 1 || mask_changed {
                         for (h, p) in has_meas.iter_mut().zip(pair) {
@@ -609,7 +610,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                         Some((j, t_j, i)) if all_finite(&big_r) => {
                             lost_precision(k, t_k, j, t_j, &m.states[i])
                         }
-                        _ => not_positive(&big_r, &inp, k, t_k),
+                        _ => not_positive(&big_r, &joseph.r_pred, &inp, k, t_k, &m.states),
                     });
                 }
                 for i in 0..n {
@@ -627,7 +628,14 @@ impl<'m, const N: usize> Engine<'m, N> {
                 if !all_finite(&pot[..n]) {
                     let otherwise =
                         "the model diverges faster than f64 can follow on this interval";
-                    return Err(covariance_overflowed(&inp, k, t_k, otherwise));
+                    return Err(covariance_overflowed(
+                        &inp,
+                        k,
+                        t_k,
+                        &pot[..n],
+                        &m.states,
+                        otherwise,
+                    ));
                 }
                 for p in &mut pot[..n] {
                     *p = p.max(0.0).sqrt();
@@ -1118,27 +1126,80 @@ fn euler_unstable(a: &[f64], n: usize, dt: f64, span: f64, steps: u64) -> Option
 /// changed how LLVM laid out the loop, +17 % instructions in Table 1.)
 #[cold]
 #[inline(never)]
-fn not_positive(big_r: &[f64], inp: &Inputs, k: u64, t: f64) -> Error {
+fn not_positive(
+    big_r: &[f64],
+    r_pred: &[f64],
+    inp: &Inputs,
+    k: u64,
+    t: f64,
+    states: &[String],
+) -> Error {
     if all_finite(big_r) {
         return singular(k, t);
     }
     let otherwise = "the noise levels or the initial SKOs are too large to square";
-    covariance_overflowed(inp, k, t, otherwise)
+    // The prediction A R Aᵀ + B is where a variance first leaves f64's range.
+    let n = inp.n;
+    let from = if all_finite(r_pred) { big_r } else { r_pred };
+    let diagonal: Vec<f64> = (0..n).map(|i| from[i * n + i]).collect();
+    covariance_overflowed(inp, k, t, &diagonal, states, otherwise)
 }
 
 /// The error for the filter's covariance leaving f64's range at step k: the cause A
 /// shows ([`covariance_growth`]), else `otherwise`.
 #[cold]
 #[inline(never)]
-fn covariance_overflowed(inp: &Inputs, k: u64, t: f64, otherwise: &str) -> Error {
+fn covariance_overflowed(
+    inp: &Inputs,
+    k: u64,
+    t: f64,
+    diagonal: &[f64],
+    states: &[String],
+    otherwise: &str,
+) -> Error {
     let (path, cause) = covariance_growth(&inp.dense_a(), inp.n, inp.dt, k)
         .unwrap_or_else(|| ("system".to_string(), otherwise.to_string()));
+    let gone: Vec<&str> = states
+        .iter()
+        .zip(diagonal)
+        .filter(|(_, v)| !v.is_finite())
+        .map(|(s, _)| s.as_str())
+        .collect();
+    let what = match gone.as_slice() {
+        [] => "the filter's covariance overflowed f64 (a variance above 1.8e308)".to_string(),
+        [one] => format!("the filter's variance of \"{one}\" overflowed f64 (above 1.8e308)"),
+        many => format!(
+            "the filter's variances of {} overflowed f64 (above 1.8e308)",
+            quoted_names(many)
+        ),
+    };
     Error::Numerical {
         step: k,
         t,
         path,
-        message: format!(
-            "the filter's covariance overflowed f64 (a variance above 1.8e308): {cause}"
+        message: format!("{what}: {cause}"),
+    }
+}
+
+/// `"x1"`, `"x1" and "x2"`, `"x1", "x2", "x3" and 4 more`: names for a message.
+fn quoted_names(names: &[&str]) -> String {
+    const SHOWN: usize = 3;
+    let q = |s: &&str| format!("\"{s}\"");
+    match names {
+        [] => String::new(),
+        [one] => q(one),
+        _ if names.len() <= SHOWN => {
+            let (last, rest) = names.split_last().expect("two or more");
+            format!(
+                "{} and {}",
+                rest.iter().map(q).collect::<Vec<_>>().join(", "),
+                q(last)
+            )
+        }
+        _ => format!(
+            "{} and {} more",
+            names[..SHOWN].iter().map(q).collect::<Vec<_>>().join(", "),
+            names.len() - SHOWN
         ),
     }
 }
@@ -1590,5 +1651,21 @@ fn build_traces(
         bucket_steps,
         t,
         states,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::quoted_names;
+
+    #[test]
+    fn names_are_listed_as_a_sentence_says_them() {
+        assert_eq!(quoted_names(&["x"]), "\"x\"");
+        assert_eq!(quoted_names(&["x", "v"]), "\"x\" and \"v\"");
+        assert_eq!(quoted_names(&["a", "b", "c"]), "\"a\", \"b\" and \"c\"");
+        assert_eq!(
+            quoted_names(&["a", "b", "c", "d", "e"]),
+            "\"a\", \"b\", \"c\" and 2 more"
+        );
     }
 }

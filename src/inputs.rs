@@ -170,10 +170,10 @@ impl Inputs {
                 let value = if var == 0.0 {
                     "underflows to 0 (its terms |γ|ψ are below 1.5e-154)".to_string()
                 } else {
-                    format!("= {var:e}")
+                    format!("is {var:e}")
                 };
                 let what = format!(
-                    "the measurement-noise variance (Γ V Γᵀ)[{j}][{j}] of \"{}\" {value}, below f64's normal range (2.2e-308): the noise levels are too small to square; give 0 for a noise-free measurement, or rescale",
+                    "the measurement-noise variance of \"{}\", a diagonal entry of Γ V Γᵀ, {value}, below f64's normal range (2.2e-308): the noise levels are too small to square; give 0 for a noise-free measurement, or rescale",
                     m.measurements[j]
                 );
                 return Err(at_step("measurement", what, m, k, dt));

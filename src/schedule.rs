@@ -68,8 +68,8 @@ pub fn compile(
         errs.push(FieldError::new(
             base,
             format!(
-                "has {} entries, expected one per measurement ({nm}); use null for always",
-                sched.len()
+                "has {}, expected one per measurement ({nm}); use null for always",
+                crate::validate::entries(sched.len())
             ),
         ));
         return None;

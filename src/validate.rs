@@ -585,7 +585,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
                             errs.at(
                                 &format!("measurement.pairs[{k}]"),
                                 format!(
-                                    "measurement \"{}\" does not measure state \"{}\" (measurement.c[{mi}][{si}] = 0); pair a state with a measurement of it",
+                                    "measurement \"{}\" does not measure state \"{}\" (its entry of c is 0); pair a state with a measurement of it",
                                     p.measurement, p.state
                                 ),
                             );
@@ -792,9 +792,9 @@ fn check_shape(
                 errs.at(
                     &format!("{path}[{i}]"),
                     format!(
-                        "row {i} of `{}` has {} entries, expected {cols} ({cols_sym} = {cols})",
+                        "this row of `{}` has {}, expected {cols} ({cols_sym} = {cols})",
                         path.rsplit('.').next().unwrap_or(path),
-                        row.len()
+                        entries(row.len())
                     ),
                 );
                 ok = false;
@@ -853,7 +853,7 @@ fn time_vector(
     if v.len() != n {
         errs.at(
             path,
-            format!("has {} entries, expected {n} ({sym} = {n})", v.len()),
+            format!("has {}, expected {n} ({sym} = {n})", entries(v.len())),
         );
     }
     let mut out = TimeMatrixBuilder::new(n, 1);
@@ -880,7 +880,7 @@ fn const_vector(
     if v.len() != n {
         errs.at(
             path,
-            format!("has {} entries, expected {n} ({sym} = {n})", v.len()),
+            format!("has {}, expected {n} ({sym} = {n})", entries(v.len())),
         );
         return vec![0.0; n];
     }
@@ -992,7 +992,7 @@ fn noise_cov(
                         if (x - y).abs() > 1e-12 * x.abs().max(y.abs()) {
                             errs.at(
                                 &format!("{cov_path}[{i}][{j}]"),
-                                format!("a covariance must be symmetric: [{i}][{j}] = {x} but [{j}][{i}] = {y}"),
+                                format!("a covariance must be symmetric: this entry is {x} but its mirror across the diagonal is {y}"),
                             );
                         }
                     }
@@ -1076,4 +1076,13 @@ fn weights(
         ok = false;
     }
     ok.then(|| w.to_vec())
+}
+
+/// "1 entry", "3 entries": a count of a list's entries, for messages.
+pub(crate) fn entries(n: usize) -> String {
+    if n == 1 {
+        "1 entry".into()
+    } else {
+        format!("{n} entries")
+    }
 }

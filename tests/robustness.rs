@@ -176,7 +176,8 @@ fn a_subnormal_measurement_noise_variance_is_an_error_at_its_step() {
     v["measurement"]["gamma"] = json!([["1e-160*(1 + t)"]]);
     let e = error_at(v, "measurement", "below f64's normal range (2.2e-308)");
     assert!(
-        e.to_string().contains("(Γ V Γᵀ)[0][0] of \"z\" = 1."),
+        e.to_string()
+            .contains("variance of \"z\", a diagonal entry of Γ V Γᵀ, is 1."),
         "{e}"
     );
     assert!(e.to_string().contains("(at step 1, t = 0.01)"), "{e}");
@@ -194,7 +195,7 @@ fn a_measurement_noise_variance_that_underflows_to_zero_is_an_error() {
         let e = error_at(v, "measurement", "below f64's normal range (2.2e-308)");
         assert!(
             e.to_string()
-                .contains("of \"z\" underflows to 0 (its terms |γ|ψ are below 1.5e-154)"),
+                .contains("of \"z\", a diagonal entry of Γ V Γᵀ, underflows to 0 (its terms |γ|ψ are below 1.5e-154)"),
             "{gamma}: {e}"
         );
     }

@@ -55,7 +55,7 @@ fn dimensions() {
         |v| v["system"]["a"][1] = json!([0]),
         &[],
         "system.a[1]",
-        "row 1 of `a` has 1 entries, expected 2 (N = 2)",
+        "this row of `a` has 1 entry, expected 2 (N = 2)",
     );
     expect(
         |v| v["system"]["a"] = json!([[0, 1]]),
@@ -328,7 +328,7 @@ fn noise_covariances() {
         },
         &[],
         "system.W[1][0]",
-        "symmetric",
+        "symmetric: this entry is 0.4 but its mirror across the diagonal is 0.5",
     );
     expect(
         |v| {
@@ -359,7 +359,7 @@ fn names_pairs_and_overrides() {
         |v| v["measurement"]["pairs"] = json!([{"state": "v", "measurement": "zx"}]),
         &[],
         "measurement.pairs[0]",
-        "does not measure state \"v\" (measurement.c[0][1] = 0)",
+        "does not measure state \"v\" (its entry of c is 0)",
     );
     expect(
         |_| {},
@@ -727,7 +727,8 @@ fn a_measurement_of_nothing_is_named_at_its_row() {
 
 /// An a so large that one step multiplies the covariance beyond f64 was reported as
 /// "the noise levels or the initial SKOs are too large to square", at `system`. Now
-/// the entry is named, with A's entry and Δt. An unstable model's overflowing bound
+/// the entry is named, with A's entry and Δt, and every overflow names the states whose
+/// variance overflowed. An unstable model's overflowing bound
 /// was put down to "|A| grows where A does not", which is false for it.
 #[test]
 fn an_overflow_from_a_names_the_entry_or_the_instability() {
@@ -735,7 +736,16 @@ fn an_overflow_from_a_names_the_entry_or_the_instability() {
         |v| v["system"]["a"][1][0] = json!("-s/m*1e300"),
         &[],
         "system.a[1][0]",
-        "the filter's covariance overflowed f64 (a variance above 1.8e308): A = I + aΔt has an entry of -3.717e297 here (a = -3.717e299 there, Δt = 0.01)",
+        "the filter's variance of \"v\" overflowed f64 (above 1.8e308): A = I + aΔt has an entry of -3.717e297 here (a = -3.717e299 there, Δt = 0.01)",
+    );
+    // v' = 50 v, not measured (zx sees x alone, and x does not see v): the filter's
+    // variance of v grows by A_vv² = 1.5² a step and leaves f64 at step ≈ 875. The
+    // message named the growing mode but not the state it grows in.
+    expect(
+        |v| v["system"]["a"] = json!([[-1, 0], [0, 50]]),
+        &[],
+        "system.a",
+        "the filter's variance of \"v\" overflowed f64 (above 1.8e308): a mode of A = I + aΔt grows (by 1.5 a step, rate 40.55 per unit of t) and the measurements do not hold it",
     );
     // x' = 50 x, measured: the filter holds it, but the open-loop covariance grows
     // as e^{100 t} and overflows at t ≈ 7.1, and the a-priori bound as e^{50 t}, at

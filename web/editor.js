@@ -654,7 +654,7 @@ export class ModelEditor {
         target = this.fields.get(path);
       }
       if (!target) {
-        this.general.append(el('li', { text: error.path ? `${error.path}: ${error.message}` : error.message }));
+        this.general.append(el('li', { text: `${modelPlace(error.path)}${error.message}` }));
         continue;
       }
       const exact = path === error.path;
@@ -664,9 +664,23 @@ export class ModelEditor {
         class: 'cell-error',
         role: 'alert',
         'data-error-path': error.path,
-        text: exact ? error.message : `${error.path}: ${error.message}`,
+        text: exact ? error.message : `${modelPlace(error.path)}${error.message}`,
       });
       target.holder.append(msg);
     }
   }
+}
+
+/** A model path as the editor names it: `system.phi[0]` → “φ [1]: ” (indices from 1, as the grids number them). */
+export function modelPlace(path) {
+  const names = {
+    'system.a': 'a', 'system.b': 'b', 'system.u': 'u', 'system.y0': 'y₀', 'system.eta0': 'η₀',
+    'system.phi': 'φ', 'system.W': 'W', 'measurement.c': 'C', 'measurement.gamma': 'Γ',
+    'measurement.g': 'g', 'measurement.psi': 'ψ', 'measurement.V': 'V',
+    'system.states': 'state names', 'measurement.names': 'measurement names',
+  };
+  const m = (path ?? '').match(/^([a-z]+\.[A-Za-z0-9_]+)((\[\d+\])*)$/);
+  if (!m || !names[m[1]]) return path ? `${path}: ` : '';
+  const idx = [...m[2].matchAll(/\[(\d+)\]/g)].map((x) => Number(x[1]) + 1);
+  return `${names[m[1]]}${idx.length ? ` [${idx.join(', ')}]` : ''}: `;
 }

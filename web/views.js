@@ -5,6 +5,7 @@
 
 import { ServerRunner, WasmWorker } from './runner.js';
 import { fmt } from './results.js';
+import { modelPlace } from './editor.js';
 
 export { fmt };
 
@@ -234,20 +235,6 @@ export async function checkOverrides(model, checks) {
     }
   }
   return out;
-}
-
-/** A model path as the editor names it: `system.phi[0]` → “φ [1]: ” (indices from 1, as the grids number them). */
-export function modelPlace(path) {
-  const names = {
-    'system.a': 'a', 'system.b': 'b', 'system.u': 'u', 'system.y0': 'y₀', 'system.eta0': 'η₀',
-    'system.phi': 'φ', 'system.W': 'W', 'measurement.c': 'C', 'measurement.gamma': 'Γ',
-    'measurement.g': 'g', 'measurement.psi': 'ψ', 'measurement.V': 'V',
-    'system.states': 'state names', 'measurement.names': 'measurement names',
-  };
-  const m = (path ?? '').match(/^([a-z]+\.[A-Za-z0-9_]+)((\[\d+\])*)$/);
-  if (!m || !names[m[1]]) return path ? `${path}: ` : '';
-  const idx = [...m[2].matchAll(/\[(\d+)\]/g)].map((x) => Number(x[1]) + 1);
-  return `${names[m[1]]}${idx.length ? ` [${idx.join(', ')}]` : ''}: `;
 }
 
 /**

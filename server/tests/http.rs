@@ -398,6 +398,41 @@ fn auth_on_and_off() {
     assert_eq!(open.get_with("/v1/presets", &[]).status, 200);
 }
 
+/// A second `kea serve` on a data directory in use took over the first one's running
+/// jobs (re-queued them as if the first had died) and ran them again. Now it is
+/// refused; once the first has stopped, the directory is free again.
+#[test]
+fn refuses_a_data_directory_another_kea_is_using() {
+    let dir = tmp();
+    let mut first = Server::start(dir.path(), &[]);
+    let mut second = Command::new(common::KEA)
+        .args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
+        .arg(dir.path())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    while second.try_wait().unwrap().is_none() {
+        if std::time::Instant::now() > deadline {
+            let _ = second.kill();
+            panic!("a second kea serve started on a data directory in use");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let out = second.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("is in use by another kea process") && err.contains("kea.lock"),
+        "{err}"
+    );
+    assert_eq!(first.get("/healthz").status, 200, "the first one serves on");
+    first.kill();
+    let again = Server::start(dir.path(), &[]);
+    assert_eq!(again.get("/healthz").status, 200);
+}
+
 #[test]
 fn refuses_a_public_address_without_a_token() {
     let dir = tmp();

@@ -44,6 +44,34 @@ const MIGRATIONS: &[&str] = &[
 
 pub struct SqliteStore {
     conn: Mutex<Connection>,
+    /// `kea.lock`, locked exclusively while the store lives (the OS releases it when
+    /// the process ends, however it ends): a second `kea serve` on the same directory
+    /// would re-queue, and run again, the jobs the first one is running.
+    _lock: std::fs::File,
+}
+
+/// Lock `dir/kea.lock` for this process, or say which directory is in use.
+fn lock_dir(dir: &Path) -> Result<std::fs::File> {
+    let path = dir.join("kea.lock");
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .map_err(|e| StoreError(format!("cannot open {}: {e}", path.display())))?;
+    match file.try_lock() {
+        Ok(()) => Ok(file),
+        Err(std::fs::TryLockError::WouldBlock) => Err(StoreError(format!(
+            "the data directory {} is in use by another kea process (it holds {}): \
+             stop that one, or give this one another --data-dir",
+            dir.display(),
+            path.display()
+        ))),
+        Err(std::fs::TryLockError::Error(e)) => Err(StoreError(format!(
+            "cannot lock {}: {e}",
+            path.display()
+        ))),
+    }
 }
 
 fn db_err(e: rusqlite::Error) -> StoreError {
@@ -72,7 +100,8 @@ fn job_from_row(row: &Row<'_>) -> rusqlite::Result<JobRecord> {
 }
 
 impl SqliteStore {
-    /// Open (creating if needed) `kea.sqlite` in `dir` and migrate it.
+    /// Lock `dir` for this process, open (creating if needed) `kea.sqlite` in it and
+    /// migrate it.
     pub fn open(dir: &Path) -> Result<SqliteStore> {
         std::fs::create_dir_all(dir).map_err(|e| {
             StoreError(format!(
@@ -80,6 +109,7 @@ impl SqliteStore {
                 dir.display()
             ))
         })?;
+        let lock = lock_dir(dir)?;
         let conn = Connection::open(dir.join("kea.sqlite")).map_err(db_err)?;
         conn.busy_timeout(std::time::Duration::from_secs(10))
             .map_err(db_err)?;
@@ -89,6 +119,7 @@ impl SqliteStore {
         .map_err(db_err)?;
         let store = SqliteStore {
             conn: Mutex::new(conn),
+            _lock: lock,
         };
         store.migrate()?;
         Ok(store)

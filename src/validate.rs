@@ -647,12 +647,16 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
 
     // --- options
     let op = &model.options;
-    let max_rows = max_trace_rows(n * crate::analysis::SERIES);
+    // The result's series (`traces.states[i]`, and t): 13 for a paired state, 8 for
+    // one without a measurement (no ζ, σ_Z, rel_z, local YZ or ZX).
+    let n_paired = paired.iter().filter(|&&p| p).count();
+    let series = 1 + 13 * n_paired + 8 * (n - n_paired);
+    let max_rows = max_trace_rows(series);
     if op.trace_points == 1 || op.trace_points > max_rows {
         let why = if max_rows < MAX_TRACE_POINTS {
             format!(
-                " (with N = {n} the traces hold {} series, at most {MAX_TRACE_VALUES} values in all)",
-                n * crate::analysis::SERIES
+                " (the traces hold {series} series — t, 13 for each of the {n_paired} paired states, 8 for each of the other {} — and at most {MAX_TRACE_VALUES} values in all)",
+                n - n_paired
             )
         } else {
             String::new()

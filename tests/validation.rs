@@ -603,27 +603,60 @@ fn expression_length_is_limited() {
     );
 }
 
+/// The values a result's traces hold (t and every state's series), counted in its JSON.
+fn trace_values(r: &kea_core::AnalysisResult) -> usize {
+    let traces = serde_json::to_value(&r.traces).unwrap();
+    let arrays = traces["states"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|s| s.as_object().unwrap().values())
+        .filter_map(Value::as_array)
+        .map(Vec::len);
+    traces["t"].as_array().unwrap().len() + arrays.sum::<usize>()
+}
+
+/// The limit of 2 000 000 trace values counted 10 series a state, while a paired
+/// state has 13 in the result: N = 100, all paired, passed 2000 rows, 2.6 M values.
+/// Now the largest `trace_points` allowed is the largest whose result holds at most
+/// 2 000 000 values, counted in the result itself (30 states, 20 of them paired).
 #[test]
 fn trace_size_is_limited_by_the_values_it_holds() {
-    // 10 series per state: N = 100 allows 2 000 000 / 1000 = 2000 rows.
-    let with_points = |tp: usize| {
-        let mut v = chain(100, |i, j| if i == j { "-1" } else { "0" }.to_string());
+    let with_points = |tp: usize, steps: usize| {
+        let mut v = chain(30, |i, j| if i == j { "-1" } else { "0" }.to_string());
+        for key in ["names", "c", "gamma", "psi"] {
+            v["measurement"][key].as_array_mut().unwrap().truncate(20);
+        }
+        for row in v["measurement"]["gamma"].as_array_mut().unwrap() {
+            row.as_array_mut().unwrap().truncate(20);
+        }
         v["options"] = json!({"trace_points": tp});
-        v
+        v["time"]["steps"] = json!(steps);
+        model_from_value(v).unwrap()
     };
-    let m = model_from_value(with_points(2001)).unwrap();
-    let err = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap_err();
+    let err = analyze(&with_points(100_000, 10), &Overrides::new(), &mut NoProgress).unwrap_err();
     let e = &err.field_errors()[0];
     assert_eq!(e.path, "options.trace_points");
+    let most: usize = e.message["expected 0 (no traces) or 2 to ".len()..]
+        .split(',')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap_or_else(|_| panic!("{}", e.message));
     assert!(
         e.message
-            .contains("expected 0 (no traces) or 2 to 2000, got 2001"),
+            .contains("13 for each of the 20 paired states, 8 for each of the other 10"),
         "{}",
         e.message
     );
-    let m = model_from_value(with_points(2000)).unwrap();
-    let r = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap();
-    assert_eq!(r.traces.t.len(), 50); // 50 steps, one row each
+    // `most` rows fit, and one more row would not.
+    let r = analyze(&with_points(most, most), &Overrides::new(), &mut NoProgress).unwrap();
+    assert_eq!(r.traces.t.len(), most);
+    let values = trace_values(&r);
+    assert!(values <= 2_000_000, "{values} values in {most} rows");
+    assert!(values + values / most > 2_000_000, "{values} values in {most} rows");
+    let err = analyze(&with_points(most + 1, 10), &Overrides::new(), &mut NoProgress);
+    assert_eq!(err.unwrap_err().field_errors()[0].path, "options.trace_points");
 }
 
 #[test]

@@ -235,7 +235,14 @@ pub fn plain_serde_error(e: FieldError, hints: &[(&str, &str)]) -> FieldError {
         .strip_prefix("invalid length ")
         .and_then(|m| m.split_once(", expected "))
     {
-        return FieldError::new(path, format!("expected {expected}, got {got} entries"));
+        // (serde says "2 elements in sequence" for the entries a fixed-length array
+        // left unread, and "an array of length 2" for too few.)
+        let expected = match expected.strip_suffix(" elements in sequence") {
+            Some(n) => format!("an array of length {n}"),
+            None => expected.to_string(),
+        };
+        let got = got.parse().map_or(format!("{got} entries"), crate::validate::entries);
+        return FieldError::new(path, format!("expected {expected}, got {got}"));
     }
     FieldError::new(path, message)
 }

@@ -235,7 +235,15 @@ impl<'de> Deserializer<'de> for Objects<'de> {
                 (_, _, f) => visitor.visit_f64(f.unwrap_or(f64::NAN)),
             },
             Value::String(s) => visitor.visit_borrowed_str(s),
-            Value::Array(a) => visitor.visit_seq(SeqDeserializer::new(a.iter().map(Objects))),
+            Value::Array(a) => {
+                // `end` refuses entries the visitor left: a fixed-length array
+                // (`[t_from, t_to]`) took its first two of `[0, 0.5, 1]` and said
+                // nothing of the third.
+                let mut seq = SeqDeserializer::new(a.iter().map(Objects));
+                let v = visitor.visit_seq(&mut seq)?;
+                seq.end()?;
+                Ok(v)
+            }
             Value::Object(_) => self.visit_object(visitor),
         }
     }

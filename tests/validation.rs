@@ -1062,3 +1062,21 @@ fn a_noise_matrix_without_columns_is_one_error() {
         );
     }
 }
+
+/// An `unavailable` interval of three entries was read as its first two, the third
+/// ignored (even a string); one of one entry was refused. Now both are refused.
+#[test]
+fn an_interval_has_exactly_two_ends() {
+    for (interval, got) in [
+        (json!([0, 0.5, 1]), "got 3"),
+        (json!([0.5, 0.7, "x"]), "got 3"),
+        (json!([0.5]), "got 1"),
+    ] {
+        let mut v = good();
+        v["measurement"]["schedule"] = json!([{"unavailable": [interval]}]);
+        let err = model_from_value(v).unwrap_err();
+        let e = &err.field_errors()[0];
+        assert_eq!(e.path, "measurement.schedule[0].unavailable[0]", "{e:?}");
+        assert!(e.message.contains(got), "{}", e.message);
+    }
+}

@@ -148,9 +148,40 @@ pub fn model_from_value(value: serde_json::Value) -> Result<Model, Error> {
         })
         .collect();
     if !missing.is_empty() {
-        return Err(Error::Invalid(missing));
+        // A misspelt section ("sytem") is the likely cause of a missing one: name it,
+        // as serde would have had it reached it.
+        let unknown = object
+            .keys()
+            .filter(|k| !MODEL_MEMBERS.contains(&k.as_str()))
+            .map(|k| FieldError::new(k, unknown_model_member(k)));
+        return Err(Error::Invalid(unknown.chain(missing).collect()));
     }
     from_value_at(value, &[])
+}
+
+/// The members of a model (`Model`'s fields; a test compares them with serde's list).
+const MODEL_MEMBERS: [&str; 9] = [
+    "kea_model",
+    "name",
+    "description",
+    "params",
+    "time",
+    "system",
+    "measurement",
+    "criteria",
+    "options",
+];
+
+/// The error at a top-level member a model does not have.
+fn unknown_model_member(name: &str) -> String {
+    let expected = format!("expected one of: {}", MODEL_MEMBERS.join(", "));
+    if name == "model" {
+        format!(
+            "unknown member; a model's members are at its top level ({expected}), not inside \"model\" (`{{\"model\": …}}` is the shape of a request that carries a model, not of a model)"
+        )
+    } else {
+        format!("unknown member; {expected}")
+    }
 }
 
 /// Parse a model from JSON text, with serde errors located at their field path.

@@ -1080,3 +1080,43 @@ fn an_interval_has_exactly_two_ends() {
         assert!(e.message.contains(got), "{}", e.message);
     }
 }
+
+/// A misspelt section (`sytem`) was reported only as `system` missing, and a model
+/// wrapped as `{"model": …}` as three sections missing. Now the unknown member is
+/// named too, first, with the members a model has.
+#[test]
+fn a_missing_section_comes_with_the_unknown_member_that_was_meant() {
+    let mut v = good();
+    let system = v.as_object_mut().unwrap().remove("system").unwrap();
+    v["sytem"] = system;
+    let err = model_from_value(v).unwrap_err();
+    let errors = err.field_errors();
+    assert_eq!(errors[0].path, "sytem");
+    assert_eq!(
+        errors[0].message,
+        "unknown member; expected one of: kea_model, name, description, params, time, system, measurement, criteria, options"
+    );
+    assert_eq!(errors[1].path, "system");
+    assert!(errors[1].message.starts_with("missing"), "{}", errors[1].message);
+    assert_eq!(errors.len(), 2);
+
+    let err = model_from_value(json!({"model": good()})).unwrap_err();
+    let errors = err.field_errors();
+    assert_eq!(errors[0].path, "model");
+    assert!(
+        errors[0].message.contains("not inside \"model\""),
+        "{}",
+        errors[0].message
+    );
+    assert_eq!(errors.len(), 4, "{errors:?}");
+
+    // The list is the model's: serde names the same members for an unknown one.
+    let mut v = good();
+    v["colour"] = json!(1);
+    let err = model_from_value(v).unwrap_err();
+    assert_eq!(err.field_errors()[0].path, "colour");
+    assert_eq!(
+        err.field_errors()[0].message,
+        "unknown member; expected one of: kea_model, name, description, params, time, system, measurement, criteria, options"
+    );
+}

@@ -1041,11 +1041,20 @@ pub const BOUND_GROWTH_WARN: f64 = 1e6;
 
 /// The warning for a bound (η or χ at t_end) above [`BOUND_GROWTH_WARN`] times the
 /// covariance's λσ (open-loop for η, potential for χ), naming the worst state.
+///
+/// A confidence below ≈ 0.68 (λ < 1) compares with σ itself: the bound does not shrink
+/// with λ, so λσ would make any bound look grown (P = 1e-7: λ = 1.3e-7, a scalar
+/// a = 0 model's χ "2.1e7 times λσ").
 fn bound_growth(states: &[String], f: &Final, lambda: f64) -> Option<String> {
+    let (scale, sigma) = if lambda >= 1.0 {
+        (lambda, "λσ")
+    } else {
+        (1.0, "σ")
+    };
     let worst = |bound: &[f64], sko: &[f64]| {
         (0..states.len())
-            .filter(|&i| lambda * sko[i] > 0.0 && bound[i].is_finite())
-            .map(|i| (bound[i] / (lambda * sko[i]), i))
+            .filter(|&i| scale * sko[i] > 0.0 && bound[i].is_finite())
+            .map(|i| (bound[i] / (scale * sko[i]), i))
             .fold(None, |w: Option<(f64, usize)>, x| match w {
                 Some(w) if w.0 >= x.0 => Some(w),
                 _ => Some(x),
@@ -1057,14 +1066,14 @@ fn bound_growth(states: &[String], f: &Final, lambda: f64) -> Option<String> {
         ("η", &f.eta, &f.open_loop_sko, "the open-loop"),
     ] {
         if let Some((ratio, i)) = worst(bound, sko).filter(|w| w.0 > BOUND_GROWTH_WARN) {
-            // (A tiny confidence makes λσ tiny: the ratio can pass f64's range.)
+            // (A tiny σ can make the ratio pass f64's range.)
             let ratio = if ratio.is_finite() {
                 format!("{ratio:.1e}")
             } else {
                 "more than 1.8e308".to_string()
             };
             parts.push(format!(
-                "{name} of \"{}\" is {ratio} times {what} λσ",
+                "{name} of \"{}\" is {ratio} times {what} {sigma}",
                 states[i]
             ));
         }

@@ -755,3 +755,28 @@ fn an_unstable_euler_step_of_a_stable_model_says_how_many_steps_would_do() {
         "the model diverges faster than f64 can follow",
     );
 }
+
+/// With a tiny confidence (P = 1e-7, λ = 1.3e-7) a scalar a = 0 model was warned that
+/// its bound "grew far beyond the covariance's confidence interval … oscillatory or
+/// feedback dynamics": χ was 2.1e7 times λσ because λσ was tiny, not the bound large
+/// (χ = 0.925, σ = 0.347). Below λ = 1 the bound is compared with σ.
+#[test]
+fn a_tiny_confidence_does_not_make_the_bound_look_grown() {
+    let model = |confidence: f64| {
+        model_from_value(json!({
+            "time": {"t0": 0, "t_end": 1, "steps": 10},
+            "system": {"states": ["x"], "a": [[0]], "b": [[1]], "phi": [1], "y0": [1], "eta0": [1]},
+            "measurement": {"names": ["z"], "c": [[1]], "gamma": [[1]], "psi": [1]},
+            "criteria": {"confidence": confidence}
+        }))
+        .unwrap()
+    };
+    for confidence in [1e-7, 0.5, 0.95] {
+        let r = analyze(&model(confidence), &Overrides::new(), &mut NoProgress).unwrap();
+        assert!(
+            !r.warnings.iter().any(|w| w.contains("grew far beyond")),
+            "P = {confidence}: {:?}",
+            r.warnings
+        );
+    }
+}

@@ -241,7 +241,9 @@ pub fn plain_serde_error(e: FieldError, hints: &[(&str, &str)]) -> FieldError {
             Some(n) => format!("an array of length {n}"),
             None => expected.to_string(),
         };
-        let got = got.parse().map_or(format!("{got} entries"), crate::validate::entries);
+        let got = got
+            .parse()
+            .map_or(format!("{got} entries"), crate::validate::entries);
         return FieldError::new(path, format!("expected {expected}, got {got}"));
     }
     FieldError::new(path, message)

@@ -634,7 +634,12 @@ fn trace_size_is_limited_by_the_values_it_holds() {
         v["time"]["steps"] = json!(steps);
         model_from_value(v).unwrap()
     };
-    let err = analyze(&with_points(100_000, 10), &Overrides::new(), &mut NoProgress).unwrap_err();
+    let err = analyze(
+        &with_points(100_000, 10),
+        &Overrides::new(),
+        &mut NoProgress,
+    )
+    .unwrap_err();
     let e = &err.field_errors()[0];
     assert_eq!(e.path, "options.trace_points");
     let most: usize = e.message["expected 0 (no traces) or 2 to ".len()..]
@@ -654,9 +659,19 @@ fn trace_size_is_limited_by_the_values_it_holds() {
     assert_eq!(r.traces.t.len(), most);
     let values = trace_values(&r);
     assert!(values <= 2_000_000, "{values} values in {most} rows");
-    assert!(values + values / most > 2_000_000, "{values} values in {most} rows");
-    let err = analyze(&with_points(most + 1, 10), &Overrides::new(), &mut NoProgress);
-    assert_eq!(err.unwrap_err().field_errors()[0].path, "options.trace_points");
+    assert!(
+        values + values / most > 2_000_000,
+        "{values} values in {most} rows"
+    );
+    let err = analyze(
+        &with_points(most + 1, 10),
+        &Overrides::new(),
+        &mut NoProgress,
+    );
+    assert_eq!(
+        err.unwrap_err().field_errors()[0].path,
+        "options.trace_points"
+    );
 }
 
 #[test]
@@ -1097,7 +1112,11 @@ fn a_missing_section_comes_with_the_unknown_member_that_was_meant() {
         "unknown member; expected one of: kea_model, name, description, params, time, system, measurement, criteria, options"
     );
     assert_eq!(errors[1].path, "system");
-    assert!(errors[1].message.starts_with("missing"), "{}", errors[1].message);
+    assert!(
+        errors[1].message.starts_with("missing"),
+        "{}",
+        errors[1].message
+    );
     assert_eq!(errors.len(), 2);
 
     let err = model_from_value(json!({"model": good()})).unwrap_err();

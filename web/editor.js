@@ -5,7 +5,7 @@
 // number (params, t₀, t_E, P, …) are also checked here, so their messages say what to
 // type rather than what the JSON parser expected.
 
-import { numberProblem, parseCell } from './numbers.js';
+import { cellProblem, numberProblem, parseCell } from './numbers.js';
 
 export { parseCell };
 
@@ -424,7 +424,12 @@ export class ModelEditor {
           spellcheck: 'false',
           autocomplete: 'off',
         });
+        if (!text) this.setLocal(cellPath, cellProblem(input.value), false);
         input.addEventListener('input', () => {
+          // A number's own check (“1e400” is too large), marked only when it changes:
+          // a redrawn mark is announced again.
+          const problem = text ? null : cellProblem(input.value);
+          if ((this.local.get(cellPath) ?? null) !== problem) this.setLocal(cellPath, problem);
           if (!Array.isArray(obj[key])) obj[key] = create();
           const value = text ? input.value : parseCell(input.value);
           const target = obj[key];

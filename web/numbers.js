@@ -34,8 +34,20 @@ export function toNumber(text) {
   return NUMBER.test(s) ? Number(s) : NaN;
 }
 
-/** A cell's text as a model value: a number when it reads as one, else an expression. */
+/**
+ * A cell's text as a model value: a number when it reads as one, else an expression.
+ * A number too large for a double stays text (as Infinity it would be sent as JSON
+ * null); `cellProblem` says what is wrong with it.
+ */
 export function parseCell(text) {
   const s = String(text).trim();
-  return NUMBER.test(s) ? Number(s) : s;
+  return NUMBER.test(s) && Number.isFinite(Number(s)) ? Number(s) : s;
+}
+
+/**
+ * What is wrong with a matrix cell's text, or null: a text that reads as a number must
+ * be one a double holds (“1e400” is too large); expressions are the core's to check.
+ */
+export function cellProblem(text) {
+  return NUMBER.test(String(text ?? '').trim()) ? numberProblem(text) : null;
 }

@@ -1,0 +1,65 @@
+// The model editor in a real browser: switching a quantity's form converts its values
+// (and a round trip restores the texts), a parameter's rename reaches its uses, a
+// number too large for a double is refused at its cell, cells show their full text,
+// and messages name fields by their labels.
+
+import { after, before, test } from 'node:test';
+import assert from 'node:assert/strict';
+import { readFileSync } from 'node:fs';
+import { launchBrowser, newPage, relDiff, startServer } from './lib.mjs';
+
+let server;
+let browser;
+let page;
+const consoleErrors = [];
+
+before(async () => {
+  server = await startServer();
+  browser = await launchBrowser();
+  page = await newPage(browser, consoleErrors);
+  await page.goto(`${server.url}/`);
+  await page.waitForSelector('body[data-ready=true]', { timeout: 30000 });
+});
+
+after(async () => {
+  await browser?.close();
+  await server?.stop();
+});
+
+async function preset(name) {
+  await page.selectOption('#preset', name);
+  await page.waitForFunction((n) => location.hash.startsWith(`#preset=${n}`), name);
+  await page.waitForTimeout(300); // the core's check of the loaded model has answered
+}
+
+/** The messages shown at the editor cell or field `path` names (the input's holder). */
+function messagesAt(path) {
+  return page.$$eval(`[data-error-path="${path}"]`, (es) => es.map((e) => e.textContent));
+}
+
+/** Every message the editor shows (at cells and at the top). */
+function editorMessages() {
+  return page.$$eval('#editor .cell-error, #editor .general-errors li', (es) => es.map((e) => e.textContent));
+}
+
+/** The model as "Export JSON" saves it. */
+async function exported() {
+  const [download] = await Promise.all([page.waitForEvent('download'), page.click('#export-model')]);
+  return JSON.parse(readFileSync(await download.path(), 'utf8'));
+}
+
+const cell = (path) => `input[data-path="${path}"]`;
+
+test('a number too large for a double is refused at its cell, in words, before sending', async () => {
+  await preset('seed-example');
+  await page.fill(cell('system.y0[0]'), '1e400');
+  await page.waitForTimeout(300);
+  const shown = await messagesAt('system.y0[0]');
+  assert.equal(shown.length, 1, `${shown}`);
+  assert.match(shown[0], /“1e400” is too large/);
+  assert.doesNotMatch(shown[0], /null/);
+  await page.fill(cell('system.y0[0]'), '0');
+  await page.waitForTimeout(300);
+  assert.deepEqual(await editorMessages(), []);
+});
+

@@ -326,7 +326,10 @@ export class ModelEditor {
         m.params[`p${i}`] = 0;
         this.render();
         this.changed();
-        this.root.querySelector(`[data-path="params.p${i}.name"]`)?.focus();
+        // The name selected, so that typing replaces the placeholder p1 (not “windp1”).
+        const input = this.root.querySelector(`[data-path="params.p${i}.name"]`);
+        input?.focus();
+        input?.select();
       },
     });
     const table = el(

@@ -63,3 +63,13 @@ test('a number too large for a double is refused at its cell, in words, before s
   assert.deepEqual(await editorMessages(), []);
 });
 
+test('"Add parameter" selects the placeholder name, so typing replaces it', async () => {
+  await preset('seed-example');
+  await page.click('text=Add parameter');
+  await page.keyboard.type('wind');
+  await page.keyboard.press('Enter');
+  assert.ok(await page.$(cell('params.wind')), 'the parameter is called wind');
+  assert.equal(await page.$(cell('params.windp1')), null);
+  await preset('seed-example');
+});
+

@@ -26,6 +26,15 @@ function el(tag, attrs = {}, ...children) {
   return e;
 }
 
+/**
+ * A cell's full text as its tooltip: a narrow cell shows `sqrt(2*alph`, and the rest
+ * could be read only by clicking in.
+ */
+function showTitle(input) {
+  if (input.value) input.title = input.value;
+  else input.removeAttribute('title');
+}
+
 const zeros = (n) => Array.from({ length: n }, () => 0);
 const resizeVec = (v, n, fill = () => 0) =>
   Array.from({ length: n }, (_, i) => (v && i < v.length ? v[i] : fill(i)));
@@ -427,8 +436,10 @@ export class ModelEditor {
           spellcheck: 'false',
           autocomplete: 'off',
         });
+        showTitle(input);
         if (!text) this.setLocal(cellPath, cellProblem(input.value), false);
         input.addEventListener('input', () => {
+          showTitle(input);
           // A number's own check (“1e400” is too large), marked only when it changes:
           // a redrawn mark is announced again.
           const problem = text ? null : cellProblem(input.value);

@@ -73,3 +73,14 @@ test('"Add parameter" selects the placeholder name, so typing replaces it', asyn
   await preset('seed-example');
 });
 
+test("a cell's full text is its tooltip, kept up to date as it is typed", async () => {
+  await preset('seed-example');
+  const a = cell('system.a[0][0]');
+  assert.equal(await page.getAttribute(a, 'title'), 's/m');
+  const long = 'sqrt(2*alpha*beta*gamma_long_name)/m + s';
+  await page.fill(a, long);
+  assert.equal(await page.getAttribute(a, 'title'), long);
+  await page.fill(a, '');
+  assert.equal(await page.getAttribute(a, 'title'), null, 'no tooltip for an empty cell');
+  await preset('seed-example');
+});

@@ -128,6 +128,18 @@ function namePath(error) {
   return path;
 }
 
+/** The labels of the editor's single fields, by path: the fields and `modelPlace` name them so. */
+const FIELD_LABELS = {
+  name: 'Name',
+  description: 'Description',
+  'time.t0': 't₀',
+  'time.t_end': 't_E',
+  'time.steps': 'Steps D',
+  'criteria.confidence': 'Confidence P',
+  'options.trace_points': 'Trace points',
+  'options.steady_state_shortcut': 'Steady-state shortcut',
+};
+
 /** A number field's check (null: fine). */
 const aNumber = (text) => numberProblem(text);
 const wholeAtLeast = (min) => (text) => numberProblem(text, { integer: true, min });
@@ -240,8 +252,8 @@ export class ModelEditor {
       'fieldset',
       { class: 'section' },
       el('legend', { text: 'Name and description' }),
-      this.field('Name', 'name', m, 'name', { parse: (s) => s }),
-      el('div', { class: 'field wide' }, el('label', { for: 'f-description', text: 'Description' }), desc),
+      this.field(FIELD_LABELS.name, 'name', m, 'name', { parse: (s) => s }),
+      el('div', { class: 'field wide' }, el('label', { for: 'f-description', text: FIELD_LABELS.description }), desc),
     );
     this.register('description', desc);
     return fs;
@@ -384,9 +396,9 @@ export class ModelEditor {
       el(
         'div',
         { class: 'row' },
-        this.field('t₀', 'time.t0', m.time, 't0', { check: aNumber }),
-        this.field('t_E', 'time.t_end', m.time, 't_end', { check: aNumber }),
-        this.field('Steps D (or auto)', 'time.steps', m.time, 'steps', { parse: steps, check: stepsProblem }),
+        this.field(FIELD_LABELS['time.t0'], 'time.t0', m.time, 't0', { check: aNumber }),
+        this.field(FIELD_LABELS['time.t_end'], 'time.t_end', m.time, 't_end', { check: aNumber }),
+        this.field(`${FIELD_LABELS['time.steps']} (or auto)`, 'time.steps', m.time, 'steps', { parse: steps, check: stepsProblem }),
       ),
       el(
         'div',
@@ -635,9 +647,9 @@ export class ModelEditor {
       el(
         'div',
         { class: 'row' },
-        this.field('Confidence P', 'criteria.confidence', m.criteria, 'confidence', { check: aNumber, optional: true, placeholder: '0.95' }),
-        this.field('Trace points', 'options.trace_points', m.options, 'trace_points', { check: wholeAtLeast(0), optional: true, placeholder: '1000' }),
-        this.field('Steady-state shortcut', 'options.steady_state_shortcut', m.options, 'steady_state_shortcut', { type: 'checkbox' }),
+        this.field(FIELD_LABELS['criteria.confidence'], 'criteria.confidence', m.criteria, 'confidence', { check: aNumber, optional: true, placeholder: '0.95' }),
+        this.field(FIELD_LABELS['options.trace_points'], 'options.trace_points', m.options, 'trace_points', { check: wholeAtLeast(0), optional: true, placeholder: '1000' }),
+        this.field(FIELD_LABELS['options.steady_state_shortcut'], 'options.steady_state_shortcut', m.options, 'steady_state_shortcut', { type: 'checkbox' }),
       ),
     );
   }
@@ -690,8 +702,15 @@ export class ModelEditor {
   }
 }
 
-/** A model path as the editor names it: `system.phi[0]` → “φ [1]: ” (indices from 1, as the grids number them). */
+/**
+ * A model path as the editor names it: `system.phi[0]` → “φ [1]: ” (indices from 1, as
+ * the grids number them), `time.t_end` → “t_E: ” (the field's label), `params.2x` →
+ * “parameter “2x”: ” and `params.2x.name` → “name of parameter “2x”: ”.
+ */
 export function modelPlace(path) {
+  if (Object.hasOwn(FIELD_LABELS, path ?? '')) return `${FIELD_LABELS[path]}: `;
+  const param = (path ?? '').match(/^params\.(.+?)(\.name)?$/);
+  if (param) return `${param[2] ? 'name of ' : ''}parameter “${param[1]}”: `;
   const names = {
     'system.a': 'a', 'system.b': 'b', 'system.u': 'u', 'system.y0': 'y₀', 'system.eta0': 'η₀',
     'system.phi': 'φ', 'system.W': 'W', 'measurement.c': 'C', 'measurement.gamma': 'Γ',

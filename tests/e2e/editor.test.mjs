@@ -84,3 +84,34 @@ test("a cell's full text is its tooltip, kept up to date as it is typed", async 
   assert.equal(await page.getAttribute(a, 'title'), null, 'no tooltip for an empty cell');
   await preset('seed-example');
 });
+
+/** Run the model in the browser until the status says an error; returns it. */
+async function refusedRun() {
+  await page.check('input[name=mode][value=browser]');
+  await page.evaluate(() => document.getElementById('status').classList.remove('error'));
+  await page.click('#run');
+  await page.waitForFunction(() => document.querySelector('#status').classList.contains('error'), null, { timeout: 30000 });
+  return page.textContent('#status');
+}
+
+test('messages name single fields by their labels and parameters by their names, not by JSON paths', async () => {
+  await preset('seed-example');
+  await page.fill(cell('time.t_end'), '-5');
+  assert.match(await refusedRun(), /^t_E: t_end \(-5\) must be greater than t0 \(0\)/);
+  await preset('seed-example');
+  await page.fill(cell('criteria.confidence'), '1.5');
+  const confidence = await refusedRun();
+  assert.match(confidence, /^Confidence P: /);
+  assert.doesNotMatch(confidence, /criteria\./);
+  await preset('seed-example');
+  await page.fill(cell('params.w.name'), '2x');
+  await page.press(cell('params.w.name'), 'Tab');
+  assert.match(await refusedRun(), /^parameter “2x”: a parameter name must be an identifier/);
+  // Every single field and a parameter's two cells, as the page's other views name them.
+  const places = await page.evaluate(async () => {
+    const { modelPlace } = await import('./editor.js');
+    return ['time.t0', 'time.t_end', 'time.steps', 'criteria.confidence', 'options.trace_points', 'params.2x', 'params.2x.name', 'system.phi[0]', 'measurement.g[1][0]'].map(modelPlace);
+  });
+  assert.deepEqual(places, ['t₀: ', 't_E: ', 'Steps D: ', 'Confidence P: ', 'Trace points: ', 'parameter “2x”: ', 'name of parameter “2x”: ', 'φ [1]: ', 'g [2, 1]: ']);
+  await preset('seed-example');
+});

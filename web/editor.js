@@ -41,6 +41,151 @@ const resizeVec = (v, n, fill = () => 0) =>
 const resizeMat = (m, r, c) =>
   Array.from({ length: r }, (_, i) => resizeVec(m?.[i], c));
 
+// ------------------------------------------------------------ form conversions
+// Switching a quantity's form (φ ↔ W, ψ ↔ V, g ↔ Γ) converts its values: a model
+// switched must mean what it meant (zeros would run it with no noise). Numbers are
+// computed; expressions become the formula's text. What cannot be converted is named
+// in the conversion's note, and left 0.
+
+/** A name an expression can use (the core's `is_identifier`). */
+const IDENTIFIER = /^[\p{L}_][\p{L}\p{N}_]*$/u;
+const UNSIGNED = /^(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$/;
+
+/** A cell as a number or an expression text (a missing entry is the 0 its cell shows); null when it is neither. */
+function asCell(v) {
+  if (v === undefined) return 0;
+  if (typeof v === 'number') return Number.isFinite(v) ? v : null;
+  if (typeof v !== 'string' || v.trim() === '') return null;
+  return parseCell(v);
+}
+
+/** A cell as a factor or a power's base: a name or an unsigned number as it is, anything else in parentheses. */
+function group(x) {
+  const s = String(x);
+  return IDENTIFIER.test(s) || UNSIGNED.test(s) ? s : `(${s})`;
+}
+
+/** a·b of two cells, as a cell. */
+function times(a, b) {
+  if (a === 0 || b === 0) return 0;
+  if (typeof a === 'number' && typeof b === 'number') return a * b;
+  if (a === 1) return b;
+  if (b === 1) return a;
+  return `${group(a)}*${group(b)}`;
+}
+
+/** a/d of two cells, as a cell (d ≠ 0). */
+function over(a, d) {
+  if (a === 0) return 0;
+  if (typeof a === 'number' && typeof d === 'number') return a / d;
+  if (d === 1) return a;
+  return `${group(a)}/${group(d)}`;
+}
+
+/** A sum of cells, as a cell: the numbers added, the texts joined by +. */
+function sum(terms) {
+  const number = terms.filter((x) => typeof x === 'number').reduce((a, x) => a + x, 0);
+  const texts = terms.filter((x) => typeof x === 'string');
+  if (!texts.length) return number;
+  if (number !== 0) texts.push(group(number));
+  return texts.join(' + ');
+}
+
+/** A computed cell, or null when a number came out too large for a double. */
+const finite = (x) => (typeof x === 'number' && !Number.isFinite(x) ? null : x);
+
+/** A model path as the grids name it: `measurement.g[0][1]` → “g [1, 2]”. */
+const placeName = (path) => modelPlace(path).replace(/: $/, '');
+
+/** The note on what a conversion could not carry over: [{path, why}]. */
+function lostNote(lost) {
+  if (!lost.length) return null;
+  return `Not converted, left 0: ${lost.map(({ path, why }) => `${placeName(path)} (${why})`).join('; ')}`;
+}
+
+/** W = diag φ² (or V = diag ψ²) from the SKOs `sko` at `path`, as an L×L matrix. */
+function squares(sko, L, path) {
+  const value = resizeMat([], L, L);
+  const lost = [];
+  for (let l = 0; l < L; l++) {
+    const x = asCell(sko?.[l]);
+    const square = x === null ? null : finite(typeof x === 'number' ? x * x : `${group(x)}^2`);
+    if (square === null) lost.push({ path: `${path}[${l}]`, why: x === null ? 'not a number or an expression' : 'its square is too large' });
+    else value[l][l] = square;
+  }
+  return { value, note: lostNote(lost) };
+}
+
+/** The SKOs φ = √diag W (or ψ from V) from the covariance `cov` at `path`; its off-diagonal entries have no SKO. */
+function roots(cov, L, path) {
+  const value = zeros(L);
+  const lost = [];
+  for (let i = 0; i < L; i++) {
+    for (let j = 0; j < L; j++) {
+      const x = asCell(cov?.[i]?.[j]);
+      if (i !== j) {
+        if (x !== 0) lost.push({ path: `${path}[${i}][${j}]`, why: 'SKOs give a diagonal covariance' });
+      } else if (x === null || (typeof x === 'number' && x < 0)) {
+        lost.push({ path: `${path}[${i}][${i}]`, why: x === null ? 'not a number or an expression' : 'a negative variance has no SKO' });
+      } else {
+        value[i] = typeof x === 'number' ? Math.sqrt(x) : `sqrt(${x})`;
+      }
+    }
+  }
+  return { value, note: lostNote(lost) };
+}
+
+/** Γ = C g (the seed's Z = c(y + gΦ) is Z = c y + c g Φ), n×M. */
+function gammaFromG(c, g, { N, n, M }) {
+  const lost = [];
+  const value = resizeMat([], n, M);
+  for (let j = 0; j < n; j++) {
+    for (let l = 0; l < M; l++) {
+      const terms = [];
+      const unreadable = [];
+      for (let k = 0; k < N; k++) {
+        const [a, b] = [asCell(c?.[j]?.[k]), asCell(g?.[k]?.[l])];
+        if (a === null) unreadable.push(`measurement.c[${j}][${k}]`);
+        if (b === null) unreadable.push(`measurement.g[${k}][${l}]`);
+        terms.push(a === null || b === null ? null : finite(times(a, b)));
+      }
+      const x = terms.includes(null) ? null : finite(sum(terms));
+      if (x !== null) value[j][l] = x;
+      else {
+        const why = unreadable.length ? `${unreadable.map(placeName).join(', ')}: not a number or an expression` : 'C g is too large';
+        lost.push({ path: `measurement.gamma[${j}][${l}]`, why });
+      }
+    }
+  }
+  return { value, note: lostNote(lost) };
+}
+
+/**
+ * g from Γ = C g: one g gives Γ only when C is diagonal (square, its diagonal not 0,
+ * 0 elsewhere): then g = Γ / C row by row. Otherwise g starts at 0, and the note says why.
+ */
+function gFromGamma(c, gamma, { N, n, M }) {
+  const value = resizeMat([], N, M);
+  const diagonal =
+    n === N &&
+    Array.from({ length: N }, (_, j) => Array.from({ length: N }, (_, k) => asCell(c?.[j]?.[k]))).every((row, j) =>
+      row.every((x, k) => (j === k ? x !== null && x !== 0 : x === 0)),
+    );
+  if (!diagonal) {
+    return { value, note: 'g is 0: Γ = C g gives g only when C is diagonal (then g = Γ / C); enter g' };
+  }
+  const lost = [];
+  for (let k = 0; k < N; k++) {
+    for (let l = 0; l < M; l++) {
+      const x = asCell(gamma?.[k]?.[l]);
+      const y = x === null ? null : finite(over(x, asCell(c[k][k])));
+      if (y === null) lost.push({ path: `measurement.gamma[${k}][${l}]`, why: x === null ? 'not a number or an expression' : 'Γ / C is too large' });
+      else value[k][l] = y;
+    }
+  }
+  return { value, note: lostNote(lost) };
+}
+
 /** The model's dimensions N, n, L, M (METHOD §1.1). */
 export function dimensions(model) {
   const s = model.system ?? {};
@@ -153,6 +298,8 @@ export class ModelEditor {
     this.fields = new Map(); // path → {input, holder}
     this.local = new Map(); // path → message: this editor's own checks of the shown texts
     this.core = []; // the core's last validation errors, kept across redraws
+    this.previous = new Map(); // form choice → {form, texts, made}: the form a switch left (switchForm)
+    this.notes = new Map(); // form choice → what its last switch could not convert
     this.general = el('ul', { class: 'general-errors', 'aria-live': 'polite' });
     new ResizeObserver(() => this.updateScrollHints()).observe(root);
   }
@@ -160,6 +307,8 @@ export class ModelEditor {
   load(model) {
     this.model = model;
     this.core = [];
+    this.previous.clear();
+    this.notes.clear();
     this.render();
   }
 
@@ -534,7 +683,31 @@ export class ModelEditor {
       this.render();
       this.changed();
     });
-    return el('div', { class: 'field' }, el('label', { for: id, text: label }), select);
+    const note = this.notes.get(name);
+    return el(
+      'div',
+      { class: 'field' },
+      el('label', { for: id, text: label }),
+      select,
+      note ? el('p', { class: 'help form-note', role: 'status', 'data-note': name, text: note }) : null,
+    );
+  }
+
+  /**
+   * Switch the quantity `name` from its form `obj[from]` to `obj[to]`; `convert()` gives
+   * {value, note} (note: what it could not convert). The texts left are kept: switching
+   * straight back (the new form, and `context`, what the conversion read besides,
+   * unchanged) restores them as they were, where converting back would rewrite them
+   * (`f*psi` → `(f*psi)^2` → `sqrt((f*psi)^2)`).
+   */
+  switchForm(name, obj, from, to, convert, context = null) {
+    const kept = this.previous.get(name);
+    const back = kept?.form === to && kept.made === JSON.stringify([obj[from], context]);
+    const { value, note } = back ? { value: kept.texts, note: null } : convert();
+    this.previous.set(name, { form: from, texts: obj[from], made: JSON.stringify([value, context]) });
+    obj[to] = value;
+    delete obj[from];
+    this.notes.set(name, note && `${note}. Switching straight back restores the values as they were.`);
   }
 
   sectionSystem({ N, L }) {
@@ -562,16 +735,11 @@ export class ModelEditor {
         el(
           'div',
           { class: 'stack' },
-          this.formChoice('Model errors given as', 'system-errors', [['phi', 'SKOs φ (W = diag φ²)'], ['W', 'covariance W']], errorForm, (v) => {
-            if (v === 'W') {
-              s.W = resizeMat([], L, L);
-              (s.phi ?? []).forEach((x, l) => (s.W[l][l] = typeof x === 'number' ? x * x : `(${x})^2`));
-              delete s.phi;
-            } else {
-              s.phi = (s.W ?? []).map((row, l) => (typeof row[l] === 'number' ? Math.sqrt(row[l]) : `sqrt(${row[l]})`));
-              delete s.W;
-            }
-          }),
+          this.formChoice('Model errors given as', 'system-errors', [['phi', 'SKOs φ (W = diag φ²)'], ['W', 'covariance W']], errorForm, (v) =>
+            v === 'W'
+              ? this.switchForm('system-errors', s, 'phi', 'W', () => squares(s.phi, L, 'system.phi'))
+              : this.switchForm('system-errors', s, 'W', 'phi', () => roots(s.W, L, 'system.W')),
+          ),
           errorsGrid,
         ),
       ),
@@ -605,30 +773,21 @@ export class ModelEditor {
         el(
           'div',
           { class: 'stack' },
-          this.formChoice('Noise matrix', 'measurement-noise', [['gamma', 'Γ (n×M)'], ['g', "seed's g (N×M)"]], noiseForm, (v) => {
-            if (v === 'g') {
-              m.g = resizeMat([], N, M);
-              delete m.gamma;
-            } else {
-              m.gamma = resizeMat([], n, M);
-              delete m.g;
-            }
-          }),
+          this.formChoice('Noise matrix', 'measurement-noise', [['gamma', 'Γ (n×M)'], ['g', "seed's g (N×M)"]], noiseForm, (v) =>
+            v === 'g'
+              ? this.switchForm('measurement-noise', m, 'gamma', 'g', () => gFromGamma(m.c, m.gamma, { N, n, M }), m.c)
+              : this.switchForm('measurement-noise', m, 'g', 'gamma', () => gammaFromG(m.c, m.g, { N, n, M }), m.c),
+          ),
           noiseGrid,
         ),
         el(
           'div',
           { class: 'stack' },
-          this.formChoice('Measurement errors given as', 'measurement-errors', [['psi', 'SKOs ψ (V = diag ψ²)'], ['V', 'covariance V']], errorForm, (v) => {
-            if (v === 'V') {
-              m.V = resizeMat([], M, M);
-              (m.psi ?? []).forEach((x, k) => (m.V[k][k] = typeof x === 'number' ? x * x : `(${x})^2`));
-              delete m.psi;
-            } else {
-              m.psi = (m.V ?? []).map((row, k) => (typeof row[k] === 'number' ? Math.sqrt(row[k]) : `sqrt(${row[k]})`));
-              delete m.V;
-            }
-          }),
+          this.formChoice('Measurement errors given as', 'measurement-errors', [['psi', 'SKOs ψ (V = diag ψ²)'], ['V', 'covariance V']], errorForm, (v) =>
+            v === 'V'
+              ? this.switchForm('measurement-errors', m, 'psi', 'V', () => squares(m.psi, M, 'measurement.psi'))
+              : this.switchForm('measurement-errors', m, 'V', 'psi', () => roots(m.V, M, 'measurement.V')),
+          ),
           errorsGrid,
         ),
       ),

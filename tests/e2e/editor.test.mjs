@@ -115,3 +115,103 @@ test('messages name single fields by their labels and parameters by their names,
   assert.deepEqual(places, ['t₀: ', 't_E: ', 'Steps D: ', 'Confidence P: ', 'Trace points: ', 'parameter “2x”: ', 'name of parameter “2x”: ', 'φ [1]: ', 'g [2, 1]: ']);
   await preset('seed-example');
 });
+
+/** Every criterion cell of the results table: {`set.criterion.row`: value|null}. */
+function criteria() {
+  return page.$$eval('#criteria-table td[data-criterion]', (cells) =>
+    Object.fromEntries(cells.map((c) => [`${c.dataset.set}.${c.dataset.criterion}.${c.dataset.row}`, c.dataset.value === '' ? null : Number(c.dataset.value)])),
+  );
+}
+
+/** Run in the browser until the result is shown; returns its criteria. */
+async function runCriteria() {
+  await page.check('input[name=mode][value=browser]');
+  await page.evaluate(() => delete document.querySelector('#summary').dataset.where);
+  await page.click('#run');
+  await page.waitForFunction(() => document.querySelector('#summary')?.dataset.where === 'browser' && !document.querySelector('#run').disabled, null, { timeout: 60000 });
+  return criteria();
+}
+
+/** Choose the form `value` of the form choice `id` (the editor redraws). */
+async function pickForm(id, value) {
+  await page.selectOption(`#${id}`, value);
+  await page.waitForTimeout(300); // the core's check has answered
+}
+
+test("the seed's g becomes Γ = C g (the same model: the same criteria), and switching back restores g's text", async () => {
+  await preset('seed-example');
+  await page.fill(cell('time.steps'), '20000'); // quick runs
+  const withG = await runCriteria();
+  await pickForm('form-measurement-noise', 'gamma');
+  assert.equal(await page.inputValue(cell('measurement.gamma[0][0]')), 'c*(v*t/m_g)');
+  assert.deepEqual(await editorMessages(), []);
+  const withGamma = await runCriteria();
+  assert.ok(Object.keys(withG).length > 0);
+  for (const [key, value] of Object.entries(withG)) {
+    if (value === null) assert.equal(withGamma[key], null, key);
+    else assert.ok(relDiff(withGamma[key], value) <= 1e-12, `${key}: ${withGamma[key]} with Γ vs ${value} with g`);
+  }
+  await pickForm('form-measurement-noise', 'g');
+  assert.equal(await page.inputValue(cell('measurement.g[0][0]')), 'v*t/m_g', "g's own text, not a quotient");
+  assert.equal(await page.$('[data-note]'), null, 'nothing to say');
+  await preset('seed-example');
+});
+
+test('g ↔ Γ with numbers: Γ = C g computed; an edited Γ gives g = Γ / C; a C that fixes no g says so', async () => {
+  await preset('seed-example');
+  await page.fill(cell('measurement.c[0][0]'), '0.5');
+  await page.fill(cell('measurement.g[0][0]'), '3');
+  await pickForm('form-measurement-noise', 'gamma');
+  assert.equal(await page.inputValue(cell('measurement.gamma[0][0]')), '1.5');
+  await page.fill(cell('measurement.gamma[0][0]'), '2'); // edited: switching back converts
+  await pickForm('form-measurement-noise', 'g');
+  assert.equal(await page.inputValue(cell('measurement.g[0][0]')), '4');
+  const model = await exported();
+  assert.deepEqual(model.measurement.g, [[4]]);
+  assert.equal(model.measurement.gamma, undefined);
+
+  // cv-tracker: C = [1 0] measures one of two states, so Γ = C g has many g.
+  await preset('cv-tracker');
+  await pickForm('form-measurement-noise', 'g');
+  const note = await page.textContent('[data-note="measurement-noise"]');
+  assert.match(note, /g is 0: Γ = C g gives g only when C is diagonal/);
+  assert.match(note, /Switching straight back restores/);
+  await pickForm('form-measurement-noise', 'gamma');
+  assert.equal(await page.inputValue(cell('measurement.gamma[0][0]')), '1', 'Γ as it was');
+  assert.equal(await page.$('[data-note]'), null);
+  await preset('seed-example');
+});
+
+test('switching φ ↔ W and ψ ↔ V and back restores the texts exactly; after an edit it converts', async () => {
+  await preset('seed-example');
+  await pickForm('form-system-errors', 'W');
+  assert.equal(await page.inputValue(cell('system.W[0][0]')), '(f*psi)^2');
+  await pickForm('form-system-errors', 'phi');
+  assert.equal(await page.inputValue(cell('system.phi[0]')), 'f*psi');
+  await pickForm('form-measurement-errors', 'V');
+  assert.equal(await page.inputValue(cell('measurement.V[0][0]')), 'psi^2');
+  await pickForm('form-measurement-errors', 'psi');
+  assert.equal(await page.inputValue(cell('measurement.psi[0]')), 'psi');
+  // An edit in between: the new value is converted.
+  await pickForm('form-measurement-errors', 'V');
+  await page.fill(cell('measurement.V[0][0]'), '4e-10');
+  await pickForm('form-measurement-errors', 'psi');
+  assert.equal(await page.inputValue(cell('measurement.psi[0]')), '0.00002');
+  assert.deepEqual(await editorMessages(), []);
+
+  // A covariance with what SKOs cannot say: its entries named, and a way back.
+  await preset('cv-tracker');
+  await page.fill('#dim-L', '2');
+  await page.press('#dim-L', 'Tab');
+  await pickForm('form-system-errors', 'W');
+  await page.fill(cell('system.W[0][1]'), '0.1');
+  await page.fill(cell('system.W[1][1]'), '-1');
+  await pickForm('form-system-errors', 'phi');
+  const note = await page.textContent('[data-note="system-errors"]');
+  assert.match(note, /W \[1, 2\] \(SKOs give a diagonal covariance\)/);
+  assert.match(note, /W \[2, 2\] \(a negative variance has no SKO\)/);
+  await pickForm('form-system-errors', 'W');
+  assert.equal(await page.inputValue(cell('system.W[0][1]')), '0.1');
+  assert.equal(await page.inputValue(cell('system.W[1][1]')), '-1');
+  await preset('seed-example');
+});

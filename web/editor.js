@@ -186,6 +186,55 @@ function gFromGamma(c, gamma, { N, n, M }) {
   return { value, note: lostNote(lost) };
 }
 
+// ------------------------------------------------------------ renaming a parameter
+
+/** The model's matrices and vectors whose cells may be expressions in the params. */
+const EXPRESSION_PATHS = [
+  'system.a', 'system.b', 'system.u', 'system.y0', 'system.eta0', 'system.phi', 'system.W',
+  'measurement.c', 'measurement.g', 'measurement.gamma', 'measurement.psi', 'measurement.V',
+];
+
+/**
+ * Names an expression reads as something else: the time variable, and the language's
+ * constants and functions (the operator table of src/expr_block.rs; the core refuses
+ * them as parameter names). A rename to or from one leaves the expressions alone:
+ * `s/m` renamed to `s/e` would quietly mean Euler's number.
+ */
+const RESERVED = new Set(
+  ('t atan2 min max abs signum sin cos tan asin acos atan sinh cosh tanh asinh acosh atanh ' +
+    'floor round ceil trunc fract exp sqrt cbrt ln log2 log10 log PI π E e TAU τ').split(' '),
+);
+
+/** Whether expressions can use `name` as a parameter. */
+const usableName = (name) => IDENTIFIER.test(name) && !RESERVED.has(name);
+
+/**
+ * `text` with the name `old` (an identifier) renamed `wanted`: whole identifiers only
+ * (`m` in `s/m`, not in `m_g`, `sum` or the exponent of `2e5`).
+ */
+function renameIdentifier(text, old, wanted) {
+  return text.replace(new RegExp(`(?<![\\p{L}\\p{N}_.])${old}(?![\\p{L}\\p{N}_])`, 'gu'), () => wanted);
+}
+
+/** `value` with `f` applied to every text in it (nested arrays). */
+function mapTexts(value, f) {
+  if (Array.isArray(value)) return value.map((v) => mapTexts(v, f));
+  return typeof value === 'string' ? f(value) : value;
+}
+
+/** Calls `f(path, text)` for every text cell of the model's expression matrices; the cell becomes what it returns. */
+function eachExpression(model, f) {
+  const walk = (array, path) =>
+    array.forEach((v, i) => {
+      if (Array.isArray(v)) walk(v, `${path}[${i}]`);
+      else if (typeof v === 'string') array[i] = f(`${path}[${i}]`, v);
+    });
+  for (const path of EXPRESSION_PATHS) {
+    const [part, key] = path.split('.');
+    if (Array.isArray(model[part]?.[key])) walk(model[part][key], path);
+  }
+}
+
 /** The model's dimensions N, n, L, M (METHOD §1.1). */
 export function dimensions(model) {
   const s = model.system ?? {};
@@ -299,7 +348,7 @@ export class ModelEditor {
     this.local = new Map(); // path → message: this editor's own checks of the shown texts
     this.core = []; // the core's last validation errors, kept across redraws
     this.previous = new Map(); // form choice → {form, texts, made}: the form a switch left (switchForm)
-    this.notes = new Map(); // form choice → what its last switch could not convert
+    this.notes = new Map(); // form choice → what its last switch could not convert; 'params': the last rename
     this.general = el('ul', { class: 'general-errors', 'aria-live': 'polite' });
     new ResizeObserver(() => this.updateScrollHints()).observe(root);
   }
@@ -458,6 +507,7 @@ export class ModelEditor {
       name = wanted;
       label();
       this.setLocal(`params.${name}`, valueProblem ?? null);
+      this.renameUses(old, wanted);
       this.changed();
     });
     nameInput.addEventListener('keydown', (e) => {
@@ -482,9 +532,48 @@ export class ModelEditor {
     return el('tr', {}, nameCell, valueCell, el('td', {}, remove));
   }
 
+  /**
+   * Rename parameter `old`'s uses in every expression cell, and in the forms kept for
+   * switching back, so that a rename does not break them (“unknown parameter "m" in
+   * "s/m"”); the note below the parameters says how many cells changed.
+   */
+  renameUses(old, wanted) {
+    const apply = usableName(wanted); // `s/2x` would not parse: leave the uses as they are
+    let cells = 0;
+    if (usableName(old)) {
+      eachExpression(this.model, (path, text) => {
+        const renamed = renameIdentifier(text, old, wanted);
+        if (renamed === text) return text;
+        cells++;
+        if (!apply) return text;
+        const input = this.fields.get(path)?.input;
+        if (input) {
+          input.value = renamed;
+          showTitle(input);
+        }
+        return renamed;
+      });
+    }
+    if (apply && cells) {
+      const rename = (text) => renameIdentifier(text, old, wanted);
+      for (const kept of this.previous.values()) {
+        kept.texts = mapTexts(kept.texts, rename);
+        kept.made = JSON.stringify(mapTexts(JSON.parse(kept.made), rename));
+      }
+    }
+    const count = `${cells} cell${cells === 1 ? '' : 's'}`;
+    let note = `renamed ${old} → ${wanted} in ${count}`;
+    if (!cells) note = `renamed ${old} → ${wanted}; no expression uses it`;
+    else if (!apply) note = `${old} is still used in ${count}: expressions cannot use “${wanted}” as a parameter`;
+    this.notes.set('params', note);
+    this.paramsNote.textContent = note;
+  }
+
   sectionParams() {
     const m = this.model;
     if (m.params === null || typeof m.params !== 'object' || Array.isArray(m.params)) m.params = {};
+    // What the last rename did to the expressions (a live region: it is there before it says it).
+    this.paramsNote = el('p', { class: 'help', role: 'status', 'data-note': 'params', text: this.notes.get('params') });
     const body = el('tbody');
     for (const name of Object.keys(m.params)) body.append(this.paramRow(name));
     const add = el('button', {
@@ -515,6 +604,7 @@ export class ModelEditor {
       el('p', { class: 'help', text: 'Named numbers usable in every expression (with t).' }),
       table,
       add,
+      this.paramsNote,
     );
     this.register('params', table, fs);
     return fs;

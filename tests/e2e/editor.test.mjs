@@ -153,7 +153,7 @@ test("the seed's g becomes Γ = C g (the same model: the same criteria), and swi
   }
   await pickForm('form-measurement-noise', 'g');
   assert.equal(await page.inputValue(cell('measurement.g[0][0]')), 'v*t/m_g', "g's own text, not a quotient");
-  assert.equal(await page.$('[data-note]'), null, 'nothing to say');
+  assert.equal(await page.$('.form-note'), null, 'nothing to say');
   await preset('seed-example');
 });
 
@@ -178,7 +178,7 @@ test('g ↔ Γ with numbers: Γ = C g computed; an edited Γ gives g = Γ / C; a
   assert.match(note, /Switching straight back restores/);
   await pickForm('form-measurement-noise', 'gamma');
   assert.equal(await page.inputValue(cell('measurement.gamma[0][0]')), '1', 'Γ as it was');
-  assert.equal(await page.$('[data-note]'), null);
+  assert.equal(await page.$('.form-note'), null);
   await preset('seed-example');
 });
 
@@ -214,4 +214,59 @@ test('switching φ ↔ W and ψ ↔ V and back restores the texts exactly; after
   assert.equal(await page.inputValue(cell('system.W[0][1]')), '0.1');
   assert.equal(await page.inputValue(cell('system.W[1][1]')), '-1');
   await preset('seed-example');
+});
+
+test("a parameter's rename reaches its uses in every expression, whole names only, and says so", async () => {
+  await preset('seed-example');
+  // The uses of m: a = s/m, b = v/m, and u below; not m_g (g = v*t/m_g).
+  await page.fill(cell('system.u[0]'), '-w + 0*sin(s)*m_g/m');
+  await page.fill(cell('params.m.name'), 'mass');
+  await page.press(cell('params.m.name'), 'Tab');
+  assert.equal(await page.inputValue(cell('system.a[0][0]')), 's/mass');
+  assert.equal(await page.inputValue(cell('system.b[0][0]')), 'v/mass');
+  assert.equal(await page.inputValue(cell('system.u[0]')), '-w + 0*sin(s)*m_g/mass');
+  assert.equal(await page.inputValue(cell('measurement.g[0][0]')), 'v*t/m_g');
+  assert.equal(await page.textContent('[data-note="params"]'), 'renamed m → mass in 3 cells');
+  // s: not the s of sin.
+  await page.fill(cell('params.s.name'), 'spring');
+  await page.press(cell('params.s.name'), 'Tab');
+  assert.equal(await page.inputValue(cell('system.a[0][0]')), 'spring/mass');
+  assert.equal(await page.inputValue(cell('system.u[0]')), '-w + 0*sin(spring)*m_g/mass');
+  assert.equal(await page.getAttribute(cell('system.u[0]'), 'title'), '-w + 0*sin(spring)*m_g/mass', 'the tooltip follows');
+  assert.equal(await page.textContent('[data-note="params"]'), 'renamed s → spring in 2 cells');
+  await page.waitForTimeout(300);
+  assert.deepEqual(await editorMessages(), [], 'the model is still valid');
+  const model = await exported();
+  assert.deepEqual(model.system.a, [['spring/mass']]);
+  assert.equal(model.params.mass, 100);
+
+  // A form kept for switching back is renamed too.
+  await pickForm('form-system-errors', 'W');
+  await page.fill(cell('params.f.name'), 'ratio');
+  await page.press(cell('params.f.name'), 'Tab');
+  assert.equal(await page.inputValue(cell('system.W[0][0]')), '(ratio*psi)^2');
+  await pickForm('form-system-errors', 'phi');
+  assert.equal(await page.inputValue(cell('system.phi[0]')), 'ratio*psi');
+
+  // A name no expression can use leaves the uses, and says so.
+  await page.fill(cell('params.mass.name'), '2m');
+  await page.press(cell('params.mass.name'), 'Tab');
+  assert.equal(await page.inputValue(cell('system.a[0][0]')), 'spring/mass');
+  assert.equal(await page.textContent('[data-note="params"]'), 'mass is still used in 3 cells: expressions cannot use “2m” as a parameter');
+  // Nor does a name the language reads as something else (t: the time variable, which
+  // g = v*t/m_g uses; renamed back, the parameter must not take it).
+  await page.fill(cell('params.2m.name'), 'mass');
+  await page.press(cell('params.2m.name'), 'Tab');
+  await page.fill(cell('params.v.name'), 't');
+  await page.press(cell('params.v.name'), 'Tab');
+  assert.equal(await page.inputValue(cell('system.b[0][0]')), 'v/mass');
+  await page.fill(cell('params.t.name'), 'v');
+  await page.press(cell('params.t.name'), 'Tab');
+  assert.equal(await page.inputValue(cell('measurement.g[0][0]')), 'v*t/m_g');
+  await preset('seed-example');
+  assert.equal(await page.textContent('[data-note="params"]'), '', 'a loaded model starts with no note');
+});
+
+test('the page logged no console errors', () => {
+  assert.deepEqual(consoleErrors, []);
 });

@@ -74,6 +74,17 @@ pub fn is_reserved(name: &str) -> bool {
     lang.constant(name).is_some() || lang.unary.contains(&name) || lang.binary.contains(&name)
 }
 
+/// Every name [`is_reserved`] refuses as a parameter: the language's constants and
+/// functions (the web editor keeps a copy; a test compares them).
+pub fn reserved_names() -> Vec<&'static str> {
+    let lang = language();
+    let constants = lang.constants.iter().map(|c| c.0);
+    constants
+        .chain(lang.unary.iter().copied())
+        .chain(lang.binary.iter().copied())
+        .collect()
+}
+
 impl Language {
     /// The value of the constant `name`.
     fn constant(&self, name: &str) -> Option<f64> {

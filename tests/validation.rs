@@ -1139,3 +1139,24 @@ fn a_missing_section_comes_with_the_unknown_member_that_was_meant() {
         "unknown member; expected one of: kea_model, name, description, params, time, system, measurement, criteria, options"
     );
 }
+
+/// The web editor renames a parameter's uses in expressions, but not to or from a name
+/// the language reads as a function or constant (`s/m` renamed `s/e` would mean
+/// Euler's number): its list (web/editor.js, `RESERVED`) is the core's, and `t`.
+#[test]
+fn the_web_editors_reserved_names_are_the_cores() {
+    let js =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/web/editor.js")).unwrap();
+    let start = js
+        .find("const RESERVED = new Set(")
+        .expect("RESERVED in editor.js");
+    let end = start + js[start..].find(".split(' ')").unwrap();
+    let words: String = js[start..end].split('\'').skip(1).step_by(2).collect();
+    let mut web: Vec<&str> = words.split(' ').filter(|w| !w.is_empty()).collect();
+    let mut core = kea_core::expr::reserved_names();
+    core.push("t");
+    web.sort_unstable();
+    core.sort_unstable();
+    core.dedup();
+    assert_eq!(web, core);
+}

@@ -594,9 +594,10 @@ impl<'m, const N: usize> Engine<'m, N> {
                 let mask_changed = avail_prev != avail;
                 if k == 1 || inp.rv_changed || mask_changed {
                     let mask = (!all).then_some(&avail[..]);
-                    prep.prepare(&m.c, &inp.rv, mask, n, nm).map_err(|()| {
-                        not_positive(&big_r, &joseph.r_pred, &inp, k, t_k, &m.states)
-                    })?;
+                    if prep.prepare(&m.c, &inp.rv, mask, n, nm).is_err() {
+                        let r = &joseph.r_pred;
+                        return Err(not_positive(&big_r, r, &inp, k, t_k, m, &prep.idx));
+                    }
                     avail_prev.copy_from_slice(&avail);
                     if k == 1 || mask_changed {
                         for (h, p) in has_meas.iter_mut().zip(pair) {
@@ -610,7 +611,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                         Some((j, t_j, i)) if all_finite(&big_r) => {
                             lost_precision(k, t_k, j, t_j, &m.states[i])
                         }
-                        _ => not_positive(&big_r, &joseph.r_pred, &inp, k, t_k, &m.states),
+                        _ => not_positive(&big_r, &joseph.r_pred, &inp, k, t_k, m, &prep.idx),
                     });
                 }
                 for i in 0..n {
@@ -1141,10 +1142,12 @@ fn not_positive(
     inp: &Inputs,
     k: u64,
     t: f64,
-    states: &[String],
+    m: &CompiledModel,
+    available: &[usize],
 ) -> Error {
+    let states = &m.states;
     if all_finite(big_r) {
-        return singular(k, t);
+        return singular_at(r_pred, inp, m, available, k, t).unwrap_or_else(|| singular(k, t));
     }
     let otherwise = "the noise levels or the initial SKOs are too large to square";
     // The prediction A R Aᵀ + B is where a variance first leaves f64's range.
@@ -1275,6 +1278,80 @@ fn lost_precision(k: u64, t: f64, j: u64, t_j: f64, state: &str) -> Error {
 }
 
 /// A singular innovation covariance at step k (time t), with its possible causes.
+/// The singular innovation covariance q = C r Cᵀ + Γ V Γᵀ (over the `available`
+/// measurements, r the prediction) named at the measurement where it fails: one whose
+/// q is 0 (no noise, and what it measures known exactly), else the first that adds
+/// nothing to those before it (q's Cholesky pivot ≤ 1e-14 of its diagonal: its
+/// innovation is a combination of theirs). None if q turns out definite here.
+fn singular_at(
+    r_pred: &[f64],
+    inp: &Inputs,
+    m: &CompiledModel,
+    available: &[usize],
+    k: u64,
+    t: f64,
+) -> Option<Error> {
+    let (n, nm) = (inp.n, m.measurements.len());
+    let mut idx = available.to_vec();
+    idx.sort_unstable();
+    let nk = idx.len();
+    let row = |j: usize| &m.c[j * n..j * n + n];
+    let mut q = vec![0.0; nk * nk];
+    for (a, &i) in idx.iter().enumerate() {
+        for (b, &j) in idx.iter().enumerate() {
+            let crc: f64 = (0..n)
+                .map(|x| row(i)[x] * (0..n).map(|y| r_pred[x * n + y] * row(j)[y]).sum::<f64>())
+                .sum();
+            q[a * nk + b] = crc + inp.rv[i * nm + j];
+        }
+    }
+    let culprit = |j: usize, message: String| Error::Numerical {
+        step: k,
+        t,
+        path: format!("measurement.c[{j}]"),
+        message,
+    };
+    if let Some(a) = (0..nk).find(|&a| q[a * nk + a] <= 0.0) {
+        let j = idx[a];
+        return Some(culprit(
+            j,
+            format!(
+                "the innovation covariance q = C r Cᵀ + Γ V Γᵀ is singular: measurement \"{}\" has no error (its Γ V Γᵀ is 0) and what it measures is known exactly (its C r Cᵀ is 0: the states it measures have no variance yet, nor process noise); give it noise (psi or V), or those states an initial SKO (eta0)",
+                m.measurements[j]
+            ),
+        ));
+    }
+    // Cholesky, row by row: the pivot of row a is what measurement a adds.
+    let mut l = vec![0.0; nk * nk];
+    for a in 0..nk {
+        for b in 0..=a {
+            let dot: f64 = (0..b).map(|x| l[a * nk + x] * l[b * nk + x]).sum();
+            let v = q[a * nk + b] - dot;
+            if a == b {
+                if v <= 1e-14 * q[a * nk + a] {
+                    let j = idx[a];
+                    let before: Vec<&str> = idx[..a]
+                        .iter()
+                        .map(|&i| m.measurements[i].as_str())
+                        .collect();
+                    return Some(culprit(
+                        j,
+                        format!(
+                            "the innovation covariance q = C r Cᵀ + Γ V Γᵀ is singular: measurement \"{}\" adds nothing to {} (its error and what it measures are a combination of theirs, with no error of its own); give it noise of its own (psi or V), or drop it",
+                            m.measurements[j],
+                            quoted_names(&before)
+                        ),
+                    ));
+                }
+                l[a * nk + a] = v.sqrt();
+            } else {
+                l[a * nk + b] = v / l[b * nk + b];
+            }
+        }
+    }
+    None
+}
+
 pub(crate) fn singular(k: u64, t: f64) -> Error {
     Error::Numerical {
         step: k,

@@ -409,8 +409,12 @@ fn singular_innovation_covariance_names_step_and_time() {
         } => {
             assert_eq!(*step, 1);
             assert!((t - 0.01).abs() < 1e-12);
-            assert_eq!(path, "measurement");
-            assert!(message.contains("innovation covariance"), "{message}");
+            assert_eq!(path, "measurement.c[0]");
+            assert!(
+                message.contains("innovation covariance")
+                    && message.contains("measurement \"zx\" has no error"),
+                "{message}"
+            );
         }
         other => panic!("expected a numerical error, got {other:?}"),
     }
@@ -1159,4 +1163,50 @@ fn the_web_editors_reserved_names_are_the_cores() {
     core.sort_unstable();
     core.dedup();
     assert_eq!(web, core);
+}
+
+/// A singular innovation covariance was one message for any measurement, at
+/// `measurement` ("a measurement has no error … and what it measures is already known
+/// exactly"), even where one measurement did it (the web form's new measurement of a
+/// state with η₀ = 0 and no noise). Now it names the measurement, at its row of c.
+#[test]
+fn a_singular_innovation_covariance_names_the_measurement() {
+    let model = |measurement: Value| {
+        json!({
+            "time": {"t0": 0.0, "t_end": 1.0, "steps": 100},
+            "system": {
+                "states": ["x", "v"], "a": [[0, 1], [0, 0]], "b": [[1], [0]],
+                "phi": [0.1], "y0": [0, 1], "eta0": [1, 0]
+            },
+            "measurement": measurement
+        })
+    };
+    // z2 measures v, whose variance stays 0 (η₀ = 0, no noise reaches it), with no
+    // noise of its own.
+    expect_error(
+        model(json!({
+            "names": ["z1", "z2"], "c": [[1, 0], [0, 1]],
+            "gamma": [[1, 0], [0, 0]], "psi": [0.1, 0.1]
+        })),
+        "measurement.c[1]",
+        "measurement \"z2\" has no error (its Γ V Γᵀ is 0) and what it measures is known exactly",
+    );
+    // z2 is z1 again, with the same noise source: it adds nothing.
+    expect_error(
+        model(json!({
+            "names": ["z1", "z2"], "c": [[1, 0], [1, 0]],
+            "gamma": [[1], [1]], "psi": [0.1]
+        })),
+        "measurement.c[1]",
+        "measurement \"z2\" adds nothing to \"z1\"",
+    );
+}
+
+/// Run `v` and expect an error at `path` containing `fragment`.
+fn expect_error(v: Value, path: &str, fragment: &str) {
+    let m = model_from_value(v).unwrap();
+    let err = analyze(&m, &Overrides::new(), &mut NoProgress).unwrap_err();
+    let e = &err.field_errors()[0];
+    assert_eq!(e.path, path, "{e:?}");
+    assert!(e.message.contains(fragment), "{}", e.message);
 }

@@ -760,6 +760,15 @@ fn check_names(names: &[String], path: &str, errs: &mut Errors) {
     for (i, name) in names.iter().enumerate() {
         if name.trim().is_empty() {
             errs.at(&format!("{path}[{i}]"), "a name must not be empty");
+        } else if name.chars().any(char::is_control) {
+            // (A line break in a name split the command line's table row in two.)
+            errs.at(
+                &format!("{path}[{i}]"),
+                format!(
+                    "a name must not contain control characters (a line break, a tab, NUL), got {}",
+                    serde_json::Value::from(name.as_str())
+                ),
+            );
         } else if names[..i].contains(name) {
             errs.at(
                 &format!("{path}[{i}]"),

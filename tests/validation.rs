@@ -1210,3 +1210,21 @@ fn expect_error(v: Value, path: &str, fragment: &str) {
     assert_eq!(e.path, path, "{e:?}");
     assert!(e.message.contains(fragment), "{}", e.message);
 }
+
+/// A state or measurement name with a line break (or NUL) was accepted, and split the
+/// command line's table row in two.
+#[test]
+fn names_have_no_control_characters() {
+    expect(
+        |v| v["system"]["states"] = json!(["x", "a\nb"]),
+        &[],
+        "system.states[1]",
+        "must not contain control characters (a line break, a tab, NUL), got \"a\\nb\"",
+    );
+    expect(
+        |v| v["measurement"]["names"] = json!(["z\u{0}"]),
+        &[],
+        "measurement.names[0]",
+        "control characters",
+    );
+}

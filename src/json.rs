@@ -58,7 +58,20 @@ pub fn parse_json(text: &[u8]) -> Result<serde_json::Value, serde_json::Error> {
             text[e.valid_up_to()]
         )));
     }
-    serde_json::from_slice::<StrictValue>(text).map(|v| v.0)
+    serde_json::from_slice::<StrictValue>(text)
+        .map(|v| v.0)
+        .map_err(|e| {
+            // serde_json's words for its nesting limit read as if the JSON were wrong.
+            if e.to_string().starts_with("recursion limit exceeded") {
+                de::Error::custom(format!(
+                    "arrays and objects nested more than 128 deep, beyond what kea reads (the JSON itself may be valid) at line {} column {}",
+                    e.line(),
+                    e.column()
+                ))
+            } else {
+                e
+            }
+        })
 }
 
 /// Whether the text is UTF-16 (as Windows editors and PowerShell's `>` write it),
@@ -165,7 +178,11 @@ where
     impl<const MIN: u64, const MAX: u64> Visitor<'_> for Whole<MIN, MAX> {
         type Value = u64;
         fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-            write!(f, "a whole number from {MIN} to {MAX}")
+            if MAX == u64::MAX {
+                write!(f, "a whole number from {MIN}")
+            } else {
+                write!(f, "a whole number from {MIN} to {MAX}")
+            }
         }
         fn visit_u64<E: de::Error>(self, v: u64) -> Result<u64, E> {
             Ok(v)
@@ -383,6 +400,21 @@ mod tests {
         // The strict reader's checks still apply after it.
         let e = parse_json(b"\xEF\xBB\xBF{\"a\": 1, \"a\": 2}").unwrap_err();
         assert!(e.to_string().contains("appears twice"), "{e}");
+    }
+
+    /// JSON nested beyond serde_json's 128 levels was "recursion limit exceeded",
+    /// which reads as if the JSON were wrong.
+    #[test]
+    fn nesting_beyond_the_reader_is_named_as_its_limit() {
+        let deep = format!("{}{}", "[".repeat(200), "]".repeat(200));
+        let e = parse_json(deep.as_bytes()).unwrap_err().to_string();
+        assert!(
+            e.starts_with("arrays and objects nested more than 128 deep, beyond what kea reads"),
+            "{e}"
+        );
+        assert!(e.contains("at line 1 column 128"), "{e}");
+        let fine = format!("{}{}", "[".repeat(100), "]".repeat(100));
+        assert!(parse_json(fine.as_bytes()).is_ok());
     }
 
     /// A UTF-16 text (PowerShell's `>` writes one) or a code-page text was reported

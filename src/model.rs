@@ -242,12 +242,21 @@ pub struct Measurement {
     pub pairs: Option<Vec<Pair>>,
 }
 
+/// `every`: a whole number of steps from 1 (0 is refused with the schedule's rules).
+fn every_steps<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<u64>, D::Error> {
+    crate::json::whole_in::<_, u64, 1, { u64::MAX }>(d).map(Some)
+}
+
 /// Availability of one measurement: exactly one of `every`, `when`, `unavailable`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Schedule {
     /// Available at every k-th step (k ≡ offset mod every).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "every_steps"
+    )]
     pub every: Option<u64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub offset: Option<u64>,

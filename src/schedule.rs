@@ -101,7 +101,7 @@ pub fn compile(
             if every == 0 {
                 errs.push(FieldError::new(
                     format!("{path}.every"),
-                    "must be at least 1",
+                    "expected a whole number of steps from 1, got 0",
                 ));
                 items.push(Availability::Always);
             } else {

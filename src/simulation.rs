@@ -276,7 +276,7 @@ pub fn check_request(req: &SimulationRequest, model: &CompiledModel) -> Result<(
         errs.push(FieldError::new(
             "trace_points",
             format!(
-                "expected 2 to {max_rows} rows (at most {} values in all)",
+                "expected 2 to {max_rows} rows (at most {} values in all), got {tp}",
                 crate::validate::MAX_TRACE_VALUES
             ),
         ));

@@ -92,7 +92,10 @@ pub struct SeedSearch {
     /// Points analysed per batch (in parallel natively). Fixed by the request, never by
     /// the thread count, so the number of analyses is reproducible; after the first
     /// qualifying point the rest of its batch is discarded.
-    #[serde(default = "default_batch")]
+    #[serde(
+        default = "default_batch",
+        deserialize_with = "crate::json::whole_in::<_, _, 1, 1024>"
+    )]
     pub batch: usize,
 }
 
@@ -441,7 +444,7 @@ pub fn validate(req: &SynthesisRequest) -> Result<(), Error> {
             if s.batch == 0 || s.batch > 1024 {
                 errs.push(FieldError::new(
                     format!("{base}.batch"),
-                    "expected 1..=1024",
+                    format!("expected a whole number from 1 to 1024, got {}", s.batch),
                 ));
             }
             let mut total: usize = 1;

@@ -377,7 +377,9 @@ fn requests_are_validated_with_field_paths() {
     assert!(e[0].message.contains("limit"), "{e:?}");
     let mut req = request(10, 0, Truth::Process);
     req.trace_points = Some(0);
-    assert_eq!(bad(req)[0].path, "trace_points");
+    let e = bad(req);
+    assert_eq!(e[0].path, "trace_points");
+    assert!(e[0].message.ends_with(", got 0"), "{e:?}");
     // A runs that is not a whole number is refused naming the range (it said "a whole
     // number ≥ 0", though 0 and 1 are refused too).
     use serde_json::json;

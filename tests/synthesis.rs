@@ -532,6 +532,24 @@ fn invalid_requests_name_the_field() {
         Some(5),
         "a whole number written as a float is read"
     );
+    // batch: the range in words and the value (it said "expected 1..=1024").
+    let batch = |batch: Value| {
+        let v = json!({"model": model, "target": target,
+            "mode": {"seed_search": {"params": [{"name": "psi", "low": 2.5e-6, "high": 1e-5, "shrink": 0.5}], "batch": batch}}});
+        match synthesis::request_from_value(v) {
+            Err(e) => e,
+            Ok(req) => synthesis::validate(&req).expect_err("invalid"),
+        }
+        .to_string()
+    };
+    assert_eq!(
+        batch(json!(0)),
+        "mode.seed_search.batch: expected a whole number from 1 to 1024, got 0"
+    );
+    assert_eq!(
+        batch(json!(2.5)),
+        "mode.seed_search.batch: expected a whole number from 1 to 1024, got 2.5"
+    );
     let p = paths(json!({"model": model, "target": target,
         "mode": {"bisect": {"param": "psi", "lo": 1e-7, "high": 1e-5}}}));
     assert_eq!(p.len(), 1);

@@ -1228,3 +1228,26 @@ fn names_have_no_control_characters() {
         "control characters",
     );
 }
+
+/// `every` named no range for a wrong type ("a whole number ≥ 0") and another for 0
+/// ("must be at least 1"): now one range, from 1, in both.
+#[test]
+fn a_schedules_every_names_its_range() {
+    for (every, got) in [
+        (json!("2"), "got a string (\"2\")"),
+        (json!(2.5), "got 2.5"),
+    ] {
+        expect(
+            |v| v["measurement"]["schedule"] = json!([{ "every": every }]),
+            &[],
+            "measurement.schedule[0].every",
+            &format!("expected a whole number from 1, {got}"),
+        );
+    }
+    expect(
+        |v| v["measurement"]["schedule"] = json!([{"every": 0}]),
+        &[],
+        "measurement.schedule[0].every",
+        "expected a whole number of steps from 1, got 0",
+    );
+}

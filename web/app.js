@@ -13,7 +13,8 @@ import { modelErrorsText } from './views.js';
 const $ = (id) => document.getElementById(id);
 
 const service = new WasmWorker(); // presets, validation, CSV: never blocked by a run
-const runners = { browser: new BrowserRunner(), server: new ServerRunner() };
+// The server's running job is kept for this browser tab, to be followed again after a reload.
+const runners = { browser: new BrowserRunner(), server: new ServerRunner({ keep: 'kea-job-analysis' }) };
 // keepUrl: the address names a model that could not be loaded; it stays as it is
 // (for the person to see or fix) until the model is changed here.
 // edits: how many times the model has changed, so that a run's result can tell whether
@@ -194,20 +195,44 @@ async function run() {
     setStatus('The model has fields to fix first (see the marked fields).', true);
     return;
   }
+  const json = modelJson(); // the model as the run starts
+  await follow(where, runner, (onProgress) => runner.run(json, onProgress), state.edits);
+}
+
+/**
+ * The server job this browser tab's page started before it was reloaded, if it has not
+ * been seen to its end: followed again — progress, Cancel, its result (stale if the
+ * model shown is not the one it runs) — or, when the server no longer has it, forgotten
+ * without a word.
+ */
+function resume() {
+  const runner = runners.server;
+  const kept = runner.kept();
+  if (!kept || state.running) return;
+  if (document.querySelector('input[name=mode][value=server]').disabled) return runner.store(null);
+  const edits = JSON.stringify(kept.model) === modelJson() ? state.edits : -1;
+  return follow('server', runner, (onProgress) => runner.attach(kept.id, onProgress), edits, kept.id);
+}
+
+/**
+ * Show a run (`start(onProgress)` → {result, job}) in the run bar, then its result:
+ * current if the model has not changed since `edits` (the count when the run's model
+ * was taken). `resumed`: the id of a server job taken over after a reload.
+ */
+async function follow(where, runner, start, edits, resumed = null) {
   state.running = runner;
   $('run').disabled = true;
   $('cancel').disabled = false;
   $('progress').value = 0;
-  const label = where === 'browser' ? 'Running in this browser…' : 'Running on the server…';
+  const label = resumed ? `Following server job ${resumed} (started before the reload)…` : where === 'browser' ? 'Running in this browser…' : 'Running on the server…';
   setStatus(label);
   const started = performance.now();
   const onProgress = (p) => {
     $('progress').value = p;
     if (state.running === runner) setStatus(`${label} ${Math.floor(p * 100)} %`);
   };
-  const edits = state.edits; // the model is serialised as the run starts
   try {
-    const { result, job } = await runner.run(modelJson(), onProgress);
+    const { result, job } = await start(onProgress);
     $('progress').value = 1;
     const elapsed = performance.now() - started;
     state.result = result;
@@ -215,10 +240,16 @@ async function run() {
     const current = state.edits === edits;
     if (current) editor.showErrors([]); // else the check of the edited model has the say
     showResult(result, where, elapsed, current);
-    setStatus(`Done in ${fmt(elapsed / 1000)} s (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`);
+    setStatus(
+      resumed
+        ? `Done (server job ${job}, followed after the reload).`
+        : `Done in ${fmt(elapsed / 1000)} s (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`,
+    );
   } catch (e) {
     if (e.kind === 'cancelled') {
       setStatus('Cancelled.');
+    } else if (e.kind === 'gone' && resumed) {
+      setStatus('');
     } else {
       // The errors at their cells, and the first here, named as the editor names its
       // place (the core's title says `system.phi[0]`: the grids count from 1).
@@ -365,6 +396,9 @@ async function main() {
   // The link's tab (`&tab=synthesis` / `simulation`), kept in the URL as it changes.
   tabs.show(new URLSearchParams(location.hash.slice(1)).get('tab') ?? 'analysis');
   document.addEventListener('kea:tab-changed', saveToUrl);
+  // Server jobs started before a reload, followed again (the other tabs' run bars listen).
+  resume();
+  document.dispatchEvent(new Event('kea:resume'));
   // A link opened in this tab while kea is open (the address bar, a link elsewhere): its
   // model or preset, and its tab. The page's own address updates (history.replaceState)
   // fire no hashchange; an address that names what is shown already is left alone.

@@ -103,16 +103,33 @@ async function problemOf(response) {
 
 const CANCELLED = { kind: 'cancelled', title: 'cancelled', errors: [] };
 
-/** Runs on the server: POST a job, follow its events, fetch the result. */
+// Set while the page is being left (a reload, a close): the requests that cuts short
+// fail, but the job runs on, and its id stays kept for the next page to re-attach to.
+let leaving = false;
+addEventListener('pagehide', () => (leaving = true));
+addEventListener('pageshow', () => (leaving = false));
+
+/**
+ * Runs on the server: POST a job, follow its events, fetch the result. With `keep` (a
+ * sessionStorage key) the running job's id is kept for this browser tab, with its
+ * request: a page reloaded during the run re-attaches to it (`kept()`, `attach()`) to
+ * follow, cancel or show it, instead of leaving it to run on unseen.
+ */
 export class ServerRunner {
-  constructor(base = '') {
+  constructor({ base = '', keep = null } = {}) {
     this.base = base;
+    this.keep = keep;
     this.job = null;
     this.cancelRequested = false;
   }
 
   run(modelJson, onProgress) {
-    return this.runJob(`{"kind":"analysis","model":${modelJson}}`, onProgress, modelPaths);
+    return this.runJob(`{"kind":"analysis","model":${modelJson}}`, onProgress);
+  }
+
+  /** A refused request's or a failed job's problem, as the page reports it. */
+  located(problem) {
+    return modelPaths(problem);
   }
 
   /**
@@ -120,7 +137,7 @@ export class ServerRunner {
    * as `located(problem)`. A cancel that comes before the server has answered the POST
    * is remembered, and the job deleted as soon as its id is known.
    */
-  async runJob(body, onProgress, located) {
+  async runJob(body, onProgress) {
     this.cancelRequested = false;
     try {
       const response = await api(`${this.base}/v1/jobs`, {
@@ -128,21 +145,60 @@ export class ServerRunner {
         headers: { 'content-type': 'application/json' },
         body,
       });
-      if (!response.ok) throw located(await problemOf(response));
+      if (!response.ok) throw this.located(await problemOf(response));
       const job = await response.json();
-      this.job = job.id;
-      if (this.cancelRequested) await this.deleteJob(job.id);
-      const final = await this.follow(job.id, onProgress);
+      this.store({ id: job.id, body });
+      return await this.attach(job.id, onProgress);
+    } finally {
+      this.cancelRequested = false;
+    }
+  }
+
+  /**
+   * Follow the job `id` to its end and fetch its result: {result, job}; `cancel()`
+   * deletes it meanwhile. A job the server does not have (any more) throws {kind: 'gone'}.
+   * The kept id is forgotten once the job is over for this page, unless the page is
+   * being left.
+   */
+  async attach(id, onProgress) {
+    this.job = id;
+    try {
+      if (this.cancelRequested) await this.deleteJob(id);
+      const final = await this.follow(id, onProgress).catch((e) => {
+        throw e?.status === 404 ? { kind: 'gone', title: `the server has no job ${id}`, status: 404, errors: [] } : e;
+      });
       if (final.status === 'cancelled') throw CANCELLED;
       if (final.status !== 'succeeded') {
-        throw located({ title: final.error?.title ?? `job ${final.status}`, ...(final.error ?? {}) });
+        throw this.located({ title: final.error?.title ?? `job ${final.status}`, ...(final.error ?? {}) });
       }
-      const result = await api(`${this.base}/v1/jobs/${job.id}/result`);
-      if (!result.ok) throw located(await problemOf(result));
-      return { result: await result.json(), job: job.id };
+      const result = await api(`${this.base}/v1/jobs/${id}/result`);
+      if (!result.ok) throw this.located(await problemOf(result));
+      return { result: await result.json(), job: id };
     } finally {
       this.job = null;
-      this.cancelRequested = false;
+      if (!leaving) this.store(null);
+    }
+  }
+
+  /** The job kept by a page before a reload: {id, model} (the model it runs), or null. */
+  kept() {
+    if (!this.keep) return null;
+    try {
+      const { id, body } = JSON.parse(sessionStorage.getItem(this.keep) ?? 'null') ?? {};
+      return typeof id === 'string' ? { id, model: JSON.parse(body).model ?? null } : null;
+    } catch {
+      return null; // unreadable: nothing to re-attach to
+    }
+  }
+
+  /** Keep `job` ({id, body}) for this browser tab, or forget it (null). */
+  store(job) {
+    if (!this.keep) return;
+    try {
+      if (job) sessionStorage.setItem(this.keep, JSON.stringify(job));
+      else sessionStorage.removeItem(this.keep);
+    } catch {
+      // storage off or full: a reload cannot re-attach to this job
     }
   }
 

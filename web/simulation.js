@@ -60,7 +60,7 @@ export class SimulationView {
         el('p', { class: 'help', text: 'Each run draws its own ChaCha8 stream of the seed: the same seed gives bit-identical results in the browser and on the server. Cost ∝ R × D × N².' }),
       ),
     );
-    this.bar = new RunBar({ prefix: 'mc', label: 'Run Monte Carlo', op: 'simulate', kind: 'simulation', onRun: (where, exec) => this.run(where, exec) });
+    this.bar = new RunBar({ prefix: 'mc', label: 'Run Monte Carlo', op: 'simulate', kind: 'simulation', onRun: (where, exec) => this.run(where, exec), onResume: (model, exec) => this.resume(model, exec) });
     this.out = el('div', { id: 'mc-result', class: 'view-result', hidden: true });
     this.stateSelect = el('select', { id: 'mc-state' });
     this.log = el('input', { type: 'checkbox', id: 'mc-log' });
@@ -113,17 +113,36 @@ export class SimulationView {
       markControls(this.form, []);
       const invalid = await checkModel(request.model, this.ctx.pendingModelErrors?.() ?? []);
       if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
-      const edits = this.edits; // exec serialises the request at once
-      const { result, job } = await exec(request);
-      const current = this.edits === edits;
-      if (current) this.ctx.showModelErrors([]); // else the check of the edited model has the say
-      this.show(result, where, current);
-      return job;
+      return await this.follow(where, () => exec(request), request.model); // exec serialises the request at once
     } catch (e) {
-      const { own, model } = routeErrors(e?.errors, this.ctx.showModelErrors);
-      const unplaced = markControls(this.form, own);
-      throw runError(e, own, model, unplaced);
+      throw this.failed(e);
     }
+  }
+
+  /** A server job taken over after a reload (RunBar.resume); `model`: the model it runs. */
+  async resume(model, exec) {
+    try {
+      return await this.follow('server', exec, model);
+    } catch (e) {
+      throw this.failed(e);
+    }
+  }
+
+  /** Wait for a run's result and show it: current if `model` is still the editor's. Returns the job's id. */
+  async follow(where, exec, model) {
+    const edits = this.edits;
+    const { result, job } = await exec();
+    const current = this.edits === edits && JSON.stringify(model) === JSON.stringify(this.ctx.model());
+    if (current) this.ctx.showModelErrors([]); // else the check of the edited model has the say
+    this.show(result, where, current);
+    return job;
+  }
+
+  /** A run's error, its parts at the model's cells and at this tab's controls. */
+  failed(e) {
+    const { own, model } = routeErrors(e?.errors, this.ctx.showModelErrors);
+    const unplaced = markControls(this.form, own);
+    return runError(e, own, model, unplaced);
   }
 
   markStale() {

@@ -187,6 +187,7 @@ export class SynthesisView {
       op: 'synthesize',
       kind: 'synthesis',
       onRun: (where, exec) => this.run(where, exec),
+      onResume: (model, exec) => this.resume(model, exec),
     });
     this.form = el('form', { class: 'view-form', novalidate: true, onsubmit: (e) => e.preventDefault(), oninput: (e) => recheckControl(e.target, () => requestErrors(() => this.request())) }, target, modeSet);
     this.out = el('div', { id: 'syn-result', class: 'view-result', hidden: true });
@@ -392,17 +393,36 @@ export class SynthesisView {
       if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
       const overridden = await checkOverrides(request.model, this.overrides(request));
       if (overridden.length) throw { kind: 'invalid', title: 'Invalid synthesis request', errors: overridden };
-      const edits = this.edits; // exec serialises the request at once
-      const { result, job } = await exec(request);
-      const current = this.edits === edits;
-      if (current) this.ctx.showModelErrors([]); // else the check of the edited model has the say
-      this.show(result, where, current);
-      return job;
+      return await this.follow(where, () => exec(request), request.model); // exec serialises the request at once
     } catch (e) {
-      const { own, model } = routeErrors(e?.errors, this.ctx.showModelErrors);
-      const unplaced = markControls(this.form, own);
-      throw runError(e, own, model, unplaced);
+      throw this.failed(e);
     }
+  }
+
+  /** A server job taken over after a reload (RunBar.resume); `model`: the model it runs. */
+  async resume(model, exec) {
+    try {
+      return await this.follow('server', exec, model);
+    } catch (e) {
+      throw this.failed(e);
+    }
+  }
+
+  /** Wait for a run's result and show it: current if `model` is still the editor's. Returns the job's id. */
+  async follow(where, exec, model) {
+    const edits = this.edits;
+    const { result, job } = await exec();
+    const current = this.edits === edits && JSON.stringify(model) === JSON.stringify(this.ctx.model());
+    if (current) this.ctx.showModelErrors([]); // else the check of the edited model has the say
+    this.show(result, where, current);
+    return job;
+  }
+
+  /** A run's error, its parts at the model's cells and at this tab's controls. */
+  failed(e) {
+    const { own, model } = routeErrors(e?.errors, this.ctx.showModelErrors);
+    const unplaced = markControls(this.form, own);
+    return runError(e, own, model, unplaced);
   }
 
   // ------------------------------------------------------------ result

@@ -42,16 +42,22 @@ export function input(id, value, attrs = {}) {
   return el('input', { id, value: value ?? '', spellcheck: 'false', autocomplete: 'off', ...attrs });
 }
 
-/** A server job of one kind (`synthesis`, `simulation`): POST, follow SSE, fetch the result. */
+/**
+ * A server job of one kind (`synthesis`, `simulation`): POST, follow SSE, fetch the
+ * result. The running job is kept for this browser tab (`kea-job-KIND`): see RunBar.resume.
+ */
 class JobRunner extends ServerRunner {
   constructor(kind) {
-    super();
+    super({ keep: `kea-job-${kind}` });
     this.kind = kind;
   }
 
   run(request, onProgress) {
-    const located = (p) => ({ kind: p.type ?? p.kind ?? 'server', title: p.title, detail: p.detail, status: p.status, errors: p.errors ?? [] });
-    return this.runJob(JSON.stringify({ kind: this.kind, ...request }), onProgress, located);
+    return this.runJob(JSON.stringify({ kind: this.kind, ...request }), onProgress);
+  }
+
+  located(p) {
+    return { kind: p.type ?? p.kind ?? 'server', title: p.title, detail: p.detail, status: p.status, errors: p.errors ?? [] };
   }
 }
 
@@ -74,14 +80,17 @@ class WasmRunner {
 
 /**
  * The run bar of a view: "Run in" (browser/server), Run, Cancel, progress, status.
- * `onRun(where, runner)` does the work; the bar handles the buttons and the states.
+ * `onRun(where, exec)` does the work; the bar handles the buttons and the states.
+ * `onResume(model, exec)` takes over a server job this browser tab's page started
+ * before it was reloaded (`model`: the model it runs), when app.js says `kea:resume`.
  */
 export class RunBar {
-  constructor({ prefix, label, op, kind, onRun }) {
+  constructor({ prefix, label, op, kind, onRun, onResume }) {
     this.prefix = prefix;
     this.runners = { browser: new WasmRunner(op), server: new JobRunner(kind) };
     this.running = null;
     this.onRun = onRun;
+    this.onResume = onResume;
     const radio = (value, text, checked) =>
       el('label', {}, el('input', { type: 'radio', name: `${prefix}-where`, value, checked }), ` ${text}`);
     this.serverRadio = radio('server', 'the server (job)', false);
@@ -100,6 +109,7 @@ export class RunBar {
     );
     this.runButton.addEventListener('click', () => this.run());
     this.cancelButton.addEventListener('click', () => this.cancel());
+    document.addEventListener('kea:resume', () => this.resume(), { once: true });
   }
 
   where() {
@@ -117,15 +127,37 @@ export class RunBar {
     this.status.classList.toggle('error', error);
   }
 
-  async run() {
+  run() {
     if (this.running) return;
     const where = this.where();
     const runner = this.runners[where];
+    return this.follow(where, runner, (onProgress) => this.onRun(where, (request) => runner.run(request, onProgress)));
+  }
+
+  /**
+   * The server job this browser tab's page started before it was reloaded, if it has
+   * not been seen to its end: followed again — progress, Cancel, its result — or, when
+   * the server no longer has it, forgotten without a word. Without a server it is
+   * forgotten too.
+   */
+  resume() {
+    const runner = this.runners.server;
+    const kept = runner.kept();
+    if (!kept || this.running) return;
+    if (this.serverRadio.querySelector('input').disabled) return runner.store(null);
+    return this.follow('server', runner, (onProgress) => this.onResume(kept.model, () => runner.attach(kept.id, onProgress)), kept.id);
+  }
+
+  /**
+   * Show a run (`start(onProgress)` → the job's id, if a server job) in the bar, to its
+   * end; `resumed`: the id of a job taken over after a reload.
+   */
+  async follow(where, runner, start, resumed = null) {
     this.running = runner;
     this.runButton.disabled = true;
     this.cancelButton.disabled = false;
     this.progress.value = 0;
-    const label = where === 'browser' ? 'Running in this browser…' : 'Running on the server…';
+    const label = resumed ? `Following server job ${resumed} (started before the reload)…` : where === 'browser' ? 'Running in this browser…' : 'Running on the server…';
     this.setStatus(label);
     const onProgress = (p) => {
       this.progress.value = p;
@@ -133,13 +165,14 @@ export class RunBar {
     };
     const started = performance.now();
     try {
-      const job = await this.onRun(where, (request) => runner.run(request, onProgress));
+      const job = await start(onProgress);
       this.progress.value = 1;
       const s = (performance.now() - started) / 1000;
-      this.setStatus(`Done in ${fmt(s)} s (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`);
+      this.setStatus(resumed ? `Done (server job ${job}, followed after the reload).` : `Done in ${fmt(s)} s (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`);
     } catch (e) {
       this.progress.value = 0;
       if (e?.kind === 'cancelled') this.setStatus('Cancelled.');
+      else if (e?.kind === 'gone' && resumed) this.setStatus('');
       else this.setStatus(e?.message ?? e?.title ?? String(e), true);
     } finally {
       this.running = null;
@@ -286,7 +319,7 @@ export function routeErrors(errors, showModelErrors) {
  * their paths).
  */
 export function runError(e, ownErrors, modelErrors, unplaced = []) {
-  if (e?.kind === 'cancelled') return e;
+  if (e?.kind === 'cancelled' || e?.kind === 'gone') return e;
   const parts = [];
   if (ownErrors.length) {
     parts.push(

@@ -1,0 +1,134 @@
+// The page's own behaviour around runs and links, in a real browser against the real
+// server: a server job outlives a reload of its page and is followed again (Cancel,
+// progress, result); "Run in" is one setting; the preset picker can be undone with
+// Back; broken links say what is broken; the Synthesis grid fits; durations read alike.
+
+import { after, before, test } from 'node:test';
+import assert from 'node:assert/strict';
+import { kea, launchBrowser, newPage, startServer } from './lib.mjs';
+
+let server;
+let browser;
+let page;
+const consoleErrors = [];
+
+before(async () => {
+  server = await startServer();
+  browser = await launchBrowser();
+  page = await newPage(browser, consoleErrors);
+  await page.goto(`${server.url}/`);
+  await ready(page);
+});
+
+after(async () => {
+  await browser?.close();
+  await server?.stop();
+});
+
+function ready(p = page) {
+  return p.waitForSelector('body[data-ready=true]', { timeout: 30000 });
+}
+
+/** Load a preset and wait for its link. */
+async function preset(name) {
+  await page.selectOption('#preset', name);
+  await page.waitForFunction((n) => location.hash.startsWith(`#preset=${n}`), name);
+}
+
+/** The job the server has under `id`. */
+async function job(id) {
+  return (await fetch(`${server.url}/v1/jobs/${id}`)).json();
+}
+
+/** The job the page keeps under `key` for this browser tab ({id, body}), or null. */
+function keptJob(key) {
+  return page.evaluate((k) => JSON.parse(sessionStorage.getItem(k) ?? 'null'), key);
+}
+
+/** Make the loaded model long: D = 10⁸ steps and no steady-state shortcut. */
+async function makeLong() {
+  await preset('seed-example');
+  await page.fill('input[data-path="time.steps"]', '100000000');
+  await page.uncheck('input[data-path="options.steady_state_shortcut"]');
+  await page.waitForFunction(() => location.hash.startsWith('#model=')); // the edited model in the link
+}
+
+test('a reload during a server analysis follows its job again: progress, Cancel', async () => {
+  await makeLong();
+  await page.check('input[name=mode][value=server]');
+  await page.click('#run');
+  await page.waitForFunction(() => document.querySelector('#progress').value > 0, null, { timeout: 30000 });
+  const { id } = await keptJob('kea-job-analysis');
+  assert.equal((await job(id)).status, 'running');
+
+  await page.reload();
+  await ready();
+  assert.equal(await page.isDisabled('#cancel'), false, 'Cancel is enabled');
+  assert.equal(await page.isDisabled('#run'), true, 'Run waits for the job');
+  assert.match(await page.textContent('#status'), new RegExp(`server job ${id}`));
+  await page.waitForFunction(() => document.querySelector('#progress').value > 0, null, { timeout: 10000 });
+
+  await page.click('#cancel');
+  await page.waitForFunction(() => document.querySelector('#status').textContent === 'Cancelled.', null, { timeout: 10000 });
+  assert.equal((await job(id)).status, 'cancelled');
+  assert.equal(await keptJob('kea-job-analysis'), null, 'the job is forgotten');
+  assert.equal(await page.isDisabled('#run'), false);
+});
+
+test("a job that ended while the page was away shows its result; one the server lacks is forgotten quietly", async () => {
+  await preset('seed-example');
+  const body = JSON.stringify({ kind: 'analysis', model: JSON.parse(kea('preset', 'seed-example')) });
+  const posted = await (await fetch(`${server.url}/v1/jobs`, { method: 'POST', headers: { 'content-type': 'application/json' }, body })).json();
+  for (let i = 0; (await job(posted.id)).status !== 'succeeded'; i++) {
+    assert.ok(i < 300, 'the job ends');
+    await new Promise((r) => setTimeout(r, 100));
+  }
+  await page.evaluate((kept) => sessionStorage.setItem('kea-job-analysis', kept), JSON.stringify({ id: posted.id, body }));
+  await page.reload();
+  await ready();
+  await page.waitForFunction(() => document.querySelector('#summary')?.dataset.where === 'server', null, { timeout: 10000 });
+  assert.match(await page.textContent('#status'), new RegExp(`Done \\(server job ${posted.id}`));
+  assert.equal(await page.$eval('#results', (e) => e.classList.contains('stale')), false, 'the model shown is the one it ran');
+  const expected = JSON.parse(kea('analyze', 'presets/seed-example.json', '--json')).criteria.bound.weighted.yx;
+  const shown = Number(await page.getAttribute('#criteria-table td[data-set=bound][data-criterion=yx][data-row=weighted]', 'data-value'));
+  assert.ok(Math.abs(shown - expected) <= 1e-9 * Math.abs(expected), `${shown} vs ${expected}`);
+  assert.equal(await keptJob('kea-job-analysis'), null);
+
+  // Gone: no message, nothing running, nothing kept. (The browser logs the 404s of the
+  // requests that find it gone; nothing else may be logged.)
+  const logged = consoleErrors.length;
+  await page.evaluate((kept) => sessionStorage.setItem('kea-job-analysis', kept), JSON.stringify({ id: '00000000-0000-0000-0000-000000000000', body }));
+  await page.reload();
+  await ready();
+  await page.waitForFunction(() => !document.querySelector('#run').disabled, null, { timeout: 10000 });
+  assert.equal(await page.textContent('#status'), '');
+  assert.equal(await keptJob('kea-job-analysis'), null);
+  const gone = consoleErrors.splice(logged);
+  assert.ok(gone.every((e) => /status of 404/.test(e)), gone.join('\n'));
+});
+
+test('a reload during a server Monte Carlo follows its job again, to its cancel', async () => {
+  await preset('seed-example');
+  await page.fill('input[data-path="time.steps"]', '100000');
+  await page.click('#tab-simulation');
+  await page.fill('#mc-runs', '20000');
+  await page.waitForFunction(() => /^#model=.*&tab=simulation$/.test(location.hash)); // what the reload opens
+  await page.check('input[name=mc-where][value=server]');
+  await page.click('#mc-run');
+  await page.waitForFunction(() => document.getElementById('mc-progress').value > 0, null, { timeout: 30000 });
+  const { id } = await keptJob('kea-job-simulation');
+  await page.reload();
+  await ready();
+  assert.equal(await page.isVisible('#simulation-panel'), true);
+  assert.equal(await page.isDisabled('#mc-cancel'), false);
+  await page.waitForFunction(() => document.getElementById('mc-progress').value > 0, null, { timeout: 10000 });
+  await page.keyboard.press('Escape');
+  await page.waitForFunction(() => document.getElementById('mc-status').textContent === 'Cancelled.', null, { timeout: 10000 });
+  assert.equal((await job(id)).status, 'cancelled');
+  assert.equal(await keptJob('kea-job-simulation'), null);
+  await page.click('#tab-analysis');
+});
+
+test('the page logged no console errors', () => {
+  assert.deepEqual(consoleErrors, []);
+});

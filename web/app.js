@@ -186,6 +186,35 @@ function mode() {
   return document.querySelector('input[name=mode]:checked').value;
 }
 
+/**
+ * "Run in" is one setting for the three tabs, though each run bar shows it: a choice
+ * made in one is made in all, and kept over a reload for this browser tab
+ * (sessionStorage, as the Synthesis and Monte Carlo fields are). A server that does
+ * not answer (its choices disabled) leaves it in the browser.
+ */
+function shareRunIn() {
+  const KEY = 'kea-run-in';
+  const choices = [...document.querySelectorAll('.run-controls .mode input[type=radio]')];
+  const choose = (value) => choices.forEach((c) => (c.checked = c.value === value));
+  let kept = null;
+  try {
+    kept = sessionStorage.getItem(KEY);
+  } catch {
+    // storage off: the default
+  }
+  if (choices.some((c) => c.value === kept && !c.disabled)) choose(kept);
+  for (const c of choices) {
+    c.addEventListener('change', () => {
+      choose(c.value);
+      try {
+        sessionStorage.setItem(KEY, c.value);
+      } catch {
+        // storage off: not kept
+      }
+    });
+  }
+}
+
 async function run() {
   if (state.running) return;
   const where = mode();
@@ -392,6 +421,7 @@ async function main() {
     fileStem,
     server: !document.querySelector('input[name=mode][value=server]').disabled,
   });
+  shareRunIn();
   await loadFromUrl();
   // The link's tab (`&tab=synthesis` / `simulation`), kept in the URL as it changes.
   tabs.show(new URLSearchParams(location.hash.slice(1)).get('tab') ?? 'analysis');

@@ -124,6 +124,24 @@ async function loadPreset(name, options) {
 }
 
 /**
+ * The preset picker's choice. A model of one's own (edited, imported, from a link) is
+ * not thrown away with no way back (an arrow key on the picker is enough to choose):
+ * its link stays in the history, one Back away (hashchange loads it again), and the
+ * preset gets a history entry of its own.
+ */
+async function choosePreset(name) {
+  if (!state.preset) {
+    clearTimeout(urlTimer);
+    history.replaceState(null, '', await linkHash()); // the model as it is now, not 300 ms ago
+    history.pushState(null, '', `#preset=${encodeURIComponent(name)}${tabParam()}`);
+    await loadPreset(name);
+    setPageStatus('Loaded the preset; the browser’s Back brings your model back.');
+    return;
+  }
+  await loadPreset(name);
+}
+
+/**
  * The link's model (`#model=…`) or preset (`#preset=NAME`). A link that cannot be read
  * is said to be broken; the seed example is shown and the address kept as it is.
  */
@@ -349,7 +367,7 @@ async function main() {
       }),
     );
   }
-  picker.addEventListener('change', () => picker.value && loadPreset(picker.value));
+  picker.addEventListener('change', () => picker.value && choosePreset(picker.value));
 
   $('export-model').addEventListener('click', () =>
     download(`${fileStem()}.json`, 'application/json', JSON.stringify(editor.model, null, 2) + '\n'),

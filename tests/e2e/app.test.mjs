@@ -145,6 +145,25 @@ test('"Run in" is one setting for the three tabs, kept over a reload', async () 
   await page.click('#tab-analysis');
 });
 
+test("a preset chosen over an edited model leaves that model one Back away", async () => {
+  await preset('seed-example');
+  await page.fill('input[data-path="params.c"]', '0.6');
+  await page.waitForFunction(() => location.hash.startsWith('#model='));
+  const edited = await page.evaluate(() => location.hash);
+  await page.focus('#preset');
+  await page.keyboard.press('ArrowDown'); // one key on the picker loads a preset: the first, after “(custom model)”
+  await page.waitForFunction(() => location.hash.startsWith('#preset='));
+  assert.notEqual(await page.inputValue('input[data-path="params.c"]'), '0.6');
+  assert.match(await page.textContent('#page-status'), /Back brings your model back/);
+  await page.goBack();
+  await page.waitForFunction(() => document.querySelector('input[data-path="params.c"]')?.value === '0.6', null, { timeout: 10000 });
+  assert.equal(await page.evaluate(() => location.hash), edited);
+  assert.equal(await page.inputValue('#preset'), '');
+  // The preset is one Forward away.
+  await page.goForward();
+  await page.waitForFunction(() => document.getElementById('preset').value !== '');
+});
+
 test('the page logged no console errors', () => {
   assert.deepEqual(consoleErrors, []);
 });

@@ -39,9 +39,34 @@ async function encodeModel(json) {
   return toBase64Url(await new Response(stream).arrayBuffer());
 }
 
+/** A link's model data that is damaged or cut short: `message` says which step failed. */
+class DamagedLink extends Error {}
+
+/**
+ * The model in a link's `#model=` text. Each step that can fail on damaged or cut
+ * data throws a DamagedLink naming it, in place of the browser's words (a failed
+ * inflate says "Failed to fetch", which reads like a network outage).
+ */
 async function decodeModel(text) {
-  const stream = new Blob([fromBase64Url(text)]).stream().pipeThrough(new DecompressionStream('deflate-raw'));
-  return JSON.parse(await new Response(stream).text());
+  if (!text) throw new DamagedLink('there is no data after “model=”');
+  let bytes;
+  try {
+    bytes = fromBase64Url(text);
+  } catch {
+    throw new DamagedLink('the text is not base64url');
+  }
+  let json;
+  try {
+    const stream = new Blob([bytes]).stream().pipeThrough(new DecompressionStream('deflate-raw'));
+    json = await new Response(stream).text();
+  } catch {
+    throw new DamagedLink('the compressed data does not inflate');
+  }
+  try {
+    return JSON.parse(json);
+  } catch (e) {
+    throw new DamagedLink(`the inflated text is not JSON: ${e.message}`);
+  }
 }
 
 /** The run pane's tab for a link: `&tab=NAME`, nothing for Analysis. */
@@ -147,27 +172,28 @@ async function choosePreset(name) {
  */
 async function loadFromUrl() {
   const params = new URLSearchParams(location.hash.slice(1));
-  let problem;
+  let problem; // what the message says after “could not be read”: ` (why)` or `: …`
   if (params.has('model')) {
     try {
       const model = await decodeModel(params.get('model'));
-      problem = modelProblem(model);
-      if (!problem) return await loadModel(model);
+      const wrong = modelProblem(model);
+      if (!wrong) return await loadModel(model);
+      problem = ` (${wrong})`;
     } catch (e) {
-      problem = e.message || String(e);
+      problem = e instanceof DamagedLink ? `: its data is damaged or truncated (${e.message})` : ` (${e.message || e})`;
     }
   } else if (params.has('preset')) {
     try {
       return await loadPreset(params.get('preset'));
     } catch (e) {
-      problem = e.message || String(e);
+      problem = ` (${e.message || e})`;
     }
   } else {
     return loadPreset('seed-example');
   }
   const errors = await loadPreset('seed-example', { keepUrl: true });
   setPageStatus(
-    `This link's model could not be read (${problem}). Showing the seed example instead; the address is kept until you change the model.`,
+    `This link's model could not be read${problem}. Showing the seed example instead; the address is kept until you change the model.`,
     true,
   );
   return errors;

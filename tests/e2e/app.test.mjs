@@ -5,6 +5,7 @@
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
+import { deflateRawSync } from 'node:zlib';
 import { kea, launchBrowser, newPage, startServer } from './lib.mjs';
 
 let server;
@@ -162,6 +163,34 @@ test("a preset chosen over an edited model leaves that model one Back away", asy
   // The preset is one Forward away.
   await page.goForward();
   await page.waitForFunction(() => document.getElementById('preset').value !== '');
+});
+
+test('a broken share link says its data is damaged, and which step failed', async () => {
+  const notJson = deflateRawSync('hello world').toString('base64url');
+  const cases = [
+    ['garbage', /the compressed data does not inflate/],
+    ['AAAA', /the compressed data does not inflate/],
+    ['aGVsbG8gd29ybGQ', /the compressed data does not inflate/],
+    ['', /there is no data after “model=”/],
+    ['A', /the text is not base64url/],
+    [notJson, /the inflated text is not JSON/],
+  ];
+  const errors = [];
+  const other = await newPage(browser, errors);
+  try {
+    for (const [data, why] of cases) {
+      await other.goto(`${server.url}/#model=${data}`);
+      await ready(other);
+      const said = await other.textContent('#page-status');
+      assert.match(said, /^This link's model could not be read: its data is damaged or truncated \(/, `#model=${data}: ${said}`);
+      assert.match(said, why, `#model=${data}: ${said}`);
+      assert.doesNotMatch(said, /fetch/i);
+      await other.goto('about:blank'); // the next link is a fresh page, not a hashchange
+    }
+  } finally {
+    await other.context().close();
+  }
+  assert.deepEqual(errors, []);
 });
 
 test('the page logged no console errors', () => {

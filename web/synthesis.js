@@ -41,6 +41,7 @@ export class SynthesisView {
     this.ctx = ctx;
     this.result = null;
     this.edits = 0; // model changes seen (markStale): a result is current if none came during its run
+    this.resized = new ResizeObserver((entries) => entries.forEach((e) => scrollHint(e.target))); // the grid tables' boxes
     this.build();
   }
 
@@ -430,6 +431,7 @@ export class SynthesisView {
   /** Show a result; `current`: the model has not changed since the run started. */
   show(r, where, current = true) {
     this.result = r;
+    this.resized.disconnect(); // the boxes of the tables shown before
     this.out.hidden = false;
     this.out.classList.toggle('stale', !current);
     this.out.dataset.where = where;
@@ -478,14 +480,15 @@ export class SynthesisView {
     const pageValues = pages ? pages.values : [null];
     pageValues.forEach((pv, k) => {
       const table = el('table', { class: 'criteria syn-table' });
-      table.append(el('caption', { text: pages ? `${pages.name} = ${fmt(pv)}` : `${rows.name}${cols ? ` × ${cols.name}` : ''}` }));
+      const title = pages ? `${pages.name} = ${fmt(pv)}` : `${rows.name}${cols ? ` × ${cols.name}` : ''}`;
+      table.append(el('caption', {}, title, el('span', { class: 'scroll-hint', text: ' — scroll sideways for more ↔' })));
       const colValues = cols ? cols.values : [null];
       table.append(
-        el('thead', {}, el('tr', {}, el('th', { scope: 'col', text: cols ? `${rows.name} \\ ${cols.name}` : rows.name }), ...colValues.map((cv) => el('th', { scope: 'col', text: cols ? `${cols.name} = ${fmt(cv)}` : LABEL.yz + ' / ' + LABEL.zx + ' / ' + LABEL.yx })))),
+        el('thead', {}, el('tr', {}, el('th', { scope: 'col', text: cols ? `${rows.name} \\ ${cols.name}` : rows.name }), ...colValues.map((cv) => el('th', { scope: 'col' }, ...(cols ? valueLabel(cols.name, cv) : [LABEL.yz + ' / ' + LABEL.zx + ' / ' + LABEL.yx]))))),
       );
       const body = el('tbody');
       rows.values.forEach((rv, i) => {
-        const tr = el('tr', {}, el('th', { scope: 'row', text: `${rows.name} = ${fmt(rv)}` }));
+        const tr = el('tr', {}, el('th', { scope: 'row' }, ...valueLabel(rows.name, rv)));
         colValues.forEach((_, j) => {
           const index = [i, ...(cols ? [j] : []), ...(pages ? [k] : [])];
           const key = index.join(',');
@@ -501,18 +504,23 @@ export class SynthesisView {
             title: p ? `${Object.entries(p.params).map(([n, v]) => `${n} = ${v}`).join(', ')}: F_YZ ${p.yz}, F_ZX ${p.zx}, F_YX ${p.yx}${p.note ? ` (${p.note})` : ''}` : '',
           });
           if (p) {
+            // Each number with the “/” or the ✓ after it: a cell wraps between them (style.css).
             for (const [n, c] of [['yz', 'F_YZ'], ['zx', 'F_ZX'], ['yx', 'F_YX']]) {
-              if (n !== 'yz') td.append(' / ');
-              td.append(el('span', { class: n === crit ? 'target-crit' : null, title: c, text: fmt(p[n]) }));
+              if (n !== 'yz') td.append(' ');
+              const after = n !== 'yx' ? ' /' : p.meets ? el('span', { class: 'mark', 'aria-label': 'meets the target', text: ' ✓' }) : null;
+              td.append(el('span', {}, el('span', { class: n === crit ? 'target-crit' : null, title: c, text: fmt(p[n]) }), after));
             }
-            if (p.meets) td.append(el('span', { class: 'mark', 'aria-label': 'meets the target', text: ' ✓' }));
           }
           tr.append(td);
         });
         body.append(tr);
       });
       table.append(body);
-      wrap.append(table);
+      // Too many columns to fit even with the cells wrapped: scrolled, and said so.
+      const box = el('div', { class: 'grid-wrap' }, table);
+      box.addEventListener('scroll', () => scrollHint(box), { passive: true });
+      this.resized.observe(box);
+      wrap.append(box);
     });
     if (cheapest) {
       const c = byIndex.get(cheapest);
@@ -580,6 +588,23 @@ function errorParams(model) {
   const names = Object.keys(model.params ?? {});
   const used = names.filter((n) => new RegExp(`(^|[^A-Za-z0-9_])${n.replace(/[^A-Za-z0-9_]/g, '')}($|[^A-Za-z0-9_])`).test(text));
   return [...used, ...names.filter((n) => !used.includes(n))];
+}
+
+/** `name = value` for a grid's heading: it may wrap after the “=”, not inside the number (`1e-6`). */
+function valueLabel(name, value) {
+  return [`${name} = `, el('span', { class: 'value', text: fmt(value) })];
+}
+
+/**
+ * Mark a table's box that is wider than the pane, as the model editor marks its grids
+ * (the same classes, style.css): the caption's hint, and a faded edge on each side
+ * with more columns.
+ */
+function scrollHint(box) {
+  const more = box.scrollWidth - box.clientWidth;
+  box.classList.toggle('overflows', more > 1);
+  box.classList.toggle('more-left', box.scrollLeft > 1);
+  box.classList.toggle('more-right', more - box.scrollLeft > 1);
 }
 
 function paramsText(params) {

@@ -193,6 +193,39 @@ test('a broken share link says its data is damaged, and which step failed', asyn
   assert.deepEqual(errors, []);
 });
 
+test('at 1366 × 800 a Synthesis grid fits its box: no number is cut off', async () => {
+  const errors = [];
+  const other = await newPage(browser, errors);
+  try {
+    await other.setViewportSize({ width: 1366, height: 800 });
+    await other.goto(`${server.url}/#preset=seed-example&tab=synthesis`);
+    await ready(other);
+    await other.fill('input[data-path="time.steps"]', '2000');
+    await other.selectOption('#syn-mode', 'grid');
+    await other.check('input[name=syn-where][value=browser]');
+    await other.click('#syn-run');
+    await other.waitForSelector('#syn-grid td[data-index]', { timeout: 60000 });
+    const boxes = () =>
+      other.$$eval('#syn-grid .grid-wrap', (bs) => bs.map((b) => ({ scroll: b.scrollWidth, client: b.clientWidth, hint: b.querySelector('.scroll-hint').offsetParent !== null })));
+    for (const b of await boxes()) {
+      assert.ok(b.scroll <= b.client, `the table is ${b.scroll} px wide in a ${b.client} px box`);
+      assert.equal(b.hint, false, 'no hint where nothing is hidden');
+    }
+    const right = await other.$eval('#syn-grid', (g) => g.getBoundingClientRect().right);
+    const cut = await other.$$eval('#syn-grid .syn-cell span', (spans, r) => spans.filter((s) => s.getBoundingClientRect().right > r + 0.5).map((s) => s.textContent), right);
+    assert.deepEqual(cut, []);
+    // Columns too many to fit: the box scrolls, and says so.
+    await other.fill('#syn-grid-values-1', Array.from({ length: 12 }, (_, i) => `${(i + 1) * 1e-6}`).join(', '));
+    await other.click('#syn-run');
+    await other.waitForFunction(() => document.querySelectorAll('#syn-grid td[data-index]').length === 36, null, { timeout: 60000 });
+    const [wide] = await boxes();
+    assert.ok(wide.scroll > wide.client && wide.hint, JSON.stringify(wide));
+  } finally {
+    await other.context().close();
+  }
+  assert.deepEqual(errors, []);
+});
+
 test('the page logged no console errors', () => {
   assert.deepEqual(consoleErrors, []);
 });

@@ -226,6 +226,32 @@ test('at 1366 × 800 a Synthesis grid fits its box: no number is cut off', async
   assert.deepEqual(errors, []);
 });
 
+test("a synthesis on the bound set shows the warnings of its answer's analysis", async () => {
+  await preset('helicopter-range');
+  await page.click('#tab-synthesis');
+  await page.selectOption('#syn-criterion', 'yx');
+  await page.selectOption('#syn-set', 'bound');
+  await page.fill('#syn-threshold', '0.6');
+  await page.selectOption('#syn-mode', 'seed_search');
+  await page.selectOption('#syn-seed-param-0', 'sd');
+  await page.fill('#syn-seed-high-0', '5');
+  await page.fill('#syn-seed-low-0', '0.6');
+  for (const i of [1, 2]) await page.selectOption(`#syn-seed-param-${i}`, '');
+  await page.check('input[name=syn-where][value=browser]');
+  await page.click('#syn-run');
+  await page.waitForFunction(() => document.getElementById('syn-result').dataset.status === 'found', null, { timeout: 60000 });
+  assert.match(await page.textContent('#syn-message'), /verified/);
+  await page.waitForFunction(() => document.getElementById('syn-warnings')?.dataset.state === 'warned', null, { timeout: 30000 });
+  assert.match(await page.textContent('#syn-warnings'), /answer \(sd = 5\) warns.*bound \(modulus procedure\) grew far beyond/s);
+  // The covariance set: no such check, no note.
+  await page.selectOption('#syn-set', 'covariance');
+  await page.fill('#syn-threshold', '0.01');
+  await page.click('#syn-run');
+  await page.waitForFunction(() => document.querySelector('#syn-summary')?.textContent.includes('covariance') && !document.getElementById('syn-run').disabled, null, { timeout: 60000 });
+  assert.equal(await page.$('#syn-warnings'), null);
+  await page.click('#tab-analysis');
+});
+
 test('the page logged no console errors', () => {
   assert.deepEqual(consoleErrors, []);
 });

@@ -5,7 +5,7 @@
 
 import { numberProblem, toNumber } from './numbers.js';
 import { WasmWorker } from './runner.js';
-import { KeptFields, RunBar, checkModel, checkOverrides, el, field, fmt, input, markControls, recheckControl, requestErrors, routeErrors, runError, select, uiWords } from './views.js';
+import { KeptFields, RunBar, checkModel, checkOverrides, el, field, fmt, input, markControls, recheckControl, requestErrors, routeErrors, runError, select, took, uiWords } from './views.js';
 
 const CRITERIA = [
   ['yz', 'F_YZ (measured vs a-priori)'],
@@ -441,7 +441,7 @@ export class SynthesisView {
     const what = `${LABEL[t.criterion]} (${t.set}${t.state ? `, state ${t.state}` : ', weighted'}) ≥ ${fmt(t.threshold)}`;
     const parts = [
       el('p', { class: `syn-status status-${r.status}`, id: 'syn-message' }, el('strong', { text: `${r.status.replaceAll('_', ' ')}: ` }), uiWords(r.message)),
-      el('p', { class: 'syn-summary', id: 'syn-summary' }, `Target ${what} · `, el('span', { id: 'syn-analyses', 'data-value': String(r.analyses), text: `${r.analyses} analyses` }), ` of D = ${r.steps.toLocaleString('en')} steps · ${fmt(r.timing.wall_ms)} ms on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`),
+      el('p', { class: 'syn-summary', id: 'syn-summary' }, `Target ${what} · `, el('span', { id: 'syn-analyses', 'data-value': String(r.analyses), text: `${r.analyses} analyses` }), ` of D = ${r.steps.toLocaleString('en')} steps · ${took(r.timing.wall_ms)} ms on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`),
       el('p', { class: 'stale-note', text: 'The model has changed since this run: run again to update.' }),
       this.pointWarnings(r, model),
     ];

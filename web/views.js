@@ -4,10 +4,10 @@
 // the run bar (where, Run, Cancel, progress, status) and the fields kept over a reload.
 
 import { ServerRunner, WasmWorker } from './runner.js';
-import { fmt } from './results.js';
+import { fmt, took } from './results.js';
 import { modelPlace } from './editor.js';
 
-export { fmt };
+export { fmt, took };
 
 export function el(tag, attrs = {}, ...children) {
   const e = document.createElement(tag);
@@ -168,7 +168,7 @@ export class RunBar {
       const job = await start(onProgress);
       this.progress.value = 1;
       const s = (performance.now() - started) / 1000;
-      this.setStatus(resumed ? `Done (server job ${job}, followed after the reload).` : `Done in ${fmt(s)} s (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`);
+      this.setStatus(resumed ? `Done (server job ${job}, followed after the reload).` : `Done in ${took(s)} s (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`);
     } catch (e) {
       this.progress.value = 0;
       if (e?.kind === 'cancelled') this.setStatus('Cancelled.');

@@ -252,6 +252,38 @@ test("a synthesis on the bound set shows the warnings of its answer's analysis",
   await page.click('#tab-analysis');
 });
 
+/** Whether `text` is a time as the page writes it: 3 significant digits, whole from 100 up. */
+function tookRule(text) {
+  const x = Number(text);
+  return Number.isFinite(x) && (x >= 100 ? Number.isInteger(x) : Number(x.toPrecision(3)) === x);
+}
+
+test('times taken read alike: 3 significant digits, in the browser and on the server', async () => {
+  await preset('seed-example');
+  for (const where of ['browser', 'server']) {
+    await page.evaluate(() => delete document.querySelector('#summary').dataset.where);
+    await page.check(`input[name=mode][value=${where}]`);
+    await page.click('#run');
+    await page.waitForFunction((w) => document.querySelector('#summary').dataset.where === w && !document.querySelector('#run').disabled, where, { timeout: 60000 });
+    const [, ms] = (await page.textContent('#summary')).match(/computed in (\S+) ms/);
+    const [, s] = (await page.textContent('#status')).match(/Done in (\S+) s/);
+    assert.ok(tookRule(ms) && tookRule(s), `${where}: ${ms} ms, ${s} s`);
+  }
+  await page.fill('input[data-path="time.steps"]', '2000');
+  await page.click('#tab-simulation');
+  await page.fill('#mc-runs', '50');
+  for (const where of ['browser', 'server']) {
+    await page.evaluate(() => delete document.getElementById('mc-result').dataset.where);
+    await page.check(`input[name=mc-where][value=${where}]`);
+    await page.click('#mc-run');
+    await page.waitForFunction((w) => document.getElementById('mc-result').dataset.where === w && !document.getElementById('mc-run').disabled, where, { timeout: 60000 });
+    const [, ms] = (await page.textContent('#mc-summary')).match(/(\S+) ms on the/);
+    const [, s] = (await page.textContent('#mc-status')).match(/Done in (\S+) s/);
+    assert.ok(tookRule(ms) && tookRule(s), `${where}: ${ms} ms, ${s} s`);
+  }
+  await page.click('#tab-analysis');
+});
+
 test('the page logged no console errors', () => {
   assert.deepEqual(consoleErrors, []);
 });

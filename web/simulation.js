@@ -298,15 +298,24 @@ export class SimulationView {
     const top = (key) => Math.max(0, ...(trace[key] ?? []).filter((v) => v !== null && Number.isFinite(v)));
     const fitted = Math.max(top('potential_sko'), top('filtered_sko'));
     const clipChi = !log && fitted > 0 && top('chi') > 3 * fitted;
+    const yTop = clipChi ? fitted * 1.15 : null;
+    // A χ (nearly) all beyond the top is not drawn: its few first points inside (a
+    // growing bound starts small) made a stroke up the left edge that read as a marker.
+    // Its legend says where it is, and its value at the cursor is still given.
+    const under = clipChi ? (trace.chi ?? []).filter((v) => v !== null && v <= yTop).length : 0;
+    const chiGone = clipChi && under < 0.02 * trace.chi.length;
     const columns = SERIES.filter(([key]) => trace[key]).map(([key, label, stroke, dash]) => ({ key, values: trace[key], label, stroke, dash }));
     const x = valueAxis([r.traces.t]);
-    const y = valueAxis(columns.map((c) => c.values), { log, top: clipChi ? fitted * 1.15 : null });
+    const y = valueAxis(columns.map((c) => c.values), { log, top: yTop });
     const shown = (axis) => (_, v) => (v === null || v === undefined ? '—' : fmt(axis.value(v)));
-    const data = [x.data(r.traces.t), ...columns.map((c) => y.data(c.values))];
+    const gone = (c) => c.key === 'chi' && chiGone;
+    const data = [x.data(r.traces.t), ...columns.map((c) => (gone(c) ? c.values.map(() => null) : y.data(c.values)))];
     const series = [{ label: 't', value: shown(x) }];
-    for (const { key, label, stroke, dash } of columns) {
-      const text = key === 'chi' && clipChi ? `${label} (beyond the top)` : label;
-      series.push({ label: text, stroke, width: key === 'filtered_sko' ? 1.2 : 2, dash, value: shown(y) });
+    for (const c of columns) {
+      const { key, label, stroke, dash, values } = c;
+      const text = key !== 'chi' || !clipChi ? label : chiGone ? `${label} (beyond the top; log scale shows it)` : `${label} (runs off the top)`;
+      const value = gone(c) ? (_, __, ___, i) => (i === null || i === undefined ? '—' : fmt(values[i])) : shown(y);
+      series.push({ label: text, stroke, width: key === 'filtered_sko' ? 1.2 : 2, dash, value });
     }
     this.chart.replaceChildren();
     this.plot = new uPlot(

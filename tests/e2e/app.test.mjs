@@ -284,6 +284,38 @@ test('times taken read alike: 3 significant digits, in the browser and on the se
   await page.click('#tab-analysis');
 });
 
+/** Pixels of the chart's canvas in χ's colour (#2ca02c). */
+function chiPixels() {
+  return page.$eval('#mc-chart canvas', (c) => {
+    const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+    let n = 0;
+    for (let i = 0; i < d.length; i += 4) if (Math.abs(d[i] - 0x2c) < 30 && Math.abs(d[i + 1] - 0xa0) < 30 && Math.abs(d[i + 2] - 0x2c) < 30) n++;
+    return n;
+  });
+}
+
+test('a Monte Carlo χ all beyond the top of the chart is not drawn; its legend says so', async () => {
+  await preset('helicopter-range');
+  await page.click('#tab-simulation');
+  await page.fill('#mc-runs', '50');
+  await page.check('input[name=mc-where][value=browser]');
+  await page.evaluate(() => delete document.getElementById('mc-result').dataset.where);
+  await page.click('#mc-run');
+  await page.waitForFunction(() => document.getElementById('mc-result').dataset.where === 'browser', null, { timeout: 60000 });
+  await page.selectOption('#mc-state', '2'); // j_f: χ leaves the axis in its first few points
+  assert.match(await page.textContent('#mc-chart .u-legend'), /bound χ \(beyond the top; log scale shows it\)/);
+  assert.equal(await chiPixels(), 0, 'nothing of χ is drawn');
+  // At the cursor its value is still given.
+  const box = await page.$eval('#mc-chart .u-over', (o) => { const r = o.getBoundingClientRect(); return { x: r.x + r.width / 2, y: r.y + r.height / 2 }; });
+  await page.mouse.move(box.x, box.y);
+  const value = await page.$eval('#mc-chart .u-legend .u-series:last-child .u-value', (v) => v.textContent);
+  assert.ok(Number(value) > 10, `${value}: above the axis (its top is near 1)`);
+  await page.check('#mc-log'); // on a log scale it is drawn
+  assert.ok((await chiPixels()) > 100);
+  await page.uncheck('#mc-log');
+  await page.click('#tab-analysis');
+});
+
 test('the page logged no console errors', () => {
   assert.deepEqual(consoleErrors, []);
 });

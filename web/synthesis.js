@@ -20,10 +20,17 @@ const MODES = [
 ];
 const ROWS = 3; // grid params and seed-search params
 
-/** The items of a values field: separated by commas, semicolons or spaces. */
+/**
+ * The items of a values field: separated by commas, semicolons or spaces (a comma with
+ * spaces around it is one separator). Two separators in a row, or one at an end
+ * (`1,,2`), give an empty item (''): refused at the field (EMPTY_ITEM), not skipped.
+ */
 function listItems(text) {
-  return text.split(/[,;\s]+/).filter((s) => s !== '');
+  const s = text.trim();
+  return s === '' ? [] : s.split(/\s*[,;]\s*|\s+/);
 }
+
+const EMPTY_ITEM = 'a value is missing: two separators in a row, or one at an end (separate the values with one comma)';
 
 /** Numbers for an input: short and exact enough (`1e-05`, `0.25`). */
 function show(x) {
@@ -261,7 +268,7 @@ export class SynthesisView {
     for (const row of this.grid) {
       if (!row.param.value) continue;
       const items = listItems(row.values.value);
-      if (items.some((s) => numberProblem(s))) {
+      if (items.some((s) => s === '' || numberProblem(s))) {
         this.gridCount.textContent = '';
         return;
       }
@@ -336,7 +343,9 @@ export class SynthesisView {
         row.param.dataset.requestPath = `mode.grid.params[${k}].name`;
         row.values.dataset.requestPath = `mode.grid.params[${k}].values`;
         if (!row.param.value) return;
-        const values = listItems(row.values.value).map((s) => {
+        const items = listItems(row.values.value);
+        if (items.includes('')) errors.push({ path: `mode.grid.params[${k}].values`, message: EMPTY_ITEM });
+        const values = items.filter((s) => s !== '').map((s) => {
           const problem = numberProblem(s);
           if (problem) errors.push({ path: `mode.grid.params[${k}].values`, message: problem });
           return toNumber(s);

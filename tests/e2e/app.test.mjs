@@ -316,6 +316,29 @@ test('a Monte Carlo χ all beyond the top of the chart is not drawn; its legend 
   await page.click('#tab-analysis');
 });
 
+test('a Synthesis grid value left empty (1,,2) is refused at its field', async () => {
+  await preset('seed-example');
+  await page.click('#tab-synthesis');
+  await page.selectOption('#syn-mode', 'grid');
+  await page.check('input[name=syn-where][value=browser]');
+  const error = () => page.$eval('#syn-grid-values-0 + .control-error', (e) => e.textContent).catch(() => null);
+  for (const text of ['1,,2', '1, ,2', '1;;2', '1, 2,', ', 1']) {
+    await page.fill('#syn-grid-values-0', text);
+    assert.match((await error()) ?? '', /a value is missing: two separators in a row, or one at an end/, text);
+    assert.equal(await page.textContent('#syn-grid-count'), '', `${text}: no count of cells`);
+  }
+  await page.fill('#syn-grid-values-0', '1,,2');
+  await page.evaluate(() => document.getElementById('syn-status').classList.remove('error'));
+  await page.click('#syn-run');
+  await page.waitForFunction(() => document.querySelector('#syn-status').classList.contains('error'), null, { timeout: 30000 });
+  assert.match(await page.textContent('#syn-status'), /see the marked fields/);
+  // Separators with spaces around them, or spaces alone, are fine.
+  await page.fill('#syn-grid-values-0', ' 1 , 2 ;3  4 ');
+  assert.equal(await error(), null);
+  assert.match(await page.textContent('#syn-grid-count'), /4 values \(1, 2, 3, 4\)/);
+  await page.click('#tab-analysis');
+});
+
 test('the page logged no console errors', () => {
   assert.deepEqual(consoleErrors, []);
 });

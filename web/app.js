@@ -1,7 +1,8 @@
 // kea's web UI: wires the preset picker, the model editor, the run toggle (browser
 // wasm worker or server job) and the results. The model lives in the URL (#model=…,
 // deflated and base64url-encoded), with the tab, so they can be shared as a link; the
-// Synthesis and Monte Carlo tabs' fields are kept for the browser tab only (KeptFields).
+// Synthesis and Monte Carlo tabs' fields (KeptFields), "Run in" and a running server
+// job's id are kept for the browser tab only (sessionStorage), over a reload.
 
 import { ModelEditor, modelProblem } from './editor.js';
 import { api } from './api.js';
@@ -155,15 +156,14 @@ async function loadPreset(name, options) {
  * preset gets a history entry of its own.
  */
 async function choosePreset(name) {
-  if (!state.preset) {
+  const own = !state.preset;
+  if (own) {
     clearTimeout(urlTimer);
     history.replaceState(null, '', await linkHash()); // the model as it is now, not 300 ms ago
     history.pushState(null, '', `#preset=${encodeURIComponent(name)}${tabParam()}`);
-    await loadPreset(name);
-    setPageStatus('Loaded the preset; the browser’s Back brings your model back.');
-    return;
   }
   await loadPreset(name);
+  if (own) setPageStatus('Loaded the preset; the browser’s Back brings your model back.');
 }
 
 /**

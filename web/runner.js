@@ -103,8 +103,8 @@ async function problemOf(response) {
 
 const CANCELLED = { kind: 'cancelled', title: 'cancelled', errors: [] };
 
-// Set while the page is being left (a reload, a close): the requests that cuts short
-// fail, but the job runs on, and its id stays kept for the next page to re-attach to.
+// Set while the page is being left (a reload, a close): the requests it cuts short
+// fail, but the job runs on, so its id stays kept for the next page to re-attach to.
 let leaving = false;
 addEventListener('pagehide', () => (leaving = true));
 addEventListener('pageshow', () => (leaving = false));

@@ -56,6 +56,7 @@ class JobRunner extends ServerRunner {
     return this.runJob(JSON.stringify({ kind: this.kind, ...request }), onProgress);
   }
 
+  /** A problem with the request's own paths (`model.…`, `mode.…`): the view routes them (routeErrors). */
   located(p) {
     return { kind: p.type ?? p.kind ?? 'server', title: p.title, detail: p.detail, status: p.status, errors: p.errors ?? [] };
   }

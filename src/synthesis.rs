@@ -232,6 +232,11 @@ pub struct Verification {
     pub looser: Option<Point>,
     /// The answer meets the target (and the looser point, if any, misses it).
     pub passed: bool,
+    /// The warnings of the answer's analysis: a bound set that grew far beyond the
+    /// covariance's (its criteria then describe |A|'s growth, not the filter), lost
+    /// precision, … — what the Analysis of that point would say.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -777,7 +782,7 @@ impl Ctx<'_> {
         &self,
         params: &[(String, f64)],
         progress: &mut dyn Progress,
-    ) -> Result<(Point, u64), Error> {
+    ) -> Result<(Point, u64, Vec<String>), Error> {
         let mut set = self.set.clone();
         for (k, v) in params {
             set.insert(k.clone(), *v);
@@ -804,7 +809,7 @@ impl Ctx<'_> {
                 Error::Cancelled => Error::Cancelled,
             }
         })?;
-        Ok((self.point(params, &r), r.steps))
+        Ok((self.point(params, &r), r.steps, r.warnings))
     }
 
     fn point(&self, params: &[(String, f64)], r: &AnalysisResult) -> Point {
@@ -858,6 +863,17 @@ impl Ctx<'_> {
         points: Vec<Vec<(String, f64)>>,
         progress: &mut dyn Progress,
     ) -> Result<Vec<Point>, Error> {
+        let out = self.batch_warned(exec, points, progress)?;
+        Ok(out.into_iter().map(|(p, _)| p).collect())
+    }
+
+    /// [`Ctx::batch`], with each analysis's warnings.
+    fn batch_warned<E: Executor>(
+        &mut self,
+        exec: &E,
+        points: Vec<Vec<(String, f64)>>,
+        progress: &mut dyn Progress,
+    ) -> Result<Vec<(Point, Vec<String>)>, Error> {
         let n = points.len() as u64;
         let total = self.total.max(1) as f64;
         let results = if points.len() == 1 {
@@ -883,9 +899,9 @@ impl Ctx<'_> {
         self.done += n;
         let mut out = Vec::with_capacity(results.len());
         for r in results {
-            let (p, steps) = r?;
+            let (p, steps, warnings) = r?;
             self.steps = steps;
-            out.push(p);
+            out.push((p, warnings));
         }
         if let ControlFlow::Break(()) = progress.report((self.done as f64 / total).min(1.0)) {
             return Err(Error::Cancelled);
@@ -1030,14 +1046,15 @@ fn verify<E: Executor>(
     if let Some(l) = looser {
         batch.push(as_list(l));
     }
-    let mut out = ctx.batch(exec, batch, progress)?;
-    let looser = if looser.is_some() { out.pop() } else { None };
-    let again = out.pop().expect("one result per point");
+    let mut out = ctx.batch_warned(exec, batch, progress)?;
+    let looser = if looser.is_some() { out.pop().map(|(p, _)| p) } else { None };
+    let (again, warnings) = out.pop().expect("one result per point");
     let passed = again.meets && looser.as_ref().is_none_or(|l| !l.meets);
     Ok(Verification {
         point: again,
         looser,
         passed,
+        warnings,
     })
 }
 
@@ -1539,6 +1556,10 @@ pub fn render_text(r: &SynthesisResult) -> String {
         }
     }
     s += &r.message;
+    // The answer's analysis's warnings, as `kea analyze` prints them.
+    for w in r.verification.iter().flat_map(|v| &v.warnings) {
+        s += &format!("\nwarning (the answer's analysis): {w}");
+    }
     s += &format!(
         "\n{} analyses of D = {} steps, {:.1} ms\n",
         r.analyses, r.steps, r.timing.wall_ms

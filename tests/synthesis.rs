@@ -671,3 +671,35 @@ fn progress_rises_to_one() {
 fn run_with(req: &SynthesisRequest, p: &mut dyn kea_core::Progress) -> SynthesisResult {
     synthesis::synthesize(req, &Sequential, p).unwrap()
 }
+
+/// A synthesis on the bound set reported "found … verified by a fresh analysis" for
+/// the helicopter range channel, whose bound grows far beyond the covariance's (the
+/// Analysis of the same point warns that the bound set's criteria then describe |A|'s
+/// growth). The verification now carries the answer's analysis's warnings, the same
+/// the analysis gives, and the text prints them.
+#[test]
+fn the_verification_carries_the_answers_analysis_warnings() {
+    let model = presets::get("helicopter-range").expect("preset");
+    let req = request(
+        &model,
+        json!({"set": "bound", "criterion": "yx", "threshold": 0.6}),
+        json!({"seed_search": {"params": [{"name": "sd", "low": 0.6, "high": 5, "shrink": 0.5}]}}),
+    );
+    let r = run(&req);
+    assert_eq!(r.status, Status::Found, "{}", r.message);
+    let v = r.verification.as_ref().expect("verified");
+    let answer: Vec<(&str, f64)> = v.point.params.iter().map(|(k, x)| (k.as_str(), *x)).collect();
+    let set: Overrides = answer.iter().map(|(k, x)| (k.to_string(), *x)).collect();
+    let direct = analyze(&model, &set, &mut NoProgress).unwrap();
+    assert!(
+        direct.warnings.iter().any(|w| w.contains("grew far beyond")),
+        "{:?}",
+        direct.warnings
+    );
+    assert_eq!(v.warnings, direct.warnings);
+    let text = synthesis::render_text(&r);
+    assert!(
+        text.contains("warning (the answer's analysis): the bound (modulus procedure) grew far beyond"),
+        "{text}"
+    );
+}

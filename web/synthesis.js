@@ -4,7 +4,6 @@
 // `synthesis`; the result as grid tables or as the answer with its verification.
 
 import { numberProblem, toNumber } from './numbers.js';
-import { WasmWorker } from './runner.js';
 import { KeptFields, RunBar, checkModel, checkOverrides, el, field, fmt, input, markControls, recheckControl, requestErrors, routeErrors, runError, select, took, uiWords } from './views.js';
 
 const CRITERIA = [
@@ -425,7 +424,7 @@ export class SynthesisView {
     const { result, job } = await exec();
     const current = this.edits === edits && JSON.stringify(model) === JSON.stringify(this.ctx.model());
     if (current) this.ctx.showModelErrors([]); // else the check of the edited model has the say
-    this.show(result, where, current, model);
+    this.show(result, where, current);
     return job;
   }
 
@@ -439,7 +438,7 @@ export class SynthesisView {
   // ------------------------------------------------------------ result
 
   /** Show a result; `current`: the model has not changed since the run started. */
-  show(r, where, current = true, model = null) {
+  show(r, where, current = true) {
     this.result = r;
     this.resized.disconnect(); // the boxes of the tables shown before
     this.out.hidden = false;
@@ -452,7 +451,7 @@ export class SynthesisView {
       el('p', { class: `syn-status status-${r.status}`, id: 'syn-message' }, el('strong', { text: `${r.status.replaceAll('_', ' ')}: ` }), uiWords(r.message)),
       el('p', { class: 'syn-summary', id: 'syn-summary' }, `Target ${what} · `, el('span', { id: 'syn-analyses', 'data-value': String(r.analyses), text: `${r.analyses} analyses` }), ` of D = ${r.steps.toLocaleString('en')} steps · ${took(r.timing.wall_ms)} ms on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`),
       el('p', { class: 'stale-note', text: 'The model has changed since this run: run again to update.' }),
-      this.pointWarnings(r, model),
+      this.pointWarnings(r),
     ];
     const d = r.details;
     if (d.grid) parts.push(this.gridTables(r, d.grid));
@@ -471,38 +470,22 @@ export class SynthesisView {
   }
 
   /**
-   * The warnings of an analysis of the point the result stands on (the answer, or a
-   * grid's first cell meeting the target), for a target on the bound set: its figures
-   * may describe the bound's growth rather than the filter (|A| taken element-wise grows
-   * where A does not), which the analysis warns of but a synthesis result does not
-   * carry. So the point is analysed again here, in this browser (no traces kept), and
-   * its warnings come under the message. Returns the element they go in (or null).
+   * The warnings of the answer's analysis (the verification's, as `kea analyze` of that
+   * point gives them), under the message: on the bound set its figures may describe
+   * the bound's growth rather than the filter (|A| taken element-wise grows where A
+   * does not), which the analysis warns of. Returns the element they go in (or null).
    */
-  pointWarnings(r, model) {
-    const cells = r.details.grid?.cells.map((c) => c.point) ?? [];
-    const point = r.answer ?? cells.find((p) => p.meets) ?? cells[0];
-    if (r.target.set !== 'bound' || !point || !model) return null;
-    const box = el('div', { class: 'syn-warnings', id: 'syn-warnings', 'data-state': 'checking' }, el('p', { class: 'help', text: 'Checking the analysis of this point for warnings…' }));
-    const which = `${r.answer ? 'the answer' : 'the cell'} (${paramsText(point.params)})`;
-    if (this.checker?.pending.size) this.checker.cancel(); // a check of an earlier result
-    this.checker ??= new WasmWorker();
-    const quiet = { ...model, options: { ...model.options, trace_points: 0 } };
-    this.checker
-      .call('analyze', { model: JSON.stringify(quiet), set: JSON.stringify(point.params) })
-      .then(({ warnings }) => {
-        box.dataset.state = warnings.length ? 'warned' : 'clean';
-        box.replaceChildren(
-          ...(warnings.length
-            ? [el('p', { text: `The analysis of ${which} warns — these bound figures may not describe the filter:` }), el('ul', {}, ...warnings.map((w) => el('li', { text: uiWords(w) })))]
-            : []),
-        );
-      })
-      .catch((e) => {
-        if (e?.kind === 'cancelled') return;
-        box.dataset.state = 'failed';
-        box.replaceChildren(el('p', { class: 'help', text: `The analysis of ${which} could not be checked for warnings: ${uiWords(e?.title ?? String(e))}` }));
-      });
-    return box;
+  pointWarnings(r) {
+    const v = r.verification;
+    if (!v?.warnings?.length) return null;
+    const which = `the answer (${paramsText(v.point.params)})`;
+    const caution = r.target.set === 'bound' ? ' — these bound figures may not describe the filter' : '';
+    return el(
+      'div',
+      { class: 'syn-warnings', id: 'syn-warnings', 'data-state': 'warned' },
+      el('p', { text: `The analysis of ${which} warns${caution}:` }),
+      el('ul', {}, ...v.warnings.map((w) => el('li', { text: uiWords(w) }))),
+    );
   }
 
   markStale() {

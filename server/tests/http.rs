@@ -752,6 +752,18 @@ fn bad_request_corpus() {
     assert!(r.text.contains("appears twice"), "{}", r.text);
     let r = s.post_raw("/v1/jobs", "text/plain", "{}");
     assert_eq!(r.status, 415, "{}", r.text);
+    // "+json" alone is no media type, and a charset other than UTF-8 would be read as
+    // UTF-8 regardless: both were answered 200. A …+json type and UTF-8 still pass.
+    for ct in ["+json", "application/json; charset=latin1", "application/json;charset=utf-16"] {
+        let r = s.post_raw("/v1/analyze", ct, "{}");
+        assert_eq!(r.status, 415, "{ct}: {}", r.text);
+    }
+    let r = s.post_raw("/v1/analyze", "application/json; charset=latin1", "{}");
+    assert!(r.text.contains("not charset=latin1"), "{}", r.text);
+    for ct in ["application/json; charset=UTF-8", "application/vnd.kea+json", "Application/JSON"] {
+        let r = s.post_raw("/v1/analyze", ct, "{}");
+        assert_eq!(r.status, 422, "{ct}: {}", r.text);
+    }
     // A compressed body: said so, not "not valid JSON".
     let r = s.post_with(
         "/v1/jobs",

@@ -26,13 +26,15 @@ impl FromRequest<AppState> for JsonBody {
             .get(header::CONTENT_TYPE)
             .and_then(|v| v.to_str().ok())
             .unwrap_or("");
-        let essence = ct
-            .split(';')
-            .next()
-            .unwrap_or("")
-            .trim()
-            .to_ascii_lowercase();
-        if essence != "application/json" && !essence.ends_with("+json") {
+        // application/json or a …+json type ("+json" alone is no media type); a
+        // charset, if given, must be UTF-8: the body is read as UTF-8 (RFC 8259 §8.1),
+        // so `charset=latin1` would be decoded wrongly without a word.
+        let media = ct.parse::<mime::Mime>().ok();
+        let json = media.as_ref().is_some_and(|m| {
+            m.type_() == mime::APPLICATION
+                && (m.subtype() == mime::JSON || m.suffix() == Some(mime::JSON))
+        });
+        if !json {
             return Err(Problem::new(
                 StatusCode::UNSUPPORTED_MEDIA_TYPE,
                 kind::MEDIA_TYPE,
@@ -40,6 +42,18 @@ impl FromRequest<AppState> for JsonBody {
             )
             .detail(format!(
                 "send the header `Content-Type: application/json` (got `{ct}`)"
+            )));
+        }
+        if let Some(charset) = media.as_ref().and_then(|m| m.get_param(mime::CHARSET))
+            && charset != mime::UTF_8
+        {
+            return Err(Problem::new(
+                StatusCode::UNSUPPORTED_MEDIA_TYPE,
+                kind::MEDIA_TYPE,
+                "the body must be UTF-8",
+            )
+            .detail(format!(
+                "kea reads JSON as UTF-8 (RFC 8259 §8.1), not charset={charset}: send it as UTF-8, with `charset=utf-8` or no charset"
             )));
         }
         // A compressed body would reach the JSON parser as bytes (400 "not valid JSON");

@@ -56,6 +56,31 @@ fn health_and_presets() {
     assert_eq!(missing.json()["status"], 404);
 }
 
+/// A stored model came back re-serialised: members sorted, `1e3` as `1000.0`,
+/// `0.10000000000000000555` as `0.1`. openapi says "returned as it was sent".
+#[test]
+fn a_stored_model_is_returned_as_it_was_sent() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    let text = r#"{"time": {"steps": 1e3, "t_end": 1.50, "t0": 0},
+  "system": {"states": ["x"], "a": [[-1]], "b": [[1]], "phi": [1], "y0": [1], "eta0": [1]},
+  "measurement": {"names": ["z"], "c": [[1]], "gamma": [[1]], "psi": [0.10000000000000000555]},
+  "name": "as sent"}"#;
+    let r = s.post_raw("/v1/models", "application/json", &format!("\u{feff}{text}\n"));
+    assert_eq!(r.status, 201, "{}", r.text);
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let got = s.get(&format!("/v1/models/{id}"));
+    assert_eq!(got.status, 200);
+    assert!(got.text.ends_with(&format!(",\"model\":{text}}}")), "{}", got.text);
+    let v = got.json();
+    assert_eq!(v["id"], id.as_str());
+    assert_eq!(v["name"], "as sent");
+    // And it runs from its id as the model it is.
+    let r = s.post("/v1/analyze", &json!({"model_id": id}));
+    assert_eq!(r.status, 200, "{}", r.text);
+    assert_eq!(r.json()["steps"], 1000);
+}
+
 #[test]
 fn models_are_stored_listed_paged_and_deleted() {
     let dir = tmp();

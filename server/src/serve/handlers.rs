@@ -52,12 +52,12 @@ pub fn raw_json(status: StatusCode, body: String) -> Response {
 /// `POST /v1/models`: the body is a model; it is validated, stored, and given an id.
 pub async fn create_model(
     State(state): State<AppState>,
-    JsonBody(body): JsonBody,
+    JsonBody(body, text): JsonBody,
 ) -> Result<Response, Problem> {
-    let (model, body) = tokio::task::spawn_blocking(move || {
-        let model = kea_core::model_from_value(body.clone())?;
+    let model = tokio::task::spawn_blocking(move || {
+        let model = kea_core::model_from_value(body)?;
         kea_core::check(&model, &Default::default())?;
-        Ok::<_, kea_core::Error>((model, body))
+        Ok::<_, kea_core::Error>(model)
     })
     .await
     .map_err(Problem::internal)?
@@ -66,7 +66,8 @@ pub async fn create_model(
         id: new_id(),
         name: model.name.clone(),
         created_at: now_rfc3339(),
-        model_json: body.to_string(),
+        // The text as sent (member order, number spellings, layout): GET returns it.
+        model_json: text,
     };
     let view = json!({ "id": record.id, "name": record.name, "created_at": record.created_at });
     let location = format!("/v1/models/{}", record.id);
@@ -97,19 +98,18 @@ pub async fn list_models(
 pub async fn get_model(
     State(state): State<AppState>,
     request::ModelId(id): request::ModelId,
-) -> Result<Json<Value>, Problem> {
+) -> Result<Response, Problem> {
     let key = id.clone();
     let record = state
         .db(move |s| s.get_model(&key))
         .await?
         .ok_or_else(|| Problem::not_found("model", &id))?;
-    let model: Value = serde_json::from_str(&record.model_json).map_err(Problem::internal)?;
-    Ok(Json(json!({
-        "id": record.id,
-        "name": record.name,
-        "created_at": record.created_at,
-        "model": model,
-    })))
+    // The model's text goes in as it was sent (valid JSON: it was parsed on the way
+    // in), not re-serialised: a Value would sort its members and respell 1e3 as 1000.0.
+    let head = json!({ "id": record.id, "name": record.name, "created_at": record.created_at });
+    let head = head.to_string();
+    let body = format!("{},\"model\":{}}}", &head[..head.len() - 1], record.model_json.trim());
+    Ok(([(header::CONTENT_TYPE, "application/json")], body).into_response())
 }
 
 /// `DELETE /v1/models/{id}`: 204. Jobs submitted with this model keep their copy.
@@ -207,7 +207,7 @@ pub fn check_work(
 /// `POST /v1/analyze`: `{model | model_id, set?}` → the analysis result, for small work.
 pub async fn analyze(
     State(state): State<AppState>,
-    JsonBody(body): JsonBody,
+    JsonBody(body, _): JsonBody,
 ) -> Result<Response, Problem> {
     let mut obj = request::object(body)?;
     resolve_model_id(&state, &mut obj).await?;

@@ -60,7 +60,7 @@ async fn load_view(state: &AppState, id: &str) -> Result<Value, Problem> {
 /// `POST /v1/jobs`: `{kind, model | model_id, set?}` → 202 with the queued job.
 pub async fn submit(
     State(state): State<AppState>,
-    JsonBody(body): JsonBody,
+    JsonBody(body, _): JsonBody,
 ) -> Result<Response, Problem> {
     let mut obj = request::object(body)?;
     let names = state.registry.names().join(", ");

@@ -15,7 +15,8 @@ use std::collections::BTreeMap;
 
 /// A JSON request body, read under the configured size limit. Every failure is a
 /// problem+json 4xx: 415 (not JSON), 413 (too large), 408 (too slow), 400 (malformed).
-pub struct JsonBody(pub Value);
+/// With the text as sent (without a byte-order mark): a stored model is kept as that.
+pub struct JsonBody(pub Value, pub String);
 
 impl FromRequest<AppState> for JsonBody {
     type Rejection = Problem;
@@ -84,7 +85,7 @@ impl FromRequest<AppState> for JsonBody {
                 )));
         }
         let bytes = read_limited(req, limits.max_body_bytes, limits.read_timeout).await?;
-        kea_core::parse_json(&bytes).map(JsonBody).map_err(|e| {
+        let value = kea_core::parse_json(&bytes).map_err(|e| {
             Problem::new(
                 StatusCode::BAD_REQUEST,
                 kind::MALFORMED,
@@ -92,7 +93,10 @@ impl FromRequest<AppState> for JsonBody {
             )
             .detail(e.to_string())
             .error("", format!("not valid JSON: {e}"))
-        })
+        })?;
+        // (parse_json took it as UTF-8, a byte-order mark skipped.)
+        let text = String::from_utf8_lossy(bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&bytes));
+        Ok(JsonBody(value, text.into_owned()))
     }
 }
 

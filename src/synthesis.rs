@@ -1047,7 +1047,11 @@ fn verify<E: Executor>(
         batch.push(as_list(l));
     }
     let mut out = ctx.batch_warned(exec, batch, progress)?;
-    let looser = if looser.is_some() { out.pop().map(|(p, _)| p) } else { None };
+    let looser = if looser.is_some() {
+        out.pop().map(|(p, _)| p)
+    } else {
+        None
+    };
     let (again, warnings) = out.pop().expect("one result per point");
     let passed = again.meets && looser.as_ref().is_none_or(|l| !l.meets);
     Ok(Verification {

@@ -688,18 +688,28 @@ fn the_verification_carries_the_answers_analysis_warnings() {
     let r = run(&req);
     assert_eq!(r.status, Status::Found, "{}", r.message);
     let v = r.verification.as_ref().expect("verified");
-    let answer: Vec<(&str, f64)> = v.point.params.iter().map(|(k, x)| (k.as_str(), *x)).collect();
+    let answer: Vec<(&str, f64)> = v
+        .point
+        .params
+        .iter()
+        .map(|(k, x)| (k.as_str(), *x))
+        .collect();
     let set: Overrides = answer.iter().map(|(k, x)| (k.to_string(), *x)).collect();
     let direct = analyze(&model, &set, &mut NoProgress).unwrap();
     assert!(
-        direct.warnings.iter().any(|w| w.contains("grew far beyond")),
+        direct
+            .warnings
+            .iter()
+            .any(|w| w.contains("grew far beyond")),
         "{:?}",
         direct.warnings
     );
     assert_eq!(v.warnings, direct.warnings);
     let text = synthesis::render_text(&r);
     assert!(
-        text.contains("warning (the answer's analysis): the bound (modulus procedure) grew far beyond"),
+        text.contains(
+            "warning (the answer's analysis): the bound (modulus procedure) grew far beyond"
+        ),
         "{text}"
     );
 }

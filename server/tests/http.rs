@@ -66,12 +66,20 @@ fn a_stored_model_is_returned_as_it_was_sent() {
   "system": {"states": ["x"], "a": [[-1]], "b": [[1]], "phi": [1], "y0": [1], "eta0": [1]},
   "measurement": {"names": ["z"], "c": [[1]], "gamma": [[1]], "psi": [0.10000000000000000555]},
   "name": "as sent"}"#;
-    let r = s.post_raw("/v1/models", "application/json", &format!("\u{feff}{text}\n"));
+    let r = s.post_raw(
+        "/v1/models",
+        "application/json",
+        &format!("\u{feff}{text}\n"),
+    );
     assert_eq!(r.status, 201, "{}", r.text);
     let id = r.json()["id"].as_str().unwrap().to_string();
     let got = s.get(&format!("/v1/models/{id}"));
     assert_eq!(got.status, 200);
-    assert!(got.text.ends_with(&format!(",\"model\":{text}}}")), "{}", got.text);
+    assert!(
+        got.text.ends_with(&format!(",\"model\":{text}}}")),
+        "{}",
+        got.text
+    );
     let v = got.json();
     assert_eq!(v["id"], id.as_str());
     assert_eq!(v["name"], "as sent");
@@ -390,9 +398,26 @@ fn graceful_shutdown_requeues_and_restart_finishes() {
     let before = s.get(&format!("/v1/jobs/{id}")).json()["progress"]
         .as_f64()
         .unwrap();
+    // A client following the job's events is told why its stream ends (it ended
+    // after a progress event, as if complete).
+    let url = s.url(&format!("/v1/jobs/{id}/events"));
+    let follower = std::thread::spawn(move || {
+        let res = ureq::get(&url).call().expect("events");
+        let text = res.into_body().read_to_string().expect("read event stream");
+        common::parse_events(&text)
+    });
+    std::thread::sleep(Duration::from_millis(300));
     assert!(
         s.terminate(Duration::from_secs(30)),
         "kea serve exits on SIGTERM"
+    );
+    let events = follower.join().unwrap();
+    let (last, data) = events.last().expect("events");
+    assert_eq!(last, "shutdown", "{events:?}");
+    assert_eq!(data["status"], "running", "{data}");
+    assert!(
+        data["message"].as_str().unwrap().contains("re-queued"),
+        "{data}"
     );
     let s = Server::start(dir.path(), &["--workers", "1"]);
     // Run again, it shows at least the progress it had reached: never backwards.
@@ -779,13 +804,21 @@ fn bad_request_corpus() {
     assert_eq!(r.status, 415, "{}", r.text);
     // "+json" alone is no media type, and a charset other than UTF-8 would be read as
     // UTF-8 regardless: both were answered 200. A …+json type and UTF-8 still pass.
-    for ct in ["+json", "application/json; charset=latin1", "application/json;charset=utf-16"] {
+    for ct in [
+        "+json",
+        "application/json; charset=latin1",
+        "application/json;charset=utf-16",
+    ] {
         let r = s.post_raw("/v1/analyze", ct, "{}");
         assert_eq!(r.status, 415, "{ct}: {}", r.text);
     }
     let r = s.post_raw("/v1/analyze", "application/json; charset=latin1", "{}");
     assert!(r.text.contains("not charset=latin1"), "{}", r.text);
-    for ct in ["application/json; charset=UTF-8", "application/vnd.kea+json", "Application/JSON"] {
+    for ct in [
+        "application/json; charset=UTF-8",
+        "application/vnd.kea+json",
+        "Application/JSON",
+    ] {
         let r = s.post_raw("/v1/analyze", ct, "{}");
         assert_eq!(r.status, 422, "{ct}: {}", r.text);
     }

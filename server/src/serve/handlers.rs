@@ -108,7 +108,11 @@ pub async fn get_model(
     // in), not re-serialised: a Value would sort its members and respell 1e3 as 1000.0.
     let head = json!({ "id": record.id, "name": record.name, "created_at": record.created_at });
     let head = head.to_string();
-    let body = format!("{},\"model\":{}}}", &head[..head.len() - 1], record.model_json.trim());
+    let body = format!(
+        "{},\"model\":{}}}",
+        &head[..head.len() - 1],
+        record.model_json.trim()
+    );
     Ok(([(header::CONTENT_TYPE, "application/json")], body).into_response())
 }
 

@@ -289,7 +289,18 @@ impl EventStream {
             let job = match self.first.take() {
                 Some(j) => j,
                 None => {
-                    self.wait().await?;
+                    if self.wait().await.is_none() {
+                        // The stream would end without its `status` event, which a
+                        // client could not tell from a finished job: say why it ends.
+                        self.done = true;
+                        let (status, progress) = self.last.unwrap_or((JobStatus::Queued, 0.0));
+                        let data = json!({
+                            "status": status,
+                            "progress": progress,
+                            "message": "the server is stopping: an unfinished job is re-queued and runs when it starts again; follow it again then",
+                        });
+                        return Some(Event::default().event("shutdown").data(data.to_string()));
+                    }
                     load(&self.state, &self.id).await.ok()?
                 }
             };

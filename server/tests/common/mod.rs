@@ -292,23 +292,28 @@ impl Server {
             .into_reader()
             .read_to_string(&mut text)
             .expect("read event stream");
-        let mut out = Vec::new();
-        for block in text.split("\n\n") {
-            let mut event = None;
-            let mut data = None;
-            for line in block.lines() {
-                if let Some(e) = line.strip_prefix("event: ") {
-                    event = Some(e.to_string());
-                } else if let Some(d) = line.strip_prefix("data: ") {
-                    data = Some(serde_json::from_str(d).expect("event data is JSON"));
-                }
-            }
-            if let (Some(e), Some(d)) = (event, data) {
-                out.push((e, d));
+        parse_events(&text)
+    }
+}
+
+/// A server-sent event stream's text as (event, data) pairs.
+pub fn parse_events(text: &str) -> Vec<(String, Value)> {
+    let mut out = Vec::new();
+    for block in text.split("\n\n") {
+        let mut event = None;
+        let mut data = None;
+        for line in block.lines() {
+            if let Some(e) = line.strip_prefix("event: ") {
+                event = Some(e.to_string());
+            } else if let Some(d) = line.strip_prefix("data: ") {
+                data = Some(serde_json::from_str(d).expect("event data is JSON"));
             }
         }
-        out
+        if let (Some(e), Some(d)) = (event, data) {
+            out.push((e, d));
+        }
     }
+    out
 }
 
 impl Drop for Server {

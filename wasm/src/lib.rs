@@ -73,14 +73,7 @@ pub fn analyze(
     let start = js_sys::Date::now();
     let model = kea_core::model_from_json(model_json).map_err(|e| to_js(&e))?;
     let set = overrides(set_json).map_err(|e| to_js(&e))?;
-    let mut report = |fraction: f64| {
-        let answer = progress.call1(&JsValue::NULL, &JsValue::from_f64(fraction));
-        match answer {
-            Ok(v) if v == JsValue::FALSE => ControlFlow::Break(()),
-            Err(_) => ControlFlow::Break(()),
-            Ok(_) => ControlFlow::Continue(()),
-        }
-    };
+    let mut report = js_progress(progress);
     let mut result = kea_core::analyze(&model, &set, &mut report).map_err(|e| to_js(&e))?;
     result.timing.wall_ms = js_sys::Date::now() - start;
     serde_json::to_string(&result).map_err(|e| JsValue::from_str(&e.to_string()))

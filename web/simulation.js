@@ -8,7 +8,7 @@ import uPlot from './vendor/uplot/uPlot.esm.js';
 import { MAX_SAFE, numberProblem, toNumber } from './numbers.js';
 import { valueAxis } from './plot.js';
 import { noTraces } from './results.js';
-import { KeptFields, RunBar, checkModel, el, field, fmt, input, markControls, recheckControl, requestErrors, routeErrors, runError, select, took, wasmCall } from './views.js';
+import { KeptFields, RunBar, RunView, checkModel, el, field, fmt, input, markControls, recheckControl, requestErrors, select, took, wasmCall } from './views.js';
 
 const SETS = ['bound', 'covariance', 'monte_carlo'];
 const CRITERIA = [
@@ -22,9 +22,10 @@ const SERIES = [
   ['chi', 'bound χ', '#2ca02c', [6, 4]],
 ];
 
-export class SimulationView {
+export class SimulationView extends RunView {
   /** `ctx`: {model(), showModelErrors(errors), download(name, type, text), fileStem()}. */
   constructor(root, ctx) {
+    super();
     this.root = root;
     this.ctx = ctx;
     this.result = null;
@@ -119,31 +120,6 @@ export class SimulationView {
     }
   }
 
-  /** A server job taken over after a reload (RunBar.resume); `model`: the model it runs. */
-  async resume(model, exec) {
-    try {
-      return await this.follow('server', exec, model);
-    } catch (e) {
-      throw this.failed(e);
-    }
-  }
-
-  /** Wait for a run's result and show it: current if `model` is still the editor's. Returns the job's id. */
-  async follow(where, exec, model) {
-    const edits = this.edits;
-    const { result, job } = await exec();
-    const current = this.edits === edits && JSON.stringify(model) === JSON.stringify(this.ctx.model());
-    if (current) this.ctx.showModelErrors([]); // else the check of the edited model has the say
-    this.show(result, where, current);
-    return job;
-  }
-
-  /** A run's error, its parts at the model's cells and at this tab's controls. */
-  failed(e) {
-    const { own, model } = routeErrors(e?.errors, this.ctx.showModelErrors);
-    const unplaced = markControls(this.form, own);
-    return runError(e, own, model, unplaced);
-  }
 
   markStale() {
     this.edits++;

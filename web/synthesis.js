@@ -4,7 +4,7 @@
 // `synthesis`; the result as grid tables or as the answer with its verification.
 
 import { numberProblem, toNumber } from './numbers.js';
-import { KeptFields, RunBar, checkModel, checkOverrides, el, field, fmt, input, markControls, recheckControl, requestErrors, routeErrors, runError, select, took, uiWords } from './views.js';
+import { KeptFields, RunBar, RunView, checkModel, checkOverrides, el, field, fmt, input, markControls, recheckControl, requestErrors, select, took, uiWords } from './views.js';
 
 const CRITERIA = [
   ['yz', 'F_YZ (measured vs a-priori)'],
@@ -41,9 +41,10 @@ function paramValue(model, name) {
   return Number.isFinite(v) && v > 0 ? v : 1;
 }
 
-export class SynthesisView {
+export class SynthesisView extends RunView {
   /** `ctx`: {model() → the editor's model object, showModelErrors(errors), download(name, type, text), fileStem()}. */
   constructor(root, ctx) {
+    super();
     this.root = root;
     this.ctx = ctx;
     this.result = null;
@@ -409,31 +410,6 @@ export class SynthesisView {
     }
   }
 
-  /** A server job taken over after a reload (RunBar.resume); `model`: the model it runs. */
-  async resume(model, exec) {
-    try {
-      return await this.follow('server', exec, model);
-    } catch (e) {
-      throw this.failed(e);
-    }
-  }
-
-  /** Wait for a run's result and show it: current if `model` is still the editor's. Returns the job's id. */
-  async follow(where, exec, model) {
-    const edits = this.edits;
-    const { result, job } = await exec();
-    const current = this.edits === edits && JSON.stringify(model) === JSON.stringify(this.ctx.model());
-    if (current) this.ctx.showModelErrors([]); // else the check of the edited model has the say
-    this.show(result, where, current);
-    return job;
-  }
-
-  /** A run's error, its parts at the model's cells and at this tab's controls. */
-  failed(e) {
-    const { own, model } = routeErrors(e?.errors, this.ctx.showModelErrors);
-    const unplaced = markControls(this.form, own);
-    return runError(e, own, model, unplaced);
-  }
 
   // ------------------------------------------------------------ result
 

@@ -397,3 +397,37 @@ export function recheckControl(control, local) {
   unmark(control);
   for (const e of errors) if (e.path === path) mark(control, e);
 }
+
+/**
+ * What the Synthesis and Monte Carlo views share: following a run (or a server job
+ * taken over after a reload) to its result, and a run's errors at the model's cells and
+ * at the tab's controls. A subclass has `form`, `ctx`, `edits` and
+ * `show(result, where, current)`.
+ */
+export class RunView {
+  /** A server job taken over after a reload (RunBar.resume); `model`: the model it runs. */
+  async resume(model, exec) {
+    try {
+      return await this.follow('server', exec, model);
+    } catch (e) {
+      throw this.failed(e);
+    }
+  }
+
+  /** Wait for a run's result and show it: current if `model` is still the editor's. Returns the job's id. */
+  async follow(where, exec, model) {
+    const edits = this.edits;
+    const { result, job } = await exec();
+    const current = this.edits === edits && JSON.stringify(model) === JSON.stringify(this.ctx.model());
+    if (current) this.ctx.showModelErrors([]); // else the check of the edited model has the say
+    this.show(result, where, current);
+    return job;
+  }
+
+  /** A run's error, its parts at the model's cells and at this tab's controls. */
+  failed(e) {
+    const { own, model } = routeErrors(e?.errors, this.ctx.showModelErrors);
+    const unplaced = markControls(this.form, own);
+    return runError(e, own, model, unplaced);
+  }
+}

@@ -6,25 +6,21 @@
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
 import { deflateRawSync } from 'node:zlib';
-import { kea, launchBrowser, newPage, startServer } from './lib.mjs';
+import { kea, newPage, openApp } from './lib.mjs';
 
 let server;
 let browser;
 let page;
 const consoleErrors = [];
 
+let app;
+
 before(async () => {
-  server = await startServer();
-  browser = await launchBrowser();
-  page = await newPage(browser, consoleErrors);
-  await page.goto(`${server.url}/`);
-  await ready(page);
+  app = await openApp(consoleErrors);
+  ({ server, browser, page } = app);
 });
 
-after(async () => {
-  await browser?.close();
-  await server?.stop();
-});
+after(() => app?.close());
 
 function ready(p = page) {
   return p.waitForSelector('body[data-ready=true]', { timeout: 30000 });

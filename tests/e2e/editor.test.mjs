@@ -6,25 +6,21 @@
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
-import { launchBrowser, newPage, relDiff, startServer } from './lib.mjs';
+import { openApp, relDiff } from './lib.mjs';
 
 let server;
 let browser;
 let page;
 const consoleErrors = [];
 
+let app;
+
 before(async () => {
-  server = await startServer();
-  browser = await launchBrowser();
-  page = await newPage(browser, consoleErrors);
-  await page.goto(`${server.url}/`);
-  await page.waitForSelector('body[data-ready=true]', { timeout: 30000 });
+  app = await openApp(consoleErrors);
+  ({ server, browser, page } = app);
 });
 
-after(async () => {
-  await browser?.close();
-  await server?.stop();
-});
+after(() => app?.close());
 
 async function preset(name) {
   await page.selectOption('#preset', name);

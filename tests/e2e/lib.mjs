@@ -56,6 +56,19 @@ export function startServer(args = []) {
   });
 }
 
+/**
+ * The web UI ready in a fresh browser: `kea serve` (with `args`), Chromium and a page on
+ * `/` (console errors collected into `consoleErrors`). `close()` ends both.
+ */
+export async function openApp(consoleErrors, args = []) {
+  const server = await startServer(args);
+  const browser = await launchBrowser();
+  const page = await newPage(browser, consoleErrors);
+  await page.goto(`${server.url}/`);
+  await page.waitForSelector('body[data-ready=true]', { timeout: 30000 });
+  return { server, browser, page, close: async () => { await browser.close(); await server.stop(); } };
+}
+
 /** Headless Chromium with a fresh profile. */
 export function launchBrowser() {
   return chromium.launch({

@@ -9,7 +9,7 @@ import assert from 'node:assert/strict';
 import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import path from 'node:path';
-import { holdJobs, kea, launchBrowser, newPage, relDiff, screenshot, startServer } from './lib.mjs';
+import { holdJobs, kea, newPage, openApp, relDiff, screenshot } from './lib.mjs';
 
 const STEPS = 2000; // small D: the grid's 7 analyses and 200 runs take well under a second
 
@@ -19,18 +19,16 @@ let page;
 let tmp;
 const consoleErrors = [];
 
+let app;
+
 before(async () => {
   tmp = mkdtempSync(path.join(tmpdir(), 'kea-e2e-tabs-'));
-  server = await startServer();
-  browser = await launchBrowser();
-  page = await newPage(browser, consoleErrors);
-  await page.goto(`${server.url}/`);
-  await page.waitForSelector('body[data-ready=true]', { timeout: 30000 });
+  app = await openApp(consoleErrors);
+  ({ server, browser, page } = app);
 });
 
 after(async () => {
-  await browser?.close();
-  await server?.stop();
+  await app?.close();
   if (tmp) rmSync(tmp, { recursive: true, force: true });
 });
 

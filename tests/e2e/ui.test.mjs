@@ -7,25 +7,21 @@ import assert from 'node:assert/strict';
 import { readFileSync, writeFileSync } from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
-import { holdJobs, kea, launchBrowser, newPage, relDiff, screenshot, startServer } from './lib.mjs';
+import { holdJobs, kea, newPage, openApp, relDiff, screenshot } from './lib.mjs';
 
 let server;
 let browser;
 let page;
 const consoleErrors = [];
 
+let app;
+
 before(async () => {
-  server = await startServer();
-  browser = await launchBrowser();
-  page = await newPage(browser, consoleErrors);
-  await page.goto(`${server.url}/`);
-  await page.waitForSelector('body[data-ready=true]', { timeout: 30000 });
+  app = await openApp(consoleErrors);
+  ({ server, browser, page } = app);
 });
 
-after(async () => {
-  await browser?.close();
-  await server?.stop();
-});
+after(() => app?.close());
 
 /** Every criterion cell of the results table: {`set.criterion.row`: value|null}. */
 async function criteria() {

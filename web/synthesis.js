@@ -587,12 +587,20 @@ export class SynthesisView extends RunView {
   }
 }
 
-/** The params, those that the error levels (φ, W, ψ, V, η₀) use first. */
+/** The params, those that the error levels (φ, W, ψ, V, η₀) use first — but one that both the model's and the sensor's use, last (see below). */
 function errorParams(model) {
-  const text = JSON.stringify([model.system?.phi, model.system?.W, model.system?.eta0, model.measurement?.psi, model.measurement?.V]);
+  const uses = (values) => {
+    const text = JSON.stringify(values);
+    return (n) => new RegExp(`(^|[^A-Za-z0-9_])${n.replace(/[^A-Za-z0-9_]/g, '')}($|[^A-Za-z0-9_])`).test(text);
+  };
+  const inModel = uses([model.system?.phi, model.system?.W, model.system?.eta0]);
+  const inSensor = uses([model.measurement?.psi, model.measurement?.V]);
   const names = Object.keys(model.params ?? {});
-  const used = names.filter((n) => new RegExp(`(^|[^A-Za-z0-9_])${n.replace(/[^A-Za-z0-9_]/g, '')}($|[^A-Za-z0-9_])`).test(text));
-  return [...used, ...names.filter((n) => !used.includes(n))];
+  // A param in both the model's errors and the sensor's scales them together, which
+  // the criteria do not see (the seed example's psi, with phi = f*psi): last.
+  const both = names.filter((n) => inModel(n) && inSensor(n));
+  const used = names.filter((n) => (inModel(n) || inSensor(n)) && !both.includes(n));
+  return [...used, ...names.filter((n) => !used.includes(n) && !both.includes(n)), ...both];
 }
 
 /** `name = value` for a grid's heading: it may wrap after the “=”, not inside the number (`1e-6`). */

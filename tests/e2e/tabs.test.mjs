@@ -120,10 +120,12 @@ test('the tab is kept in the link', async () => {
 test('a synthesis grid gives the same table in the browser, on the server and in the CLI', async () => {
   const modelFile = await smallSeedExample();
   await page.click('#tab-synthesis');
-  // The params that the error levels use come first: f and psi for the seed example.
+  // The params that the error levels use come first: f for the seed example. psi,
+  // in both φ = f*psi and ψ, scales the two together, which no criterion sees (a grid
+  // on it had identical rows): it comes last, and the next param (m) is the second.
   assert.deepEqual(
     await page.$$eval(['#syn-grid-param-0', '#syn-grid-param-1'].join(','), (s) => s.map((x) => x.value)),
-    ['psi', 'f'],
+    ['f', 'm'],
   );
   await page.selectOption('#syn-mode', 'grid');
   await page.selectOption('#syn-criterion', 'yx');
@@ -524,7 +526,7 @@ test("the Synthesis and Monte Carlo tabs' fields are kept over a reload; stored 
     await other.selectOption('#syn-grid-param-1', 'c'); // a grid row, kept though another mode is shown
     await other.fill('#syn-grid-values-1', '0.1, 0.2');
     await other.selectOption('#syn-mode', 'bisect');
-    await other.selectOption('#syn-bisect-param', 'f');
+    await other.selectOption('#syn-bisect-param', 'c'); // not the default (f)
     await other.fill('#syn-bisect-low', '0.5');
     await other.fill('#syn-bisect-high', '40');
     await other.fill('#syn-bisect-probes', '5');
@@ -535,7 +537,7 @@ test("the Synthesis and Monte Carlo tabs' fields are kept over a reload; stored 
     await other.selectOption('#mc-model-error', 'constant');
     await other.fill('#mc-trace-points', '77');
     const filled = await fields();
-    assert.equal(filled['syn-bisect-param'], 'f');
+    assert.equal(filled['syn-bisect-param'], 'c');
     assert.notDeepEqual(filled, defaults);
 
     await other.reload();

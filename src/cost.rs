@@ -389,8 +389,8 @@ mod tests {
             n * l * l / 4.0 + n * (n + 1.0) / 2.0 * l + 2.0 * n * l
         );
         let e = step.expressions;
-        assert_eq!((e.distinct, e.chars, e.entries), (2, 6 + 3, 3));
-        assert_eq!(e.units(), (10 * 2 + 9 + 2 * 3) as f64);
+        assert_eq!((e.distinct, e.chars, e.entries, e.calls), (2, 6 + 3, 3, 12));
+        assert_eq!(e.units(), (10 * 2 + 9 + 2 * 3 + 12) as f64);
         // Without the texts, every varying entry is an expression of 20 characters.
         let blind = Expressions::of(&c, None);
         assert_eq!((blind.distinct, blind.chars, blind.entries), (3, 60, 3));
@@ -420,7 +420,7 @@ mod tests {
         assert_eq!((e.distinct, e.chars, e.whens, e.when_chars), (1, 5, 1, 6));
         assert!(
             step.explain()
-                .contains("2 expressions in t (11 characters)")
+                .contains("2 expressions in t (11 characters, calls 12)")
         );
     }
 }

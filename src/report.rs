@@ -246,13 +246,14 @@ mod tests {
         );
     }
 
-    /// State names may hold a comma, a quote or a line break: the CSV quotes them
-    /// (RFC 4180), so every record keeps its columns.
+    /// State names may hold a comma or a quote (not a line break: validation refuses
+    /// control characters): the CSV quotes them (RFC 4180), so every record keeps its
+    /// columns.
     #[test]
     fn csv_quotes_names_that_need_it() {
         let model = crate::model_from_value(serde_json::json!({
             "time": {"t0": 0, "t_end": 1, "steps": 100},
-            "system": {"states": ["p,1", "v \"x\"\nw"], "a": [[0, 1], [0, 0]],
+            "system": {"states": ["p,1", "v \"x\", w"], "a": [[0, 1], [0, 0]],
                        "b": [[0], [1]], "phi": [1], "eta0": [1, 1]},
             "measurement": {"names": ["z"], "c": [[1, 0]], "gamma": [[1]], "psi": [0.5]},
             "options": {"trace_points": 10}
@@ -265,11 +266,11 @@ mod tests {
             "{}",
             &text[..80]
         );
-        assert!(text.contains(",\"y:v \"\"x\"\"\nw\","), "{text}");
+        assert!(text.contains(",\"y:v \"\"x\"\", w\","), "{text}");
         let mut reader = csv::Reader::from_reader(text.as_bytes());
         let header = reader.headers().unwrap().clone();
         assert_eq!(&header[1], "y:p,1");
-        assert_eq!(&header[header.len() - 1], "local_yx:v \"x\"\nw");
+        assert_eq!(&header[header.len() - 1], "local_yx:v \"x\", w");
         let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
         assert_eq!(rows.len(), r.traces.t.len());
         assert!(rows.iter().all(|row| row.len() == header.len()));

@@ -211,6 +211,7 @@ test('at 1366 × 800 a Synthesis grid fits its box: no number is cut off', async
     const cut = await other.$$eval('#syn-grid .syn-cell span', (spans, r) => spans.filter((s) => s.getBoundingClientRect().right > r + 0.5).map((s) => s.textContent), right);
     assert.deepEqual(cut, []);
     // Columns too many to fit: the box scrolls, and says so.
+    await other.selectOption('#syn-grid-param-1', 'c');
     await other.fill('#syn-grid-values-1', Array.from({ length: 12 }, (_, i) => `${(i + 1) * 1e-6}`).join(', '));
     await other.click('#syn-run');
     await other.waitForFunction(() => document.querySelectorAll('#syn-grid td[data-index]').length === 36, null, { timeout: 60000 });

@@ -52,7 +52,7 @@ pub fn raw_json(status: StatusCode, body: String) -> Response {
 /// `POST /v1/models`: the body is a model; it is validated, stored, and given an id.
 pub async fn create_model(
     State(state): State<AppState>,
-    JsonBody(body, text): JsonBody,
+    JsonBody(body, bytes): JsonBody,
 ) -> Result<Response, Problem> {
     let model = tokio::task::spawn_blocking(move || {
         let model = kea_core::model_from_value(body)?;
@@ -67,7 +67,9 @@ pub async fn create_model(
         name: model.name.clone(),
         created_at: now_rfc3339(),
         // The text as sent (member order, number spellings, layout): GET returns it.
-        model_json: text,
+        // (UTF-8, as parse_json took it; a byte-order mark is not part of the text.)
+        model_json: String::from_utf8_lossy(bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&bytes))
+            .into_owned(),
     };
     let view = json!({ "id": record.id, "name": record.name, "created_at": record.created_at });
     let location = format!("/v1/models/{}", record.id);

@@ -15,8 +15,8 @@ use std::collections::BTreeMap;
 
 /// A JSON request body, read under the configured size limit. Every failure is a
 /// problem+json 4xx: 415 (not JSON), 413 (too large), 408 (too slow), 400 (malformed).
-/// With the text as sent (without a byte-order mark): a stored model is kept as that.
-pub struct JsonBody(pub Value, pub String);
+/// With the bytes as sent (valid UTF-8 once parsed): a stored model is kept as its text.
+pub struct JsonBody(pub Value, pub Vec<u8>);
 
 impl FromRequest<AppState> for JsonBody {
     type Rejection = Problem;
@@ -94,9 +94,7 @@ impl FromRequest<AppState> for JsonBody {
             .detail(e.to_string())
             .error("", format!("not valid JSON: {e}"))
         })?;
-        // (parse_json took it as UTF-8, a byte-order mark skipped.)
-        let text = String::from_utf8_lossy(bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&bytes));
-        Ok(JsonBody(value, text.into_owned()))
+        Ok(JsonBody(value, bytes))
     }
 }
 

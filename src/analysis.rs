@@ -1321,7 +1321,9 @@ fn singular_at(
             ),
         ));
     }
-    // Cholesky, row by row: the pivot of row a is what measurement a adds.
+    // Cholesky, row by row: the pivot of row a is what measurement a adds. (Not
+    // linalg::cholesky, which fails only at a pivot ≤ 0: this q, formed again, can
+    // keep a rounding-level pivot where the step's factorisation failed.)
     let mut l = vec![0.0; nk * nk];
     for a in 0..nk {
         for b in 0..=a {

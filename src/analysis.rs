@@ -28,6 +28,16 @@ pub const WORK_BETWEEN_REPORTS: f64 = (1u64 << 20) as f64;
 /// At most this many steps between progress reports, however cheap the steps.
 pub const MAX_STEPS_BETWEEN_REPORTS: u64 = 1 << 14;
 
+/// How the warnings about the bound set alone begin (its overflow, its growth far
+/// beyond the covariance's interval): they say nothing of the covariance set's
+/// criteria, so a synthesis targeting that set leaves them out ([`bound_set_only`]).
+const BOUND_WARNING: &str = "the bound (modulus procedure)";
+
+/// The warning concerns the bound set's criteria only.
+pub fn bound_set_only(warning: &str) -> bool {
+    warning.starts_with(BOUND_WARNING)
+}
+
 /// When a loop over steps reports progress: every `every` steps, `every` chosen so
 /// that the steps between two reports are about [`WORK_BETWEEN_REPORTS`] by the work
 /// estimate (at least 1, at most [`MAX_STEPS_BETWEEN_REPORTS`]). A step of a 200-state
@@ -863,7 +873,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                 "|A| taken element-wise grows where A does not (oscillatory or feedback dynamics), so the bound is not informative here; see the covariance set"
             };
             format!(
-                "the bound (modulus procedure) overflowed at step {k} (t = {}): {why}",
+                "{BOUND_WARNING} overflowed at step {k} (t = {}): {why}",
                 crate::report::short(t)
             )
         });
@@ -1080,7 +1090,7 @@ fn bound_growth(states: &[String], f: &Final, lambda: f64) -> Option<String> {
         }
     }
     (!parts.is_empty()).then(|| format!(
-        "the bound (modulus procedure) grew far beyond the covariance's confidence interval by t_end ({}): |A| and |I − pC| taken element-wise grow where A and I − pC do not (oscillatory or feedback dynamics), so the bound set's criteria describe that growth rather than the filter; see the covariance set",
+        "{BOUND_WARNING} grew far beyond the covariance's confidence interval by t_end ({}): |A| and |I − pC| taken element-wise grow where A and I − pC do not (oscillatory or feedback dynamics), so the bound set's criteria describe that growth rather than the filter; see the covariance set",
         parts.join("; ")
     ))
 }

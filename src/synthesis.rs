@@ -232,9 +232,10 @@ pub struct Verification {
     pub looser: Option<Point>,
     /// The answer meets the target (and the looser point, if any, misses it).
     pub passed: bool,
-    /// The warnings of the answer's analysis: a bound set that grew far beyond the
-    /// covariance's (its criteria then describe |A|'s growth, not the filter), lost
-    /// precision, … — what the Analysis of that point would say.
+    /// The warnings of the answer's analysis that concern the target's set: a bound
+    /// set that grew far beyond the covariance's (its criteria then describe |A|'s
+    /// growth, not the filter; left out for a covariance target), lost precision, … —
+    /// what the Analysis of that point would say.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
 }
@@ -809,7 +810,14 @@ impl Ctx<'_> {
                 Error::Cancelled => Error::Cancelled,
             }
         })?;
-        Ok((self.point(params, &r), r.steps, r.warnings))
+        // The warnings that concern the target's set: the bound set's own say nothing
+        // of a covariance target's criteria.
+        let point = self.point(params, &r);
+        let mut warnings = r.warnings;
+        if self.target.set == CriteriaSetName::Covariance {
+            warnings.retain(|w| !crate::analysis::bound_set_only(w));
+        }
+        Ok((point, r.steps, warnings))
     }
 
     fn point(&self, params: &[(String, f64)], r: &AnalysisResult) -> Point {

@@ -713,3 +713,35 @@ fn the_verification_carries_the_answers_analysis_warnings() {
         "{text}"
     );
 }
+
+/// The bound set's own warnings (its growth far beyond the covariance's interval)
+/// say nothing of the covariance set's criteria: a covariance target's verification
+/// leaves them out, and keeps the rest of what the analysis says.
+#[test]
+fn a_covariance_targets_verification_leaves_out_the_bound_sets_warnings() {
+    let model = presets::get("cv-tracker").expect("preset");
+    let req = request(
+        &model,
+        json!({"set": "covariance", "criterion": "yx", "state": "position", "threshold": 300}),
+        json!({"bisect": {"param": "r", "low": 0.05, "high": 5}}),
+    );
+    let r = run(&req);
+    assert_eq!(r.status, Status::Found, "{}", r.message);
+    let v = r.verification.as_ref().expect("verified");
+    let set: Overrides = v.point.params.clone().into_iter().collect();
+    let direct = analyze(&model, &set, &mut NoProgress).unwrap();
+    let bound_only: Vec<&String> = direct
+        .warnings
+        .iter()
+        .filter(|w| w.starts_with("the bound (modulus procedure)"))
+        .collect();
+    assert!(!bound_only.is_empty(), "{:?}", direct.warnings);
+    let rest: Vec<String> = direct
+        .warnings
+        .iter()
+        .filter(|w| !bound_only.contains(w))
+        .cloned()
+        .collect();
+    assert_eq!(v.warnings, rest);
+    assert!(!synthesis::render_text(&r).contains("warning"));
+}

@@ -628,10 +628,11 @@ impl<'m, const N: usize> Engine<'m, N> {
                     pot[i] = big_r[i * n + i];
                 }
                 // R_ii far below r_ii is the small difference of large terms (2.7):
-                // rounding error, not the filter (see ROUNDING_LEVEL).
+                // rounding error, not the filter (see ROUNDING_LEVEL) — except for a
+                // state a unit row measures in an exact update.
                 if let Some(i) = (0..n).position(|i| {
                     let r = joseph.r_pred[i * n + i];
-                    r > 0.0 && pot[i] <= ROUNDING_LEVEL * r
+                    r > 0.0 && pot[i] <= ROUNDING_LEVEL * r && !(joseph.exact && prep.measures(i))
                 }) {
                     cancelled.get_or_insert((k, t_k, i));
                     cancelled_steps += 1;
@@ -973,7 +974,7 @@ impl<'m, const N: usize> Engine<'m, N> {
         }
         if let Some((k, t, i)) = cancelled {
             warnings.push(format!(
-                "the filtered variance of \"{}\" fell to ≤ {ROUNDING_LEVEL:e} of its predicted variance at step {k} (t = {}); {cancelled_steps} of the {} steps had a state's at that level: the update cancels it almost exactly (a measurement with no or very little noise, or an initial SKO far above the measurement's), so R's diagonal there keeps fewer than 4 correct digits and the covariance set's ZX and YX at those steps are ratios of rounding errors",
+                "the filtered variance of \"{}\" fell to ≤ {ROUNDING_LEVEL:e} of its predicted variance at step {k} (t = {}); {cancelled_steps} of the {} steps had a state's at that level: the update cancels it almost exactly — a state measured only through others (its correlation with a measured state, or a row of c that combines states), with an initial or model-error SKO far above what the measurements leave of it — so R's diagonal there keeps fewer than 4 correct digits: the covariance set's ZX and YX at those steps are ratios of rounding errors, and later steps inherit R's error until the filter forgets it",
                 m.states[i],
                 crate::validate::num(t),
                 self.steps
@@ -1036,11 +1037,13 @@ fn overflowed_maxima(m: &CompiledModel, ydot_max: &[f64], z_max: &[f64]) -> Opti
 }
 
 /// A filtered variance R_ii at or below this fraction of the predicted r_ii is
-/// reported: the Joseph update (2.7) forms it as r − (k sᵀ + s kᵀ) + q k kᵀ, terms of
-/// size r_ii, so its rounding error is ≈ 1e-16 r_ii — at R_ii = 1e-12 r_ii, 1e-4 of
-/// R_ii. Such steps come from a measurement without noise (R_ii is 0 in exact
-/// arithmetic) and make the covariance set's ZX = σ_Z/σ_X and YX ratios of rounding
-/// errors, which can dominate their averages.
+/// reported, unless a unit row measures state i in an exact update (`riccati`'s
+/// `update_exact`, which keeps R_ii's relative precision). Otherwise the update (2.7)
+/// forms R_ii from terms of size r_ii, so its rounding error is ≈ 1e-16 r_ii — at
+/// R_ii = 1e-12 r_ii, 1e-4 of R_ii. Such steps come from a state determined only
+/// through others (the tracker's velocity from two positions, with a diffuse start)
+/// and make the covariance set's ZX = σ_Z/σ_X and YX ratios of rounding errors, which
+/// can dominate their averages.
 pub const ROUNDING_LEVEL: f64 = 1e-12;
 
 /// How many times the covariance's confidence half-width λσ the bound may be at t_end

@@ -214,6 +214,32 @@ impl Prepared {
                 })
     }
 
+    /// Whether a unit row's update would lose digits in the expanded form of (2.7)
+    /// (see [`SequentialJoseph::step`]): its innovation variance q = coef² r_col,col
+    /// + d above [`EXACT_Q_OVER_D`] times its noise variance d, or d = 0. The expanded
+    /// form subtracts terms of size q to leave R_col,col ≈ r_col,col·d/q, so its
+    /// relative error is ≈ ε·q/d. Updates only shrink r, so the rows' q at the
+    /// predicted r bound every q of the step.
+    fn needs_exact(&self, r_pred: &[f64], n: usize) -> bool {
+        self.unit[..self.idx.len()]
+            .iter()
+            .zip(&self.d)
+            .any(|(u, &d)| match *u {
+                Some((col, coef)) => {
+                    // (Written so that NaN takes the exact path, which reports it.)
+                    !(coef * coef * r_pred[col * n + col] <= (EXACT_Q_OVER_D - 1.0) * d)
+                }
+                None => false,
+            })
+    }
+
+    /// A measurement in use is a unit row on state `i`.
+    pub fn measures(&self, i: usize) -> bool {
+        self.unit[..self.idx.len()]
+            .iter()
+            .any(|u| u.is_some_and(|(col, _)| col == i))
+    }
+
     /// The number of measurements in use.
     pub fn len(&self) -> usize {
         self.idx.len()
@@ -227,6 +253,12 @@ impl Prepared {
 /// The largest innovation-to-noise variance ratio q/d for which the block gain is
 /// read off the updated covariance instead of composed from the scalar gains.
 const DIRECT_GAIN_MAX_Q_OVER_D: f64 = 16.0;
+
+/// The largest q/d for which a unit row's update takes the expanded form of (2.7),
+/// whose relative error in R_col,col is then ≲ 1e3 ε ≈ 2e-13; above it (a diffuse
+/// initial SKO, a sensor far more accurate than the prediction, no noise at all) the
+/// step takes [`update_exact`].
+const EXACT_Q_OVER_D: f64 = 1e3;
 
 /// P a Pᵀ = L D Lᵀ in place (a full symmetric m × m; its strict lower triangle := L),
 /// for a positive semi-definite a, with diagonal pivoting: each step takes the largest
@@ -314,6 +346,11 @@ pub struct SequentialJoseph {
     /// h_kᵀ, the transpose of h_k = I − p_k C (N × N): row c is column c of h_k,
     /// so that building it and the bound's product |h| x (3.19) are row operations.
     pub ht: Vec<f64>,
+    /// The last step's update was [`update_exact`]: the filtered variance of a state
+    /// a unit row measures is then the filter's, however far below the predicted.
+    pub exact: bool,
+    /// update_exact's row (N).
+    row: Vec<f64>,
 }
 
 impl SequentialJoseph {
@@ -325,6 +362,8 @@ impl SequentialJoseph {
             r_pred: vec![0.0; n * n],
             gain_t: vec![0.0; nm * n],
             ht: vec![0.0; n * n],
+            exact: false,
+            row: vec![0.0; n],
         }
     }
 
@@ -346,7 +385,10 @@ impl SequentialJoseph {
     /// else p_j = (I − k_n c_n)⋯(I − k_{j+1} c_{j+1}) k_j  (N·n²/2)
     /// ```
     /// The expansion holds for any k, so like the Joseph form it does not rely on k
-    /// being the optimal gain. `n` is the state dimension (a compile-time constant
+    /// being the optimal gain. Its rounding error in R_col,col is ≈ ε·q/d of it, so
+    /// where a unit row's q at the predicted r exceeds 10³ d (or d = 0) the step's
+    /// updates take [`update_exact`] instead: (2.7) as a product, with the factor's
+    /// entry 1 − coef·k_col taken as d/q. `n` is the state dimension (a compile-time constant
     /// at the call site lets the compiler unroll every loop here).
     #[inline(always)]
     pub(crate) fn step<const N: usize, L: Lanes>(
@@ -363,8 +405,14 @@ impl SequentialJoseph {
         predict_cov::<N, L>(&mut self.r_pred, big_r, e, big_b, &mut self.u, n);
         big_r.copy_from_slice(&self.r_pred[..n * n]);
         let nk = prep.len();
-        let direct = prep.gain_from_covariance(&self.r_pred, n);
-        let ok = if N > 0 {
+        let exact = prep.needs_exact(&self.r_pred, n);
+        self.exact = exact;
+        // (The direct gain needs q ≤ 16 d for every row: never with `exact`.)
+        let direct = !exact && prep.gain_from_covariance(&self.r_pred, n);
+        let ok = if exact {
+            let w = (&mut self.s[..], &mut self.row[..]);
+            update_exact(n, big_r, &mut self.kt, &mut self.ht, w, prep)
+        } else if N > 0 {
             update_fixed::<N>(
                 mat_mut(big_r),
                 self.kt.as_chunks_mut::<N>().0,
@@ -400,20 +448,23 @@ impl SequentialJoseph {
         // hᵀ = I − (L⁻¹ C)ᵀ K'ᵀ: row c of hᵀ loses (L⁻¹ C)_jc times gain j, for each
         // measurement j in turn (each entry sees the same subtractions, in the same
         // order, as h = I − K' (L⁻¹ C) built entry by entry).
-        let ht = &mut self.ht[..n * n];
-        ht.fill(0.0);
-        for i in 0..n {
-            ht[i * n + i] = 1.0;
-        }
-        for j in 0..nk {
-            let k = &self.kt[j * n..j * n + n];
-            match prep.unit[j] {
-                Some((col, coef)) => L::sub_scaled(&mut ht[col * n..col * n + n], k, coef),
-                None => {
-                    let row = &prep.rows[j * n..j * n + n];
-                    for (hc, &c) in ht.chunks_exact_mut(n).zip(row) {
-                        for (x, &ka) in hc.iter_mut().zip(k) {
-                            *x -= ka * c;
+        // (update_exact built it as the product of the rows' accurate factors.)
+        if !exact {
+            let ht = &mut self.ht[..n * n];
+            ht.fill(0.0);
+            for i in 0..n {
+                ht[i * n + i] = 1.0;
+            }
+            for j in 0..nk {
+                let k = &self.kt[j * n..j * n + n];
+                match prep.unit[j] {
+                    Some((col, coef)) => L::sub_scaled(&mut ht[col * n..col * n + n], k, coef),
+                    None => {
+                        let row = &prep.rows[j * n..j * n + n];
+                        for (hc, &c) in ht.chunks_exact_mut(n).zip(row) {
+                            for (x, &ka) in hc.iter_mut().zip(k) {
+                                *x -= ka * c;
+                            }
                         }
                     }
                 }
@@ -447,6 +498,153 @@ impl SequentialJoseph {
         }
         true
     }
+}
+
+/// The scalar Joseph updates of [`SequentialJoseph::step`] where the expanded form
+/// would lose digits ([`Prepared::needs_exact`]), with h_kᵀ built alongside. For a
+/// unit row c = coef·e_col the factor I − k c is taken with its one entry near
+/// cancellation computed exactly — 1 − coef·k_col = d/q — and (2.7) as written:
+///
+/// ```text
+/// N = r (I − k c)ᵀ:   N_ab = r_ab − coef k_b r_a,col  (b ≠ col),   N_a,col = (d/q) r_a,col
+/// R = (I − k c) N + d k kᵀ:   R_ab = N_ab − coef k_a N_col,b  (a ≠ col),   R_col,b = (d/q) N_col,b
+/// ```
+///
+/// Rounding error in N is multiplied by d/q on the way to R_col,·, so R keeps its
+/// relative precision however far q exceeds d (a diffuse initial SKO: η₀ = 10⁸
+/// against ψ = 1 left R as garbage in the expanded form; d = 0 gives R_col,col = 0).
+/// The earlier gains and h = (I − k_n c_n)⋯(I − k_1 c_1) pass through the same
+/// factors. A row that is not a unit row takes the expanded form, as in
+/// `update_fixed`. `r` is full and symmetric on entry and on return; O(n·N²), scalar
+/// code, so that every build gives the same bits.
+#[cold]
+#[inline(never)]
+fn update_exact(
+    n: usize,
+    r: &mut [f64],
+    kt: &mut [f64],
+    ht: &mut [f64],
+    (s, work): (&mut [f64], &mut [f64]),
+    prep: &Prepared,
+) -> bool {
+    let r = &mut r[..n * n];
+    let s = &mut s[..n];
+    let work = &mut work[..n];
+    // h, built row-major here and transposed at the end.
+    let h = &mut ht[..n * n];
+    h.fill(0.0);
+    for i in 0..n {
+        h[i * n + i] = 1.0;
+    }
+    for j in 0..prep.len() {
+        let row = &prep.rows[j * n..j * n + n];
+        let d = prep.d[j];
+        for (a, x) in s.iter_mut().enumerate() {
+            *x = (0..n).map(|b| r[a * n + b] * row[b]).sum();
+        }
+        let q = s.iter().zip(row).map(|(a, b)| a * b).sum::<f64>() + d;
+        if !(q > 0.0 && q < f64::INFINITY) {
+            return false;
+        }
+        let (done, rest) = kt.split_at_mut(j * n);
+        let k = &mut rest[..n];
+        for (k, s) in k.iter_mut().zip(s.iter()) {
+            *k = s / q;
+        }
+        match prep.unit[j] {
+            Some((col, coef)) => {
+                let hc = d / q;
+                // Row col of N (symmetric r: column col is row col).
+                let rcc = r[col * n + col];
+                let ncol = &mut *work;
+                for (b, x) in ncol.iter_mut().enumerate() {
+                    *x = if b == col {
+                        hc * rcc
+                    } else {
+                        r[col * n + b] - coef * k[b] * rcc
+                    };
+                }
+                // The upper triangle of R; r's lower triangle (and row a's own
+                // r_a,col, read first) stay as they were until the mirror below.
+                for a in 0..n {
+                    let rac = r[a * n + col];
+                    for b in a..n {
+                        let nab = if b == col {
+                            hc * rac
+                        } else {
+                            r[a * n + b] - coef * k[b] * rac
+                        };
+                        let hn = if a == col {
+                            hc * ncol[b]
+                        } else {
+                            nab - coef * k[a] * ncol[b]
+                        };
+                        r[a * n + b] = hn + d * k[a] * k[b];
+                    }
+                }
+                // Earlier gains and h: x := (I − k c) x, entry col by d/q.
+                let through = |x: &mut [f64]| {
+                    let xc = x[col];
+                    for (a, v) in x.iter_mut().enumerate() {
+                        *v = if a == col { hc * xc } else { *v - coef * k[a] * xc };
+                    }
+                };
+                for km in done.chunks_exact_mut(n) {
+                    through(km);
+                }
+                let (above, from_col) = h.split_at_mut(col * n);
+                let (hcol, below) = from_col.split_at_mut(n);
+                for (a, ha) in above.chunks_exact_mut(n).enumerate() {
+                    for (x, c) in ha.iter_mut().zip(hcol.iter()) {
+                        *x -= coef * k[a] * c;
+                    }
+                }
+                for (a, ha) in below.chunks_exact_mut(n).enumerate() {
+                    for (x, c) in ha.iter_mut().zip(hcol.iter()) {
+                        *x -= coef * k[col + 1 + a] * c;
+                    }
+                }
+                for x in hcol.iter_mut() {
+                    *x *= hc;
+                }
+            }
+            None => {
+                for a in 0..n {
+                    let (ka, beta) = (k[a], q * k[a] - s[a]);
+                    for b in a..n {
+                        r[a * n + b] = r[a * n + b] - ka * s[b] + beta * k[b];
+                    }
+                }
+                for km in done.chunks_exact_mut(n) {
+                    let ck: f64 = km.iter().zip(row).map(|(a, b)| a * b).sum();
+                    for (x, ka) in km.iter_mut().zip(k.iter()) {
+                        *x -= ka * ck;
+                    }
+                }
+                // h := h − k (c h)
+                let ch = &mut *work;
+                for (b, x) in ch.iter_mut().enumerate() {
+                    *x = (0..n).map(|l| row[l] * h[l * n + b]).sum();
+                }
+                for (a, ha) in h.chunks_exact_mut(n).enumerate() {
+                    for (x, c) in ha.iter_mut().zip(ch.iter()) {
+                        *x -= k[a] * c;
+                    }
+                }
+            }
+        }
+        for a in 1..n {
+            for b in 0..a {
+                r[a * n + b] = r[b * n + a];
+            }
+        }
+    }
+    for a in 1..n {
+        for b in 0..a {
+            h.swap(a * n + b, b * n + a);
+        }
+    }
+    true
 }
 
 /// The scalar Joseph updates of [`SequentialJoseph::step`] on fixed-size arrays.

@@ -678,10 +678,11 @@ fn mutated_presets_give_errors_or_finite_results() {
 }
 
 /// An initial SKO 150 orders of magnitude above the measurement's (cv-tracker with
-/// eta0 = 1e150, inside the SKOs' range): the update cancels the position's variance
-/// to rounding level at once, and two steps later q comes out ≤ 0. That was reported
-/// as a singular innovation covariance ("a measurement has no error…"), naming the
-/// measurement; now as the precision it is, from the step it began.
+/// eta0 = 1e150, inside the SKOs' range): the position's update is exact, but the
+/// velocity's variance, known only through two positions, cancels to rounding level
+/// at step 2, and at step 3 q comes out ≤ 0. That was reported as a singular
+/// innovation covariance ("a measurement has no error…"), naming the measurement;
+/// now as the precision it is, from the step it began.
 #[test]
 fn an_innovation_covariance_lost_to_rounding_says_so() {
     let mut v: Value =
@@ -690,7 +691,7 @@ fn an_innovation_covariance_lost_to_rounding_says_so() {
     let e = error_at(
         v,
         "system",
-        "the filter's covariance lost its precision: from step 1 (t = 0.1) the update cancelled the variance of \"position\"",
+        "the filter's covariance lost its precision: from step 2 (t = 0.2) the update cancelled the variance of \"velocity\"",
     );
     assert!(
         e.to_string()

@@ -216,17 +216,18 @@ impl Prepared {
 
     /// Whether a unit row's update would lose digits in the expanded form of (2.7)
     /// (see [`SequentialJoseph::step`]): its innovation variance q = coef² r_col,col
-    /// + d above [`EXACT_Q_OVER_D`] times its noise variance d, or d = 0. The expanded
-    /// form subtracts terms of size q to leave R_col,col ≈ r_col,col·d/q, so its
-    /// relative error is ≈ ε·q/d. Updates only shrink r, so the rows' q at the
-    /// predicted r bound every q of the step.
+    /// + d above [`EXACT_Q_OVER_D`] times its noise variance d, or d = 0 (or NaN,
+    /// which the exact path reports). The expanded form subtracts terms of size q to
+    /// leave R_col,col ≈ r_col,col·d/q, so its relative error is ≈ ε·q/d. Updates only
+    /// shrink r, so the rows' q at the predicted r bound every q of the step. Never
+    /// where [`Self::gain_from_covariance`] holds (q ≤ 16 d for every row), which
+    /// the step asks first.
     fn needs_exact(&self, r_pred: &[f64], n: usize) -> bool {
         self.unit[..self.idx.len()]
             .iter()
             .zip(&self.d)
             .any(|(u, &d)| match *u {
                 Some((col, coef)) => {
-                    // (Written so that NaN takes the exact path, which reports it.)
                     !(coef * coef * r_pred[col * n + col] <= (EXACT_Q_OVER_D - 1.0) * d)
                 }
                 None => false,
@@ -405,10 +406,9 @@ impl SequentialJoseph {
         predict_cov::<N, L>(&mut self.r_pred, big_r, e, big_b, &mut self.u, n);
         big_r.copy_from_slice(&self.r_pred[..n * n]);
         let nk = prep.len();
-        let exact = prep.needs_exact(&self.r_pred, n);
+        let direct = prep.gain_from_covariance(&self.r_pred, n);
+        let exact = !direct && prep.needs_exact(&self.r_pred, n);
         self.exact = exact;
-        // (The direct gain needs q ≤ 16 d for every row: never with `exact`.)
-        let direct = !exact && prep.gain_from_covariance(&self.r_pred, n);
         let ok = if exact {
             let w = (&mut self.s[..], &mut self.row[..]);
             update_exact(n, big_r, &mut self.kt, &mut self.ht, w, prep)

@@ -198,6 +198,13 @@ pub fn preset(name: &str) -> Option<String> {
     kea_core::presets::get_json(name).map(str::to_string)
 }
 
+/// One preset's synthesis example (a request's `target` and `mode`, no `model`),
+/// exactly as shipped; `undefined` for an unknown name.
+#[wasm_bindgen]
+pub fn preset_synthesis(name: &str) -> Option<String> {
+    kea_core::presets::synthesis_json(name).map(str::to_string)
+}
+
 /// The version of kea this build comes from.
 #[wasm_bindgen]
 pub fn version() -> String {
@@ -239,5 +246,7 @@ mod tests {
         assert_eq!(list[0]["name"], "seed-example");
         assert!(preset("seed-example").unwrap().contains("\"kea_model\""));
         assert!(preset("no-such").is_none());
+        assert!(preset_synthesis("cv-tracker").unwrap().contains("\"target\""));
+        assert!(preset_synthesis("no-such").is_none());
     }
 }

@@ -1,4 +1,5 @@
-//! `kea presets` (list) and `kea preset NAME` (print the JSON).
+//! `kea presets` (list) and `kea preset NAME [--synthesis]` (print the model's JSON, or
+//! its synthesis example's).
 
 use crate::Run;
 use std::fmt::Write;
@@ -39,11 +40,20 @@ impl Run for ListArgs {
 pub struct ShowArgs {
     /// The preset's name (see `kea presets`).
     pub name: String,
+    /// Print the preset's synthesis example instead: a request's `target` and `mode`
+    /// (`kea synthesize --preset NAME` runs it; add `"model"` to use it elsewhere).
+    #[arg(long)]
+    pub synthesis: bool,
 }
 
 impl Run for ShowArgs {
     fn run(self) -> ExitCode {
-        match kea_core::presets::get_json(&self.name) {
+        let text = if self.synthesis {
+            kea_core::presets::synthesis_json(&self.name)
+        } else {
+            kea_core::presets::get_json(&self.name)
+        };
+        match text {
             Some(json) => {
                 let end = if json.ends_with('\n') { "" } else { "\n" };
                 match super::print_text(&format!("{json}{end}")) {

@@ -1,6 +1,7 @@
-//! `kea synthesize REQUEST.json [--model FILE|preset:NAME | --preset NAME] [--set name=value]…
-//! [--threads N] [--json]`: the error levels that reach a desired filtering effect
-//! (METHOD §1.7), on every core.
+//! `kea synthesize [REQUEST.json] [--model FILE|preset:NAME | --preset NAME]
+//! [--set name=value]… [--threads N] [--json]`: the error levels that reach a desired
+//! filtering effect (METHOD §1.7), on every core. Without a request, a preset's own
+//! example (`presets/synthesis/NAME.json`).
 
 use crate::Run;
 use crate::parallel::Rayon;
@@ -12,8 +13,9 @@ use std::time::Instant;
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// The synthesis request (JSON: `target`, `mode`, and `model` unless given below);
-    /// see docs/synthesis.md.
-    pub request: String,
+    /// see docs/synthesis.md. Left out with a preset's model: that preset's example
+    /// (`kea preset NAME --synthesis` prints it).
+    pub request: Option<String>,
     /// Take the model from this file, or `preset:NAME` (replaces the request's `model`).
     #[arg(long, conflicts_with = "preset")]
     pub model: Option<String>,
@@ -35,17 +37,45 @@ pub struct Args {
     pub limit: super::WorkLimit,
 }
 
+impl Args {
+    /// The example of the preset given by `--preset NAME` or `--model preset:NAME`,
+    /// for a command without a request.
+    fn preset_example(&self) -> Result<Value, ExitCode> {
+        let name = self
+            .preset
+            .as_deref()
+            .or_else(|| self.model.as_deref()?.strip_prefix("preset:"));
+        let Some(name) = name else {
+            eprintln!(
+                "missing: the synthesis request (a file, or `-` for stdin); or --preset NAME alone for that preset's example"
+            );
+            return Err(ExitCode::from(super::EXIT_INVALID));
+        };
+        let text = kea_core::presets::synthesis_json(name).ok_or_else(|| {
+            eprintln!("{}", super::no_preset(name));
+            ExitCode::from(super::EXIT_INVALID)
+        })?;
+        Ok(kea_core::parse_json(text.as_bytes()).expect("the examples parse (tested)"))
+    }
+}
+
 impl Run for Args {
     fn run(self) -> ExitCode {
-        if self.request == "-" && self.model.as_deref() == Some("-") {
+        if self.request.as_deref() == Some("-") && self.model.as_deref() == Some("-") {
             eprintln!(
                 "the request and --model are both `-`, but stdin can be read once: give one of them as a file"
             );
             return ExitCode::from(super::EXIT_INVALID);
         }
-        let mut value = match super::read_json(&self.request) {
-            Ok(v) => v,
-            Err(c) => return c,
+        let mut value = match &self.request {
+            Some(arg) => match super::read_json(arg) {
+                Ok(v) => v,
+                Err(c) => return c,
+            },
+            None => match self.preset_example() {
+                Ok(v) => v,
+                Err(c) => return c,
+            },
         };
         let Value::Object(obj) = &mut value else {
             return super::report_error(&kea_core::Error::invalid(

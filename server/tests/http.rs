@@ -54,6 +54,27 @@ fn health_and_presets() {
     assert_eq!(missing.status, 404);
     assert_eq!(missing.content_type, "application/problem+json");
     assert_eq!(missing.json()["status"], 404);
+
+    // The synthesis example, as shipped; with the preset's model it is a job that
+    // finds its answer.
+    let example = s.get("/v1/presets/cv-tracker/synthesis");
+    assert_eq!(example.status, 200);
+    assert_eq!(example.content_type, "application/json");
+    assert_eq!(
+        example.text,
+        kea_core::presets::synthesis_json("cv-tracker").unwrap()
+    );
+    let mut request = example.json();
+    request["kind"] = json!("synthesis");
+    request["model"] = one.json();
+    let job = s.post("/v1/jobs", &request);
+    assert_eq!(job.status, 202, "{}", job.text);
+    let id = job.json()["id"].as_str().unwrap().to_string();
+    let done = s.wait_finished(&id, Duration::from_secs(60));
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let result = s.get(&format!("/v1/jobs/{id}/result"));
+    assert_eq!(result.json()["status"], "found", "{}", result.text);
+    assert_eq!(s.get("/v1/presets/nope/synthesis").status, 404);
 }
 
 /// A stored model came back re-serialised: members sorted, `1e3` as `1000.0`,

@@ -27,13 +27,25 @@ pub async fn list_presets() -> Json<Value> {
 pub async fn get_preset(
     request::PresetName(name): request::PresetName,
 ) -> Result<Response, Problem> {
-    let json = kea_core::presets::get_json(&name).ok_or_else(|| {
-        Problem::not_found("preset", &name).detail(format!(
-            "there is no preset `{name}`; known: {}",
-            kea_core::presets::names().join(", ")
-        ))
-    })?;
+    let json = kea_core::presets::get_json(&name).ok_or_else(|| no_preset(&name))?;
     Ok(raw_json(StatusCode::OK, json.to_string()))
+}
+
+/// `GET /v1/presets/{name}/synthesis`: the preset's synthesis example (a request's
+/// `target` and `mode`, no `model`) exactly as shipped.
+pub async fn get_preset_synthesis(
+    request::PresetName(name): request::PresetName,
+) -> Result<Response, Problem> {
+    let json = kea_core::presets::synthesis_json(&name).ok_or_else(|| no_preset(&name))?;
+    Ok(raw_json(StatusCode::OK, json.to_string()))
+}
+
+/// The 404 of an unknown preset, with the known names.
+fn no_preset(name: &str) -> Problem {
+    Problem::not_found("preset", name).detail(format!(
+        "there is no preset `{name}`; known: {}",
+        kea_core::presets::names().join(", ")
+    ))
 }
 
 /// A response whose body is JSON text already.

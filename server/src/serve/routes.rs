@@ -88,6 +88,13 @@ pub fn table() -> Vec<Route> {
             NONE,
             handlers::get_preset,
         ),
+        route(
+            M::GET,
+            "/v1/presets/{name}/synthesis",
+            Api,
+            NONE,
+            handlers::get_preset_synthesis,
+        ),
         route(M::POST, "/v1/models", Api, NONE, handlers::create_model),
         route(M::GET, "/v1/models", Api, PAGE, handlers::list_models),
         route(M::GET, "/v1/models/{id}", Api, NONE, handlers::get_model),

@@ -588,7 +588,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                             path: "system.a".into(),
                             message,
                         },
-                        None => overflowed("the mean state", "system.a", k, t_k),
+                        None => mean_overflowed(&inp, &m.y0, &y, &m.states, k, t_k),
                     },
                 );
             }
@@ -1110,6 +1110,41 @@ pub(crate) fn overflowed(what: &str, path: &str, k: u64, t: f64) -> Error {
     }
 }
 
+/// The error where the mean overflows and Euler's step is not the cause: a growing A
+/// (the model diverges on this interval), else the scale of the states themselves —
+/// y0 or u·Δt too large for f64 — named at the larger of the two for the first state
+/// that overflowed. (`a = 0, u = -1e308` was blamed on `system.a`.)
+#[cold]
+#[inline(never)]
+fn mean_overflowed(
+    inp: &Inputs,
+    y0: &[f64],
+    y: &[f64],
+    states: &[String],
+    k: u64,
+    t: f64,
+) -> Error {
+    let n = inp.n;
+    if growth_per_step(&inp.dense_a(), n) > 1.0 {
+        return overflowed("the mean state", "system.a", k, t);
+    }
+    let i = y[..n].iter().position(|v| !v.is_finite()).unwrap_or(0);
+    let (path, what) = if inp.u_dt[i].abs() * k as f64 >= y0[i].abs() {
+        (format!("system.u[{i}]"), "its input u")
+    } else {
+        (format!("system.y0[{i}]"), "its initial mean y0")
+    };
+    Error::Numerical {
+        step: k,
+        t,
+        path,
+        message: format!(
+            "the mean of \"{}\" overflowed f64 (above 1.8e308) where A does not grow: {what} is too large for double precision over the interval; rescale the state (its units)",
+            states[i]
+        ),
+    }
+}
+
 /// The error where the mean overflows although the model is stable: Euler's step
 /// y + (a y + u)Δt is unstable at this Δt. A mode λ of a (μ = 1 + λΔt of A) decays when Re λ < 0, but
 /// the step multiplies it by |μ| > 1 unless Δt < −2 Re λ / |λ|² (METHOD §1.2's
@@ -1324,6 +1359,16 @@ fn singular_at(
         path: format!("measurement.c[{j}]"),
         message,
     };
+    if let Some(a) = (0..nk).find(|&a| !q[a * nk + a].is_finite()) {
+        let j = idx[a];
+        return Some(culprit(
+            j,
+            format!(
+                "the innovation variance of measurement \"{}\" (C r Cᵀ + Γ V Γᵀ) overflowed f64 (above 1.8e308): its row of c times the predicted SKOs of the states it measures is too large to square; rescale the states or the measurement (their units)",
+                m.measurements[j]
+            ),
+        ));
+    }
     if let Some(a) = (0..nk).find(|&a| q[a * nk + a] <= 0.0) {
         let j = idx[a];
         return Some(culprit(

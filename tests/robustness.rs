@@ -781,3 +781,41 @@ fn a_tiny_confidence_does_not_make_the_bound_look_grown() {
         );
     }
 }
+
+/// C r Cᵀ overflowing f64 (c = 1e20 against an initial SKO of 1e140) was reported as
+/// a singular innovation covariance, "measurement \"z\" adds nothing to  (…)", with
+/// an empty list of other measurements. It is an overflow, named at the row of c.
+#[test]
+fn an_overflowing_innovation_variance_is_not_called_singular() {
+    let mut v = scalar();
+    v["system"]["eta0"] = json!([1e140]);
+    v["measurement"]["c"] = json!([[1e20]]);
+    let e = error_at(
+        v,
+        "measurement.c[0]",
+        "the innovation variance of measurement \"z\" (C r Cᵀ + Γ V Γᵀ) overflowed f64",
+    );
+    assert!(!e.to_string().contains("singular"), "{e}");
+}
+
+/// A mean overflowing with a = 0 was blamed on `system.a` ("the model diverges"):
+/// the cause is the input u (or y0), too large for f64 over the interval.
+#[test]
+fn a_mean_overflowing_without_growth_names_u_or_y0() {
+    let mut v = scalar();
+    v["system"]["a"] = json!([[0]]);
+    v["system"]["u"] = json!([-1e308]);
+    v["time"] = json!({"t0": 0, "t_end": 2, "steps": 20});
+    error_at(v, "system.u[0]", "where A does not grow: its input u is too large");
+    let mut v = scalar();
+    v["system"]["a"] = json!([[0]]);
+    v["system"]["y0"] = json!([1.7e308]);
+    v["system"]["u"] = json!([1e307]);
+    v["time"] = json!({"t0": 0, "t_end": 1, "steps": 10});
+    error_at(v, "system.y0[0]", "its initial mean y0 is too large");
+    // A growing A stays the cause it was.
+    let mut v = scalar();
+    v["system"]["a"] = json!([[800]]);
+    v["system"]["y0"] = json!([1e300]);
+    error_at(v, "system.a", "the model diverges faster than f64 can follow");
+}

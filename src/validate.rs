@@ -242,7 +242,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
     } else if t.t0.is_finite() && t.t_end <= t.t0 {
         errs.at(
             "time.t_end",
-            format!("t_end ({}) must be greater than t0 ({})", t.t_end, t.t0),
+            format!("t_end ({}) must be greater than t0 ({})", num(t.t_end), num(t.t0)),
         );
     }
     let mut notes = Vec::new();
@@ -615,7 +615,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
             "criteria.confidence",
             format!(
                 "expected a probability strictly between 0 and 1, got {}",
-                cr.confidence
+                num(cr.confidence)
             ),
         );
     }
@@ -903,7 +903,7 @@ fn const_vector(
             let p = format!("{path}[{i}]");
             match compile_const(x, params, &p) {
                 Ok(x) if non_negative && x < 0.0 => {
-                    errs.at(&p, format!("an SKO must be ≥ 0, got {x}"));
+                    errs.at(&p, format!("an SKO must be ≥ 0, got {}", num(x)));
                     0.0
                 }
                 Ok(x) if non_negative && !(x * x).is_finite() => {
@@ -1005,7 +1005,7 @@ fn noise_cov(
                         if (x - y).abs() > 1e-12 * x.abs().max(y.abs()) {
                             errs.at(
                                 &format!("{cov_path}[{i}][{j}]"),
-                                format!("a covariance must be symmetric: this entry is {x} but its mirror across the diagonal is {y}"),
+                                format!("a covariance must be symmetric: this entry is {} but its mirror across the diagonal is {}", num(x), num(y)),
                             );
                         }
                     }
@@ -1066,7 +1066,7 @@ fn weights(
         if !(x.is_finite() && *x >= 0.0) {
             errs.at(
                 &format!("{path}[{i}]"),
-                format!("a weight must be a finite number ≥ 0, got {x}"),
+                format!("a weight must be a finite number ≥ 0, got {}", num(*x)),
             );
             ok = false;
         } else if *x > 0.0 && defined.is_some_and(|d| !d[i]) {
@@ -1084,7 +1084,7 @@ fn weights(
     if ok && (sum - 1.0).abs() > WEIGHT_TOL {
         errs.at(
             path,
-            format!("weights must sum to 1 (within {WEIGHT_TOL:e}), they sum to {sum}"),
+            format!("weights must sum to 1 (within {WEIGHT_TOL:e}), they sum to {}", num(sum)),
         );
         ok = false;
     }

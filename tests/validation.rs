@@ -187,6 +187,12 @@ fn numbers_and_ranges() {
         "an SKO must be ≥ 0",
     );
     expect(
+        |v| v["system"]["phi"][0] = json!(-1.35e154),
+        &[],
+        "system.phi[0]",
+        "an SKO must be ≥ 0, got -1.35e154",
+    );
+    expect(
         |v| v["measurement"]["psi"][0] = json!("-psi"),
         &[],
         "measurement.psi[0]",
@@ -329,6 +335,17 @@ fn noise_covariances() {
         &[],
         "system.W[1][0]",
         "symmetric: this entry is 0.4 but its mirror across the diagonal is 0.5",
+    );
+    // Extreme values in exponent form, not 155 zeros.
+    expect(
+        |v| {
+            v["system"]["b"] = json!([[1, 0], [0, 1]]);
+            v["system"].as_object_mut().unwrap().remove("phi");
+            v["system"]["W"] = json!([[1.0, 1e-155], [0, 1.0]]);
+        },
+        &[],
+        "system.W[1][0]",
+        "this entry is 0 but its mirror across the diagonal is 1e-155",
     );
     expect(
         |v| {

@@ -1,5 +1,5 @@
 //! The analysis against independent references: closed forms of the scalar case and
-//! scipy's DARE (shared/reference/dare_reference.json, copied to tests/data/).
+//! scipy's DARE (the team's shared reference values, copied to tests/data/dare_reference.json).
 
 use kea_core::{AnalysisResult, Model, NoProgress, analyze, model_from_value};
 use serde_json::{Value, json};

@@ -189,8 +189,8 @@ fn ensure_wasm_toolchain() -> Result<PathBuf> {
             "xtask: need wasm-bindgen-cli {version} (found: {}); installing (a few minutes)",
             found.as_deref().map(str::trim).unwrap_or("none")
         );
-        // No `--locked`: the CLI's own lock file names a version the index lacks
-        // (see TOOLCHAIN notes); the exact `--version` pin is what matters.
+        // No `--locked`: the CLI's own lock file names a version the package index
+        // here lacks; the exact `--version` pin is what matters.
         run(cargo().args(["install", "wasm-bindgen-cli", "--version", &version]))?;
         let exe = wasm_bindgen_exe();
         let found = output(Command::new(&exe).arg("--version"));

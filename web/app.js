@@ -20,7 +20,8 @@ const runners = { browser: new BrowserRunner(), server: new ServerRunner({ keep:
 // (for the person to see or fix) until the model is changed here.
 // edits: how many times the model has changed, so that a run's result can tell whether
 // it still belongs to the model shown.
-const state = { preset: null, result: null, job: null, running: null, checkSeq: 0, keepUrl: false, edits: 0 };
+// example: the preset's synthesis example (presets/synthesis/NAME.json), for the Synthesis tab.
+const state = { preset: null, example: null, result: null, job: null, running: null, checkSeq: 0, keepUrl: false, edits: 0 };
 
 // ------------------------------------------------------------------ URL
 
@@ -131,11 +132,15 @@ async function check() {
   return errors;
 }
 
-/** Load a model (or a preset's) into the editor; `keepUrl` leaves the address as it is. */
-function loadModel(model, presetName = null, { keepUrl = false } = {}) {
+/**
+ * Load a model (or a preset's, with its synthesis `example`) into the editor; `keepUrl`
+ * leaves the address as it is.
+ */
+function loadModel(model, presetName = null, { keepUrl = false, example = null } = {}) {
   state.keepUrl = keepUrl;
   setPageStatus('');
   state.preset = presetName;
+  state.example = example;
   $('preset').value = presetName ?? '';
   editor.load(model);
   markStale();
@@ -144,9 +149,9 @@ function loadModel(model, presetName = null, { keepUrl = false } = {}) {
 }
 
 async function loadPreset(name, options) {
-  const model = await service.call('preset', { name });
+  const [model, example] = await Promise.all([service.call('preset', { name }), service.call('presetSynthesis', { name })]);
   if (!model) throw new Error(`no preset named “${name}”`);
-  return loadModel(model, name, options);
+  return loadModel(model, name, { ...options, example });
 }
 
 /**
@@ -460,6 +465,7 @@ async function main() {
   const tabs = mountTabs({
     model: () => editor.model,
     pendingModelErrors: () => editor.localErrors(),
+    example: () => (state.preset && state.example ? { preset: state.preset, ...state.example } : null),
     showModelErrors: (errors) => editor.showErrors(errors),
     download,
     fileStem,

@@ -1,6 +1,6 @@
 // The wasm build of kea-core, in a Web Worker so the page never freezes.
 //
-// Messages in:  {id, op: 'presets' | 'preset' | 'check' | 'analyze' | 'traces_csv', ...args}
+// Messages in:  {id, op: 'presets' | 'preset' | 'presetSynthesis' | 'check' | 'analyze' | 'traces_csv', ...args}
 //               or {id, op: 'synthesize' | 'simulate', request} | {id, op: 'simulation_csv', result}
 // Messages out: {id, progress} while analysing (at most every 50 ms), then
 //               {id, ok: <value>} or {id, error: {kind, title, errors:[{path, message}]}}.
@@ -42,6 +42,9 @@ self.onmessage = async (event) => {
         break;
       case 'preset':
         value = JSON.parse(kea.preset(event.data.name) ?? 'null');
+        break;
+      case 'presetSynthesis': // the preset's synthesis example: {target, mode}, or null
+        value = JSON.parse(kea.preset_synthesis(event.data.name) ?? 'null');
         break;
       case 'check':
         value = JSON.parse(kea.check(event.data.model, event.data.set ?? ''));

@@ -42,7 +42,11 @@ function paramValue(model, name) {
 }
 
 export class SynthesisView extends RunView {
-  /** `ctx`: {model() → the editor's model object, showModelErrors(errors), download(name, type, text), fileStem()}. */
+  /**
+   * `ctx`: {model() → the editor's model object, example() → the loaded preset's
+   * synthesis example ({preset, target, mode}) or null, showModelErrors(errors),
+   * download(name, type, text), fileStem()}.
+   */
   constructor(root, ctx) {
     super();
     this.root = root;
@@ -198,7 +202,9 @@ export class SynthesisView extends RunView {
       onRun: (where, exec) => this.run(where, exec),
       onResume: (model, exec) => this.resume(model, exec),
     });
-    this.form = el('form', { class: 'view-form', novalidate: true, onsubmit: (e) => e.preventDefault(), oninput: (e) => recheckControl(e.target, () => requestErrors(() => this.request())) }, target, modeSet);
+    // Which preset's example the fields hold (applyExample), until they are changed.
+    this.exampleNote = el('p', { class: 'help', id: id('example'), hidden: true });
+    this.form = el('form', { class: 'view-form', novalidate: true, onsubmit: (e) => e.preventDefault(), oninput: (e) => recheckControl(e.target, () => requestErrors(() => this.request())) }, this.exampleNote, target, modeSet);
     this.out = el('div', { id: 'syn-result', class: 'view-result', hidden: true });
     this.root.append(this.form, this.bar.root, this.out);
     // The fields as they were before a reload, put back once the model's params are
@@ -214,7 +220,12 @@ export class SynthesisView extends RunView {
       [this.batch],
     ]);
     this.restorePending = true;
-    for (const type of ['input', 'change']) this.form.addEventListener(type, () => this.kept.save());
+    for (const type of ['input', 'change']) {
+      this.form.addEventListener(type, () => {
+        this.kept.save();
+        this.exampleNote.hidden = true;
+      });
+    }
     this.refreshChoices();
     this.showMode();
   }
@@ -225,7 +236,8 @@ export class SynthesisView extends RunView {
 
   /**
    * The model's params and states changed: update the choices. A new model (another
-   * object: a preset, an import) also resets the params and their ranges.
+   * object: a preset, an import) also resets the params and their ranges — to the
+   * preset's synthesis example where it is a preset's.
    */
   refreshChoices() {
     const model = this.ctx.model();
@@ -248,17 +260,59 @@ export class SynthesisView extends RunView {
     this.grid.forEach((row, i) => {
       if (fill(row.param, i === 0 ? ps : [['', '(none)'], ...ps], i < 2 ? preferred[i] ?? '' : '')) this.defaultsGrid(i);
     });
-    this.gridSummary();
     this.seed.forEach((row, i) => {
       if (fill(row.param, i === 0 ? ps : [['', '(none)'], ...ps], i === 0 ? preferred[0] : '')) this.defaultsSeed(i);
     });
+    if (fresh) {
+      const example = this.ctx.example?.();
+      if (example) this.applyExample(example);
+      this.exampleNote.hidden = !example;
+      const name = example?.preset;
+      this.exampleNote.replaceChildren(...(example ? [`Example for preset ${name}: its synthesis question, as `, el('code', { text: `kea synthesize --preset ${name}` }), ' asks it.'] : []));
+    }
+    this.gridSummary();
     if (this.restorePending) {
       this.restorePending = false;
-      this.kept.restore();
+      if (this.kept.restore()) this.exampleNote.hidden = true; // the fields as they were edited
       this.showMode();
       this.gridSummary();
     }
     this.kept.save(); // the choices (and a new model's defaults) as they are now
+  }
+
+  /** A preset's synthesis example ({target, mode}, as presets/synthesis/NAME.json has it) in the fields. */
+  applyExample({ target: t, mode }) {
+    this.criterion.value = t.criterion;
+    this.set.value = t.set;
+    this.state.value = t.state ?? '';
+    this.threshold.value = String(t.threshold);
+    const [kind, m] = Object.entries(mode)[0];
+    this.mode.value = kind;
+    if (kind === 'bisect') {
+      const b = this.bisect;
+      b.param.value = m.param;
+      b.low.value = String(m.low);
+      b.high.value = String(m.high);
+      b.rel_tol.value = String(m.rel_tol ?? 1e-3); // the core's defaults
+      b.probes.value = String(m.probes ?? 9);
+    } else if (kind === 'grid') {
+      this.grid.forEach((row, i) => {
+        const p = m.params[i];
+        row.param.value = p?.name ?? '';
+        if (p) row.values.value = p.values.map(String).join(', ');
+        else this.defaultsGrid(i);
+        row.cheaper.value = m.cost_order?.find((c) => c.name === p?.name)?.cheaper ?? '';
+      });
+    } else if (kind === 'seed_search') {
+      this.seed.forEach((row, i) => {
+        const p = m.params[i];
+        row.param.value = p?.name ?? '';
+        if (p) for (const k of ['high', 'low', 'shrink']) row[k].value = String(p[k]);
+        else this.defaultsSeed(i);
+      });
+      this.batch.value = String(m.batch ?? 4);
+    }
+    this.showMode();
   }
 
   /** The grid's cells as the values fields read now: "f: 3 values (2, 4, 8) × … = 6 cells". */

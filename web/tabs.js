@@ -6,8 +6,8 @@ import { SimulationView } from './simulation.js';
 import { SynthesisView } from './synthesis.js';
 
 /**
- * `ctx`: {model(), showModelErrors(errors), download(name, type, text), fileStem(),
- * server: whether a kea server answers}. Returns the name of the tab shown, as a function.
+ * `ctx`: {model(), example() (a loaded preset's synthesis example), showModelErrors(errors),
+ * download(name, type, text), fileStem(), server: whether a kea server answers}. Returns the name of the tab shown, as a function.
  */
 export function mountTabs(ctx) {
   const pane = document.getElementById('results-pane');

@@ -211,7 +211,7 @@ export class KeptFields {
     }
   }
 
-  /** Put the stored values back, group by group; returns whether any were stored. */
+  /** Put the stored values back, group by group; returns whether any field changed. */
   restore() {
     let saved = null;
     try {
@@ -221,10 +221,15 @@ export class KeptFields {
     }
     if (!saved || typeof saved !== 'object' || Array.isArray(saved)) return false;
     const takes = (c, v) => typeof v === 'string' && (c.tagName !== 'SELECT' || [...c.options].some((o) => o.value === v));
+    let changed = false;
     for (const group of this.groups) {
-      if (group.every((c) => takes(c, saved[c.id]))) for (const c of group) c.value = saved[c.id];
+      if (!group.every((c) => takes(c, saved[c.id]))) continue;
+      for (const c of group) {
+        changed ||= c.value !== saved[c.id];
+        c.value = saved[c.id];
+      }
     }
-    return true;
+    return changed;
   }
 }
 

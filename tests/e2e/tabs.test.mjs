@@ -120,12 +120,11 @@ test('the tab is kept in the link', async () => {
 test('a synthesis grid gives the same table in the browser, on the server and in the CLI', async () => {
   const modelFile = await smallSeedExample();
   await page.click('#tab-synthesis');
-  // The params that the error levels use come first: f for the seed example. psi,
-  // in both φ = f*psi and ψ, scales the two together, which no criterion sees (a grid
-  // on it had identical rows): it comes last, and the next param (m) is the second.
+  // The preset's example (a grid of f × c) is in the fields; each is set here all the
+  // same (example.test.mjs checks the example, and the choices for a model of one's own).
   assert.deepEqual(
     await page.$$eval(['#syn-grid-param-0', '#syn-grid-param-1'].join(','), (s) => s.map((x) => x.value)),
-    ['f', 'm'],
+    ['f', 'c'],
   );
   await page.selectOption('#syn-mode', 'grid');
   await page.selectOption('#syn-criterion', 'yx');
@@ -425,6 +424,8 @@ test('synthesis inputs are refused at their control, in words', async () => {
   await screenshot(page, '16-synthesis-override-error');
   // Without a cost order, the table's message names the control, not the API member.
   await page.fill('#syn-grid-values-0', '2, 4');
+  await page.selectOption('#syn-set', 'bound');
+  await page.fill('#syn-threshold', '10'); // f = 4 meets it
   await runView('syn', 'browser');
   assert.equal(await page.$$eval('#synthesis-panel .control-error', (es) => es.length), 0, 'the marks went');
   const message = await page.textContent('#syn-message');

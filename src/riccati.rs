@@ -350,7 +350,7 @@ pub struct SequentialJoseph {
     /// The last step's update was [`update_exact`]: the filtered variance of a state
     /// a unit row measures is then the filter's, however far below the predicted.
     pub exact: bool,
-    /// update_exact's row (N).
+    /// update_exact's two rows (2N).
     row: Vec<f64>,
 }
 
@@ -364,7 +364,7 @@ impl SequentialJoseph {
             gain_t: vec![0.0; nm * n],
             ht: vec![0.0; n * n],
             exact: false,
-            row: vec![0.0; n],
+            row: vec![0.0; 2 * n],
         }
     }
 
@@ -411,7 +411,7 @@ impl SequentialJoseph {
         self.exact = exact;
         let ok = if exact {
             let w = (&mut self.s[..], &mut self.row[..]);
-            update_exact(n, big_r, &mut self.kt, &mut self.ht, w, prep)
+            update_exact::<N>(n, big_r, &mut self.kt, &mut self.ht, w, prep)
         } else if N > 0 {
             update_fixed::<N>(
                 mat_mut(big_r),
@@ -519,7 +519,7 @@ impl SequentialJoseph {
 /// code, so that every build gives the same bits.
 #[cold]
 #[inline(never)]
-fn update_exact(
+fn update_exact<const N: usize>(
     n: usize,
     r: &mut [f64],
     kt: &mut [f64],
@@ -527,9 +527,15 @@ fn update_exact(
     (s, work): (&mut [f64], &mut [f64]),
     prep: &Prepared,
 ) -> bool {
+    // A constant when N > 0 (the engine's fixed sizes), so that the loops unroll.
+    let n = if N > 0 { N } else { n };
     let r = &mut r[..n * n];
     let s = &mut s[..n];
-    let work = &mut work[..n];
+    // Column col of r as it was (colv) and row col of N (ncol).
+    let (colv, ncol) = work[..2 * n].split_at_mut(n);
+    // Only r's upper triangle is current (read through `at`) until a row that is not a
+    // unit row, which mirrors it first, and the end.
+    let at = |r: &[f64], a: usize, b: usize| r[a.min(b) * n + a.max(b)];
     // h, built row-major here and transposed at the end.
     let h = &mut ht[..n * n];
     h.fill(0.0);
@@ -539,8 +545,19 @@ fn update_exact(
     for j in 0..prep.len() {
         let row = &prep.rows[j * n..j * n + n];
         let d = prep.d[j];
-        for (a, x) in s.iter_mut().enumerate() {
-            *x = (0..n).map(|b| r[a * n + b] * row[b]).sum();
+        let unit = prep.unit[j];
+        if let Some((col, coef)) = unit {
+            for (a, x) in colv.iter_mut().enumerate() {
+                *x = at(r, a, col);
+            }
+            for (x, c) in s.iter_mut().zip(colv.iter()) {
+                *x = coef * c;
+            }
+        } else {
+            mirror_upper(r, n);
+            for (a, x) in s.iter_mut().enumerate() {
+                *x = r[a * n..a * n + n].iter().zip(row).map(|(r, c)| r * c).sum();
+            }
         }
         let q = s.iter().zip(row).map(|(a, b)| a * b).sum::<f64>() + d;
         if !(q > 0.0 && q < f64::INFINITY) {
@@ -551,57 +568,48 @@ fn update_exact(
         for (k, s) in k.iter_mut().zip(s.iter()) {
             *k = s / q;
         }
-        match prep.unit[j] {
+        match unit {
             Some((col, coef)) => {
                 let hc = d / q;
-                // Row col of N (symmetric r: column col is row col).
-                let rcc = r[col * n + col];
-                let ncol = &mut *work;
+                let rcc = colv[col];
                 for (b, x) in ncol.iter_mut().enumerate() {
-                    *x = if b == col {
-                        hc * rcc
-                    } else {
-                        r[col * n + b] - coef * k[b] * rcc
-                    };
+                    *x = at(r, col, b) - coef * k[b] * rcc;
                 }
-                // The upper triangle of R; r's lower triangle (and row a's own
-                // r_a,col, read first) stay as they were until the mirror below.
-                for a in 0..n {
-                    let rac = r[a * n + col];
-                    for b in a..n {
-                        let nab = if b == col {
-                            hc * rac
-                        } else {
-                            r[a * n + b] - coef * k[b] * rac
-                        };
-                        let hn = if a == col {
-                            hc * ncol[b]
-                        } else {
-                            nab - coef * k[a] * ncol[b]
-                        };
-                        r[a * n + b] = hn + d * k[a] * k[b];
+                ncol[col] = hc * rcc;
+                // Rows a ≠ col of the upper triangle: N_ab − coef k_a N_col,b + d k_a k_b
+                // with N_ab = r_ab − s_a k_b, except N_a,col = (d/q) r_a,col (below).
+                for a in (0..n).filter(|&a| a != col) {
+                    let (sa, ck, dk) = (s[a], coef * k[a], d * k[a]);
+                    let ra = &mut r[a * n + a..a * n + n];
+                    for ((x, kb), nb) in ra.iter_mut().zip(&k[a..]).zip(&ncol[a..]) {
+                        *x = *x - sa * kb - ck * nb + dk * kb;
                     }
+                    if col > a {
+                        r[a * n + col] = hc * colv[a] - ck * ncol[col] + dk * k[col];
+                    }
+                }
+                let kc = d * k[col];
+                for b in col..n {
+                    r[col * n + b] = hc * ncol[b] + kc * k[b];
                 }
                 // Earlier gains and h: x := (I − k c) x, entry col by d/q.
-                let through = |x: &mut [f64]| {
-                    let xc = x[col];
-                    for (a, v) in x.iter_mut().enumerate() {
-                        *v = if a == col { hc * xc } else { *v - coef * k[a] * xc };
-                    }
-                };
                 for km in done.chunks_exact_mut(n) {
-                    through(km);
+                    let xc = km[col];
+                    for (v, ka) in km.iter_mut().zip(k.iter()) {
+                        *v -= coef * ka * xc;
+                    }
+                    km[col] = hc * xc;
                 }
                 let (above, from_col) = h.split_at_mut(col * n);
                 let (hcol, below) = from_col.split_at_mut(n);
-                for (a, ha) in above.chunks_exact_mut(n).enumerate() {
+                for (ha, ka) in above
+                    .chunks_exact_mut(n)
+                    .zip(&k[..col])
+                    .chain(below.chunks_exact_mut(n).zip(&k[col + 1..]))
+                {
+                    let f = coef * ka;
                     for (x, c) in ha.iter_mut().zip(hcol.iter()) {
-                        *x -= coef * k[a] * c;
-                    }
-                }
-                for (a, ha) in below.chunks_exact_mut(n).enumerate() {
-                    for (x, c) in ha.iter_mut().zip(hcol.iter()) {
-                        *x -= coef * k[col + 1 + a] * c;
+                        *x -= f * c;
                     }
                 }
                 for x in hcol.iter_mut() {
@@ -622,7 +630,7 @@ fn update_exact(
                     }
                 }
                 // h := h − k (c h)
-                let ch = &mut *work;
+                let ch = &mut *ncol;
                 for (b, x) in ch.iter_mut().enumerate() {
                     *x = (0..n).map(|l| row[l] * h[l * n + b]).sum();
                 }
@@ -633,18 +641,23 @@ fn update_exact(
                 }
             }
         }
-        for a in 1..n {
-            for b in 0..a {
-                r[a * n + b] = r[b * n + a];
-            }
-        }
     }
+    mirror_upper(r, n);
     for a in 1..n {
         for b in 0..a {
             h.swap(a * n + b, b * n + a);
         }
     }
     true
+}
+
+/// The lower triangle of an n × n row-major matrix := its upper triangle.
+fn mirror_upper(r: &mut [f64], n: usize) {
+    for a in 1..n {
+        for b in 0..a {
+            r[a * n + b] = r[b * n + a];
+        }
+    }
 }
 
 /// The scalar Joseph updates of [`SequentialJoseph::step`] on fixed-size arrays.

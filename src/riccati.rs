@@ -215,13 +215,14 @@ impl Prepared {
     }
 
     /// Whether a unit row's update would lose digits in the expanded form of (2.7)
-    /// (see [`SequentialJoseph::step`]): its innovation variance q = coef² r_col,col
-    /// + d above [`EXACT_Q_OVER_D`] times its noise variance d, or d = 0 (or NaN,
-    /// which the exact path reports). The expanded form subtracts terms of size q to
+    /// (see [`SequentialJoseph::step`]): its innovation variance
+    /// q = coef² r_col,col + d above [`EXACT_Q_OVER_D`] times its noise variance d,
+    /// or d = 0 (or NaN, which the exact path reports: hence `!(x <= …)`). The expanded form subtracts terms of size q to
     /// leave R_col,col ≈ r_col,col·d/q, so its relative error is ≈ ε·q/d. Updates only
     /// shrink r, so the rows' q at the predicted r bound every q of the step. Never
     /// where [`Self::gain_from_covariance`] holds (q ≤ 16 d for every row), which
     /// the step asks first.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn needs_exact(&self, r_pred: &[f64], n: usize) -> bool {
         self.unit[..self.idx.len()]
             .iter()

@@ -110,6 +110,36 @@ fn a_stored_model_is_returned_as_it_was_sent() {
     assert_eq!(r.json()["steps"], 1000);
 }
 
+/// An error in a stored model read `model.measurement.psi[0]` although the request
+/// had no `model`. The path stays the resolved request's (as a job's stored request
+/// has it), and the message names the stored model it is in; errors of the request's
+/// own members are as they were.
+#[test]
+fn an_error_in_a_stored_model_names_it() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    let r = s.post("/v1/models", &preset("cv-tracker"));
+    assert_eq!(r.status, 201, "{}", r.text);
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    for (path, body) in [
+        ("/v1/analyze", json!({"model_id": id, "set": {"r": -1}})),
+        ("/v1/jobs", json!({"kind": "analysis", "model_id": id, "set": {"r": -1}})),
+    ] {
+        let r = s.post(path, &body);
+        assert_eq!(r.status, 422, "{}", r.text);
+        let e = &r.json()["errors"][0];
+        assert_eq!(e["path"], "model.measurement.psi[0]", "{}", r.text);
+        let message = e["message"].as_str().unwrap();
+        assert!(
+            message.ends_with(&format!("(in the stored model `{id}`)")),
+            "{message}"
+        );
+    }
+    let r = s.post("/v1/analyze", &json!({"model_id": id, "set": {"nope": 1}}));
+    assert_eq!(r.status, 422, "{}", r.text);
+    assert!(!r.text.contains("in the stored model"), "{}", r.text);
+}
+
 #[test]
 fn models_are_stored_listed_paged_and_deleted() {
     let dir = tmp();

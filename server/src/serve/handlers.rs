@@ -143,13 +143,14 @@ pub async fn delete_model(
     }
 }
 
-/// Replace `model_id` by the stored model, so the request is self-contained.
+/// Replace `model_id` by the stored model, so the request is self-contained; returns
+/// the id (for [`prepare`]'s messages) when there was one.
 pub async fn resolve_model_id(
     state: &AppState,
     obj: &mut Map<String, Value>,
-) -> Result<(), Problem> {
+) -> Result<Option<String>, Problem> {
     let Some(idv) = obj.remove("model_id") else {
-        return Ok(());
+        return Ok(None);
     };
     if obj.contains_key("model") {
         return Err(Problem::invalid(vec![FieldError::new(
@@ -175,16 +176,53 @@ pub async fn resolve_model_id(
     })?;
     let model: Value = serde_json::from_str(&record.model_json).map_err(Problem::internal)?;
     obj.insert("model".into(), model);
-    Ok(())
+    Ok(Some(id))
+}
+
+/// An error in a stored model (a request with `model_id`): its paths stay those of
+/// the resolved request (`model.system.phi[0]`, as a job's stored request reads), and
+/// each such message says which stored model it is in, since the request as sent had
+/// no `model`.
+pub fn in_stored_model(err: kea_core::Error, id: Option<&str>) -> kea_core::Error {
+    let Some(id) = id else { return err };
+    let of_model = |path: &str| path == "model" || path.starts_with("model.");
+    let note = |message: String| format!("{message} (in the stored model `{id}`)");
+    match err {
+        kea_core::Error::Invalid(errors) => kea_core::Error::Invalid(
+            errors
+                .into_iter()
+                .map(|e| {
+                    if of_model(&e.path) {
+                        FieldError::new(e.path, note(e.message))
+                    } else {
+                        e
+                    }
+                })
+                .collect(),
+        ),
+        kea_core::Error::Numerical {
+            step,
+            t,
+            path,
+            message,
+        } if of_model(&path) => kea_core::Error::Numerical {
+            step,
+            t,
+            path,
+            message: note(message),
+        },
+        other => other,
+    }
 }
 
 /// Validate and compile a request of the job kind `kind` (registered) on a blocking
 /// thread: a large model takes long enough to stall the async workers, and every
-/// other request (`/healthz` too) with them.
+/// other request (`/healthz` too) with them. `stored`: the `model_id` it gave.
 pub async fn prepare(
     state: &AppState,
     kind: &str,
     request: Value,
+    stored: Option<&str>,
 ) -> Result<Box<dyn PreparedJob>, Problem> {
     let registry = state.registry.clone();
     let kind = kind.to_string();
@@ -196,7 +234,7 @@ pub async fn prepare(
     })
     .await
     .map_err(Problem::internal)?
-    .map_err(Problem::from_core)
+    .map_err(|e| Problem::from_core(in_stored_model(e, stored)))
 }
 
 /// Refuse work above `limit`; `advice` says what to do instead.
@@ -228,8 +266,8 @@ pub async fn analyze(
     JsonBody(body, _): JsonBody,
 ) -> Result<Response, Problem> {
     let mut obj = request::object(body)?;
-    resolve_model_id(&state, &mut obj).await?;
-    let prepared = prepare(&state, "analysis", Value::Object(obj)).await?;
+    let stored = resolve_model_id(&state, &mut obj).await?;
+    let prepared = prepare(&state, "analysis", Value::Object(obj), stored.as_deref()).await?;
     let limits = &state.config.limits;
     check_work(
         &prepared.work(),
@@ -252,6 +290,6 @@ pub async fn analyze(
     let out = tokio::task::spawn_blocking(move || prepared.run(&mut kea_core::NoProgress))
         .await
         .map_err(Problem::internal)?
-        .map_err(Problem::from_core)?;
+        .map_err(|e| Problem::from_core(in_stored_model(e, stored.as_deref())))?;
     Ok(raw_json(StatusCode::OK, out.result_json))
 }

@@ -88,10 +88,10 @@ pub async fn submit(
             format!("unknown job kind `{kind_name}`; known: {names}"),
         )]));
     }
-    resolve_model_id(&state, &mut obj).await?;
+    let stored = resolve_model_id(&state, &mut obj).await?;
     let request = Value::Object(obj);
     let request_json = request.to_string();
-    let prepared = prepare(&state, &kind_name, request).await?;
+    let prepared = prepare(&state, &kind_name, request, stored.as_deref()).await?;
     let work = prepared.work();
     check_work(
         &work,

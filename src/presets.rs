@@ -53,7 +53,10 @@ pub fn list() -> Vec<PresetInfo> {
 
 /// The preset's JSON text exactly as shipped.
 pub fn get_json(name: &str) -> Option<&'static str> {
-    PRESETS.iter().find(|(n, ..)| *n == name).map(|(_, j, _)| *j)
+    PRESETS
+        .iter()
+        .find(|(n, ..)| *n == name)
+        .map(|(_, j, _)| *j)
 }
 
 /// The preset's synthesis example exactly as shipped: a request's `target` and `mode`
@@ -93,18 +96,25 @@ mod tests {
         for name in super::names() {
             let mut request: serde_json::Value =
                 serde_json::from_str(super::synthesis_json(name).unwrap()).unwrap();
-            assert!(request.get("model").is_none(), "{name}: the example has no model");
+            assert!(
+                request.get("model").is_none(),
+                "{name}: the example has no model"
+            );
             request["model"] = serde_json::from_str(super::get_json(name).unwrap()).unwrap();
             let request = synthesis::request_from_value(request)
                 .unwrap_or_else(|e| panic!("{name}: example invalid: {e}"));
-            let r = synthesis::synthesize(&request, &crate::exec::Sequential, &mut crate::NoProgress)
-                .unwrap_or_else(|e| panic!("{name}: {e}"));
+            let r =
+                synthesis::synthesize(&request, &crate::exec::Sequential, &mut crate::NoProgress)
+                    .unwrap_or_else(|e| panic!("{name}: {e}"));
             assert_eq!(r.status, Status::Found, "{name}: {}", r.message);
             let v = r.verification.as_ref().unwrap();
             assert!(v.passed, "{name}: {}", r.message);
             if let Details::Grid(g) = &r.details {
                 let meets = g.cells.iter().filter(|c| c.point.meets).count();
-                assert!(0 < meets && meets < g.cells.len(), "{name}: {meets} cells meet");
+                assert!(
+                    0 < meets && meets < g.cells.len(),
+                    "{name}: {meets} cells meet"
+                );
             }
         }
     }

@@ -557,7 +557,11 @@ fn update_exact<const N: usize>(
         } else {
             mirror_upper(r, n);
             for (a, x) in s.iter_mut().enumerate() {
-                *x = r[a * n..a * n + n].iter().zip(row).map(|(r, c)| r * c).sum();
+                *x = r[a * n..a * n + n]
+                    .iter()
+                    .zip(row)
+                    .map(|(r, c)| r * c)
+                    .sum();
             }
         }
         let q = s.iter().zip(row).map(|(a, b)| a * b).sum::<f64>() + d;

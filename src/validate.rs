@@ -242,7 +242,11 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
     } else if t.t0.is_finite() && t.t_end <= t.t0 {
         errs.at(
             "time.t_end",
-            format!("t_end ({}) must be greater than t0 ({})", num(t.t_end), num(t.t0)),
+            format!(
+                "t_end ({}) must be greater than t0 ({})",
+                num(t.t_end),
+                num(t.t0)
+            ),
         );
     }
     let mut notes = Vec::new();
@@ -1084,7 +1088,10 @@ fn weights(
     if ok && (sum - 1.0).abs() > WEIGHT_TOL {
         errs.at(
             path,
-            format!("weights must sum to 1 (within {WEIGHT_TOL:e}), they sum to {}", num(sum)),
+            format!(
+                "weights must sum to 1 (within {WEIGHT_TOL:e}), they sum to {}",
+                num(sum)
+            ),
         );
         ok = false;
     }

@@ -806,7 +806,11 @@ fn a_mean_overflowing_without_growth_names_u_or_y0() {
     v["system"]["a"] = json!([[0]]);
     v["system"]["u"] = json!([-1e308]);
     v["time"] = json!({"t0": 0, "t_end": 2, "steps": 20});
-    error_at(v, "system.u[0]", "where A does not grow: its input u is too large");
+    error_at(
+        v,
+        "system.u[0]",
+        "where A does not grow: its input u is too large",
+    );
     let mut v = scalar();
     v["system"]["a"] = json!([[0]]);
     v["system"]["y0"] = json!([1.7e308]);
@@ -817,5 +821,9 @@ fn a_mean_overflowing_without_growth_names_u_or_y0() {
     let mut v = scalar();
     v["system"]["a"] = json!([[800]]);
     v["system"]["y0"] = json!([1e300]);
-    error_at(v, "system.a", "the model diverges faster than f64 can follow");
+    error_at(
+        v,
+        "system.a",
+        "the model diverges faster than f64 can follow",
+    );
 }

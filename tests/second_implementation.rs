@@ -230,7 +230,9 @@ fn accurate_sensors_against_a_diffuse_start_match_the_plain_joseph_product() {
     let mut rng = ChaCha8Rng::seed_from_u64(20261124);
     for (case, (n, nm)) in [(1, 1), (2, 1), (3, 3), (5, 2)].into_iter().enumerate() {
         let mut spec = random_spec(&mut rng, n, nm);
-        spec.c = (0..nm * n).map(|i| f64::from(u8::from(i % n == i / n))).collect();
+        spec.c = (0..nm * n)
+            .map(|i| f64::from(u8::from(i % n == i / n)))
+            .collect();
         for i in 0..nm {
             for j in 0..nm {
                 if i != j {
@@ -238,8 +240,12 @@ fn accurate_sensors_against_a_diffuse_start_match_the_plain_joseph_product() {
                 }
             }
         }
-        spec.eta0 = (0..n).map(|_| 10f64.powf(rng.random_range(1.0..3.0))).collect();
-        spec.psi = (0..nm).map(|_| 10f64.powf(rng.random_range(-3.0..-2.0))).collect();
+        spec.eta0 = (0..n)
+            .map(|_| 10f64.powf(rng.random_range(1.0..3.0)))
+            .collect();
+        spec.psi = (0..nm)
+            .map(|_| 10f64.powf(rng.random_range(-3.0..-2.0)))
+            .collect();
         assert_matches_plain(case, &spec);
     }
 }
@@ -535,7 +541,12 @@ fn an_unmeasured_state_cancelled_to_rounding_level_is_reported() {
     let mut v: Value =
         serde_json::from_str(kea_core::presets::get_json("cv-tracker").unwrap()).unwrap();
     v["system"]["eta0"] = json!([1e9, 1e9]);
-    let r = analyze(&model_from_value(v).unwrap(), &Default::default(), &mut NoProgress).unwrap();
+    let r = analyze(
+        &model_from_value(v).unwrap(),
+        &Default::default(),
+        &mut NoProgress,
+    )
+    .unwrap();
     let w = r
         .warnings
         .iter()

@@ -123,7 +123,10 @@ fn an_error_in_a_stored_model_names_it() {
     let id = r.json()["id"].as_str().unwrap().to_string();
     for (path, body) in [
         ("/v1/analyze", json!({"model_id": id, "set": {"r": -1}})),
-        ("/v1/jobs", json!({"kind": "analysis", "model_id": id, "set": {"r": -1}})),
+        (
+            "/v1/jobs",
+            json!({"kind": "analysis", "model_id": id, "set": {"r": -1}}),
+        ),
     ] {
         let r = s.post(path, &body);
         assert_eq!(r.status, 422, "{}", r.text);

@@ -246,7 +246,11 @@ mod tests {
         assert_eq!(list[0]["name"], "seed-example");
         assert!(preset("seed-example").unwrap().contains("\"kea_model\""));
         assert!(preset("no-such").is_none());
-        assert!(preset_synthesis("cv-tracker").unwrap().contains("\"target\""));
+        assert!(
+            preset_synthesis("cv-tracker")
+                .unwrap()
+                .contains("\"target\"")
+        );
         assert!(preset_synthesis("no-such").is_none());
     }
 }

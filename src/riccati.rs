@@ -217,11 +217,12 @@ impl Prepared {
     /// Whether a unit row's update would lose digits in the expanded form of (2.7)
     /// (see [`SequentialJoseph::step`]): its innovation variance
     /// q = coef² r_col,col + d above [`EXACT_Q_OVER_D`] times its noise variance d,
-    /// or d = 0 (or NaN, which the exact path reports: hence `!(x <= …)`). The expanded form subtracts terms of size q to
-    /// leave R_col,col ≈ r_col,col·d/q, so its relative error is ≈ ε·q/d. Updates only
-    /// shrink r, so the rows' q at the predicted r bound every q of the step. Never
-    /// where [`Self::gain_from_covariance`] holds (q ≤ 16 d for every row), which
-    /// the step asks first.
+    /// or d = 0 (or NaN, which the exact path reports: hence `!(x <= …)`). The
+    /// expanded form subtracts terms of size q to leave R_col,col ≈ r_col,col·d/q, so
+    /// its relative error is ≈ ε·q/d. Updates only shrink r, so the rows' q at the
+    /// predicted r bound every q of the step. Never where
+    /// [`Self::gain_from_covariance`] holds (q ≤ 16 d for every row), which the step
+    /// asks first.
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn needs_exact(&self, r_pred: &[f64], n: usize) -> bool {
         self.unit[..self.idx.len()]
@@ -390,8 +391,8 @@ impl SequentialJoseph {
     /// being the optimal gain. Its rounding error in R_col,col is ≈ ε·q/d of it, so
     /// where a unit row's q at the predicted r exceeds 10³ d (or d = 0) the step's
     /// updates take [`update_exact`] instead: (2.7) as a product, with the factor's
-    /// entry 1 − coef·k_col taken as d/q. `n` is the state dimension (a compile-time constant
-    /// at the call site lets the compiler unroll every loop here).
+    /// entry 1 − coef·k_col taken as d/q. `n` is the state dimension (a compile-time
+    /// constant at the call site lets the compiler unroll every loop here).
     #[inline(always)]
     pub(crate) fn step<const N: usize, L: Lanes>(
         &mut self,

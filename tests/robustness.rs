@@ -225,8 +225,7 @@ fn a_measurement_noise_variance_that_underflows_to_zero_is_an_error() {
 fn a_simulated_process_that_outgrows_double_precision_stops_the_run() {
     use kea_core::exec::Sequential;
     use kea_core::simulation::{SimulationRequest, simulate, traces_csv};
-    let mut v: Value =
-        serde_json::from_str(kea_core::presets::get_json("cv-tracker").unwrap()).unwrap();
+    let mut v = common::preset_value("cv-tracker");
     v["system"]["a"] = json!([[0, 1], [0, 10]]);
     v["time"] = json!({"t0": 0, "t_end": 100, "steps": 1000});
     let m = model_from_value(v).unwrap();
@@ -239,8 +238,7 @@ fn a_simulated_process_that_outgrows_double_precision_stops_the_run() {
     );
     assert!(text.contains("times the filter's error SKO"), "{text}");
     // A model whose bound overflows (χ null in the result) writes empty cells.
-    let mut v: Value =
-        serde_json::from_str(kea_core::presets::get_json("cv-tracker").unwrap()).unwrap();
+    let mut v = common::preset_value("cv-tracker");
     v["time"] = json!({"t0": 0, "t_end": 1000, "steps": 10000});
     v["options"]["trace_points"] = json!(4);
     let m = model_from_value(v).unwrap();
@@ -629,7 +627,7 @@ fn assert_finite_or_documented_null(r: &AnalysisResult, model: &str) {
 fn mutated_presets_give_errors_or_finite_results() {
     let mut seeds: Vec<Value> = kea_core::presets::names()
         .into_iter()
-        .map(|n| serde_json::from_str(kea_core::presets::get_json(n).unwrap()).unwrap())
+        .map(common::preset_value)
         .collect();
     seeds.push(scalar());
     let mut rng = ChaCha8Rng::seed_from_u64(20_240_611);
@@ -685,8 +683,7 @@ fn mutated_presets_give_errors_or_finite_results() {
 /// now as the precision it is, from the step it began.
 #[test]
 fn an_innovation_covariance_lost_to_rounding_says_so() {
-    let mut v: Value =
-        serde_json::from_str(kea_core::presets::get_json("cv-tracker").unwrap()).unwrap();
+    let mut v = common::preset_value("cv-tracker");
     v["system"]["eta0"] = json!([1e150, 1e150]);
     let e = error_at(
         v,

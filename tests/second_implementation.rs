@@ -2,6 +2,8 @@
 //! (nalgebra, explicit formulas, whole histories kept in memory) on random
 //! time-varying models.
 
+mod common;
+
 use kea_core::analysis::BOUND_GROWTH_WARN;
 use kea_core::{AnalysisResult, NoProgress, analyze, covariance_recursion, model_from_value};
 use nalgebra::{DMatrix, DVector};
@@ -538,8 +540,7 @@ fn a_noise_free_measurement_leaves_its_state_no_filtered_variance() {
 /// 2 — the small difference of large terms — and the result says so.
 #[test]
 fn an_unmeasured_state_cancelled_to_rounding_level_is_reported() {
-    let mut v: Value =
-        serde_json::from_str(kea_core::presets::get_json("cv-tracker").unwrap()).unwrap();
+    let mut v = common::preset_value("cv-tracker");
     v["system"]["eta0"] = json!([1e9, 1e9]);
     let r = analyze(
         &model_from_value(v).unwrap(),

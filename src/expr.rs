@@ -102,7 +102,7 @@ pub struct TimeFn {
     /// Index of `t` in `vars`.
     t_slot: usize,
     /// The block form of `expr`'s text with its variables, parsed on the first
-    /// `eval_block`: a parsed exmex expression is ≈ 20 KB (its nodes are inline), so
+    /// `eval_block`: a parsed exmex expression is ≈ 25 KB (its nodes are inline), so
     /// only the copy an analysis steps with carries the second one.
     block: Option<Box<(BlockEx, Vec<Block>)>>,
 }
@@ -964,9 +964,10 @@ fn unknown(
 pub const MAX_EXPRESSION_CHARS: usize = 1000;
 
 /// The most distinct time-dependent expressions one model may have, and their total
-/// length. A parsed expression takes ≈ 20 KB plus ≈ 1.2 KB per character with the
-/// analysis's 16-lane form (≈ 23 KB), so these bound a model's expressions to
-/// ≈ 150 MB. Entries of one matrix with the same text share one parse and count once;
+/// length. A parsed expression holds ≈ 25 KB plus ≈ 0.3 KB per character, and ≈ 65 KB
+/// plus ≈ 1 KB per character with the analysis's 16-lane form, so these bound a
+/// model's expressions to ≈ 40 MB compiled and ≈ 125 MB while an analysis runs
+/// (`tests/memory.rs` measures them). Entries of one matrix with the same text share one parse and count once;
 /// the measurement schedule's `when` expressions count too.
 pub const MAX_TIME_EXPRESSIONS: usize = 2000;
 pub const MAX_TIME_EXPRESSION_CHARS: usize = 50_000;
@@ -995,11 +996,11 @@ impl ExprBudget {
         };
         let why = if self.count >= MAX_TIME_EXPRESSIONS {
             format!(
-                "more than {MAX_TIME_EXPRESSIONS} distinct time-dependent expressions in one model (the limit: each costs ≈ 45 KB)"
+                "more than {MAX_TIME_EXPRESSIONS} distinct time-dependent expressions in one model (the limit: each costs ≈ 65 KB while an analysis runs)"
             )
         } else if self.chars + chars > MAX_TIME_EXPRESSION_CHARS {
             format!(
-                "the model's distinct time-dependent expressions exceed {MAX_TIME_EXPRESSION_CHARS} characters in total (the limit: each character costs ≈ 1.2 KB parsed)"
+                "the model's distinct time-dependent expressions exceed {MAX_TIME_EXPRESSION_CHARS} characters in total (the limit: each character costs ≈ 1 KB while an analysis runs)"
             )
         } else {
             self.count += 1;

@@ -61,10 +61,21 @@ pub fn parse_json(text: &[u8]) -> Result<serde_json::Value, serde_json::Error> {
     serde_json::from_slice::<StrictValue>(text)
         .map(|v| v.0)
         .map_err(|e| {
+            let words = e.to_string();
             // serde_json's words for its nesting limit read as if the JSON were wrong.
-            if e.to_string().starts_with("recursion limit exceeded") {
+            if words.starts_with("recursion limit exceeded") {
                 de::Error::custom(format!(
                     "arrays and objects nested more than 128 deep, beyond what kea reads (the JSON itself may be valid) at line {} column {}",
+                    e.line(),
+                    e.column()
+                ))
+            } else if words.starts_with("unexpected end of hex escape")
+                || words.starts_with("lone leading surrogate")
+            {
+                // Its words for an unpaired surrogate escape name neither the cause nor,
+                // for a lone low surrogate ("leading"), the right half.
+                de::Error::custom(format!(
+                    "a \\u escape of half a UTF-16 surrogate pair with no matching half (RFC 8259 §7: a character beyond U+FFFF is written as \\uD800–\\uDBFF followed by \\uDC00–\\uDFFF; such a half alone is no character): write the character itself, or both halves, at line {} column {}",
                     e.line(),
                     e.column()
                 ))
@@ -415,6 +426,29 @@ mod tests {
         assert!(e.contains("at line 1 column 128"), "{e}");
         let fine = format!("{}{}", "[".repeat(100), "]".repeat(100));
         assert!(parse_json(fine.as_bytes()).is_ok());
+    }
+
+    /// An unpaired surrogate escape was "unexpected end of hex escape", or for a lone
+    /// low surrogate "lone leading surrogate".
+    #[test]
+    fn an_unpaired_surrogate_escape_is_named_as_one() {
+        for text in [
+            r#"{"a": "\ud800x"}"#,
+            r#"{"a": "\ud800"}"#,
+            r#"{"a": "\udc00"}"#,
+            r#"{"a": "\ud800\ud800"}"#,
+        ] {
+            let e = parse_json(text.as_bytes()).unwrap_err().to_string();
+            assert!(
+                e.starts_with("a \\u escape of half a UTF-16 surrogate pair with no matching half"),
+                "{text}: {e}"
+            );
+            assert!(e.contains("at line 1 column"), "{text}: {e}");
+        }
+        let pair = parse_json(r#"{"a": "\ud83d\ude00"}"#.as_bytes()).unwrap();
+        assert_eq!(pair, json!({"a": "\u{1F600}"}));
+        let bad = parse_json(r#"{"a": "\u12zz"}"#.as_bytes()).unwrap_err();
+        assert!(bad.to_string().starts_with("invalid escape"), "{bad}");
     }
 
     /// A UTF-16 text (PowerShell's `>` writes one) or a code-page text was reported

@@ -110,17 +110,26 @@ export function finalTable(result) {
   table.append(el('caption', { text: `Values at t_E = ${fmt(result.t_end)} (bound SKOs; ΔX = λχ, λ = ${fmt(result.lambda)} for P = ${result.confidence})` }));
   const cols = [
     ['eta', 'η'],
-    ['zeta', 'ζ'],
+    ['zeta', 'ζ (paired measurement)'],
     ['chi', 'χ'],
     ['potential_sko', '√R'],
     ['delta_y', 'ΔY'],
     ['delta_x', 'ΔX'],
   ];
   table.append(el('thead', {}, el('tr', {}, el('th', { scope: 'col', text: 'state' }), ...cols.map(([, l]) => el('th', { scope: 'col', text: l })))));
+  // ζ is one value per measurement: it goes on the row of the state the measurement is
+  // paired with (result.pairs), "—" on a state no measurement is paired with.
+  const measurements = result.measurements ?? [];
+  const pairedWith = new Map((result.pairs ?? []).map((p) => [p.state, measurements.indexOf(p.measurement)]));
+  const value = (k, name, i) => {
+    if (k !== 'zeta') return f[k]?.[i] ?? null;
+    const j = pairedWith.get(name);
+    return j === undefined || j < 0 ? null : (f.zeta?.[j] ?? null);
+  };
   const body = el('tbody');
   result.states.forEach((name, i) => {
     body.append(
-      el('tr', {}, el('th', { scope: 'row', text: name }), ...cols.map(([k]) => el('td', { class: 'num', text: fmt(f[k]?.[i] ?? null) }))),
+      el('tr', {}, el('th', { scope: 'row', text: name }), ...cols.map(([k]) => el('td', { class: 'num', text: fmt(value(k, name, i)) }))),
     );
   });
   table.append(body);

@@ -7,7 +7,7 @@ import assert from 'node:assert/strict';
 import { readFileSync, writeFileSync } from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
-import { holdJobs, kea, newPage, openApp, relDiff, screenshot } from './lib.mjs';
+import { ROOT, holdJobs, kea, newPage, openApp, relDiff, screenshot } from './lib.mjs';
 
 let server;
 let browser;
@@ -104,6 +104,24 @@ test("the seed's worked example gives the same F_YX in the browser, on the serve
   for (const name of ['η a-priori', 'ζ measured', 'χ filtered', 'potential SKO']) {
     assert.ok(legend.some((l) => l.includes(name)), `legend ${legend} lacks ${name}`);
   }
+});
+
+test("the values at t_E put each measurement's ζ on the state it is paired with", async () => {
+  // helicopter-range: 6 states, 4 measurements (of D_f, V_f, D_b, V_b), so the
+  // measurements' positions are not the states'.
+  await preset('helicopter-range');
+  await runIn('browser');
+  const rows = await page.$$eval('table.final tbody tr', (trs) =>
+    trs.map((tr) => [tr.querySelector('th').textContent, [...tr.querySelectorAll('td')].map((td) => td.textContent)]),
+  );
+  const zeta = Object.fromEntries(rows.map(([state, cells]) => [state, cells[1]]));
+  const cli = JSON.parse(kea('analyze', path.join(ROOT, 'presets', 'helicopter-range.json'), '--json'));
+  for (const { state, measurement } of cli.pairs) {
+    const j = cli.measurements.indexOf(measurement);
+    assertClose(Number(zeta[state]), cli.final.zeta[j], `ζ of ${state} (${measurement})`);
+  }
+  assert.deepEqual([zeta.j_f, zeta.j_b], ['—', '—'], 'unmeasured states have no ζ');
+  assert.notEqual(cli.final.zeta[2], cli.final.zeta[3]);
 });
 
 test('a model with every elementary function gives the CLI\'s bits in the browser', async () => {

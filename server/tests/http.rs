@@ -502,6 +502,54 @@ fn auth_on_and_off() {
     assert_eq!(open.get_with("/v1/presets", &[]).status, 200);
 }
 
+/// A server without a token trusted any Host, so a web page whose name was pointed
+/// at 127.0.0.1 (DNS rebinding) could read the stored models and submit jobs through
+/// the user's browser. Its API now answers only requests addressed to this machine,
+/// or to a name given with --allowed-host; a token, or --allow-no-token, lifts it.
+#[test]
+fn without_a_token_the_api_answers_only_requests_addressed_to_this_machine() {
+    use std::io::{Read, Write};
+    // (status line, body) of a GET with the given Host.
+    let get = |s: &Server, path: &str, host: &str| {
+        let addr = s.base.trim_start_matches("http://");
+        let mut tcp = std::net::TcpStream::connect(addr).unwrap();
+        tcp.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+        write!(
+            tcp,
+            "GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+        )
+        .unwrap();
+        let mut answer = String::new();
+        tcp.read_to_string(&mut answer).unwrap();
+        let status = answer.lines().next().unwrap_or_default().to_string();
+        (status, answer)
+    };
+    let open = Server::start(tmp().path(), &["--allowed-host", "kea.lab"]);
+    let port = open.base.rsplit(':').next().unwrap().to_string();
+    for here in [
+        format!("127.0.0.1:{port}"),
+        format!("localhost:{port}"),
+        "kea.lab".to_string(),
+    ] {
+        let (status, body) = get(&open, "/v1/models", &here);
+        assert!(status.contains(" 200 "), "{here}: {body}");
+    }
+    let (status, body) = get(&open, "/v1/models", &format!("attacker.example:{port}"));
+    assert!(status.contains(" 403 "), "{body}");
+    assert!(body.contains("application/problem+json"), "{body}");
+    assert!(body.contains("urn:kea:problem:forbidden-host"), "{body}");
+    assert!(body.contains("not to `attacker.example:"), "{body}");
+    assert!(body.contains("--allowed-host"), "{body}");
+    // The health check and the UI stay open; they reveal nothing.
+    let (status, _) = get(&open, "/healthz", "attacker.example");
+    assert!(status.contains(" 200 "), "{status}");
+    drop(open);
+    // With a token, the token is the check.
+    let guarded = Server::start(tmp().path(), &["--token", "s3cret"]);
+    let (status, body) = get(&guarded, "/v1/models", "attacker.example");
+    assert!(status.contains(" 401 "), "{body}");
+}
+
 /// A second `kea serve` on a data directory in use took over the first one's running
 /// jobs (re-queued them as if the first had died) and ran them again. Now it is
 /// refused; once the first has stopped, the directory is free again.

@@ -41,6 +41,15 @@ pub struct Args {
     /// Allow binding to a non-loopback address without a token (anyone can use it).
     #[arg(long, env = "KEA_ALLOW_NO_TOKEN")]
     pub allow_no_token: bool,
+    /// Without a token, /v1 answers only requests addressed to this machine (Host
+    /// localhost, 127.x.x.x or [::1]); a further name it may be called by, e.g. behind a
+    /// reverse proxy that keeps the Host (repeatable, or comma-separated).
+    #[arg(
+        long = "allowed-host",
+        env = "KEA_ALLOWED_HOSTS",
+        value_delimiter = ','
+    )]
+    pub allowed_hosts: Vec<String>,
     /// The static web UI [default: ./web, else the source tree's web/].
     #[arg(long, env = "KEA_WEB_DIR")]
     pub web_dir: Option<PathBuf>,
@@ -141,8 +150,20 @@ fn serve(args: Args) -> Result<(), Failure> {
         .workers
         .filter(|&w| w > 0)
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    // A server without a token on loopback trusts whoever reaches it, so it checks that
+    // a request was addressed to this machine: a web page whose name an attacker points
+    // at 127.0.0.1 (DNS rebinding) is same-origin with kea, and would otherwise read and
+    // submit through the user's browser. --allow-no-token accepts anyone, by name too.
+    let host_check = (token.is_none() && !args.allow_no_token).then(|| {
+        args.allowed_hosts
+            .iter()
+            .map(|h| h.trim().to_ascii_lowercase())
+            .filter(|h| !h.is_empty())
+            .collect()
+    });
     let config = Config {
         token,
+        host_check,
         web_dir: web_dir(args.web_dir),
         cors_origins: args.cors_origins,
         workers,

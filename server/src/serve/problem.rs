@@ -18,6 +18,7 @@ pub mod kind {
     pub const METHOD: &str = "urn:kea:problem:method-not-allowed";
     pub const CONFLICT: &str = "urn:kea:problem:conflict";
     pub const UNAUTHORIZED: &str = "urn:kea:problem:unauthorized";
+    pub const FORBIDDEN_HOST: &str = "urn:kea:problem:forbidden-host";
     pub const TOO_LARGE: &str = "urn:kea:problem:body-too-large";
     pub const BODY_TIMEOUT: &str = "urn:kea:problem:body-timeout";
     pub const MEDIA_TYPE: &str = "urn:kea:problem:unsupported-media-type";

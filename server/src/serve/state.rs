@@ -33,6 +33,10 @@ pub struct Limits {
 #[derive(Clone, Debug)]
 pub struct Config {
     pub token: Option<String>,
+    /// Without a token (and without --allow-no-token): the names besides loopback's
+    /// that a /v1 request's Host may give ([`super::auth::addressed_here`]); `None`:
+    /// any Host.
+    pub host_check: Option<Vec<String>>,
     /// The static web UI; `None` serves no UI.
     pub web_dir: Option<PathBuf>,
     pub cors_origins: Vec<String>,

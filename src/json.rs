@@ -58,7 +58,7 @@ pub fn parse_json(text: &[u8]) -> Result<serde_json::Value, serde_json::Error> {
             text[e.valid_up_to()]
         )));
     }
-    serde_json::from_slice::<StrictValue>(text)
+    let value = serde_json::from_slice::<StrictValue>(text)
         .map(|v| v.0)
         .map_err(|e| {
             let words = e.to_string();
@@ -82,7 +82,63 @@ pub fn parse_json(text: &[u8]) -> Result<serde_json::Value, serde_json::Error> {
             } else {
                 e
             }
-        })
+        })?;
+    if let Some((lit, line, column)) = first_underflow(text) {
+        return Err(de::Error::custom(format!(
+            "the number {lit} is below the smallest f64 (≈ 4.9e-324) and would be read as 0, at line {line} column {column}: write 0 if 0 is meant"
+        )));
+    }
+    Ok(value)
+}
+
+/// Whether `lit`, a number's text, names a non-zero value that parsed as `x` = 0: it
+/// underflows f64 (serde_json and Rust read `1e-400` as 0 without a word).
+pub fn underflows(lit: &str, x: f64) -> bool {
+    let mantissa = lit.split(['e', 'E']).next().unwrap_or(lit);
+    x == 0.0 && mantissa.bytes().any(|b| (b'1'..=b'9').contains(&b))
+}
+
+/// The first number of a valid JSON text that [`underflows`], with its line and
+/// column (characters, from 1). Only a literal with a negative exponent can.
+fn first_underflow(text: &[u8]) -> Option<(String, usize, usize)> {
+    let (mut i, mut line, mut line_start) = (0, 1, 0);
+    while i < text.len() {
+        match text[i] {
+            b'"' => {
+                // Skip the string (the text is valid JSON: it ends).
+                i += 1;
+                while i < text.len() && text[i] != b'"' {
+                    i += if text[i] == b'\\' { 2 } else { 1 };
+                }
+                i += 1;
+            }
+            b'\n' => {
+                line += 1;
+                i += 1;
+                line_start = i;
+            }
+            b'-' | b'0'..=b'9' => {
+                let start = i;
+                while i < text.len()
+                    && matches!(text[i], b'-' | b'+' | b'.' | b'e' | b'E' | b'0'..=b'9')
+                {
+                    i += 1;
+                }
+                let lit = std::str::from_utf8(&text[start..i]).unwrap_or_default();
+                if (lit.contains("e-") || lit.contains("E-"))
+                    && lit.parse::<f64>().is_ok_and(|x| underflows(lit, x))
+                {
+                    let column = String::from_utf8_lossy(&text[line_start..start])
+                        .chars()
+                        .count()
+                        + 1;
+                    return Some((lit.to_string(), line, column));
+                }
+            }
+            _ => i += 1,
+        }
+    }
+    None
 }
 
 /// Whether the text is UTF-16 (as Windows editors and PowerShell's `>` write it),
@@ -426,6 +482,28 @@ mod tests {
         assert!(e.contains("at line 1 column 128"), "{e}");
         let fine = format!("{}{}", "[".repeat(100), "]".repeat(100));
         assert!(parse_json(fine.as_bytes()).is_ok());
+    }
+
+    /// A literal below the smallest f64 was read as 0 without a word (an SKO of
+    /// 1e-400 became a noise-free sensor), while one above the largest is refused.
+    #[test]
+    fn a_number_that_underflows_to_zero_is_refused_with_its_place() {
+        let e = parse_json(b"{\"a\": [1, 2.5e-400],\n \"b\": \"1e-400\"}").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "the number 2.5e-400 is below the smallest f64 (≈ 4.9e-324) and would be read as 0, at line 1 column 11: write 0 if 0 is meant"
+        );
+        let e = parse_json(b"{\"s\": \"\\\" 1e-999\",\n  \"b\": -1E-330}").unwrap_err();
+        assert!(
+            e.to_string().contains("-1E-330 is below") && e.to_string().contains("line 2 column 8"),
+            "{e}"
+        );
+        // Zero written any way, subnormals and strings are numbers as they were.
+        let fine =
+            parse_json(b"[0, 0.0, -0e-999, 0e5, 1e-320, 4.9e-324, 1e-300, \"1e-400\"]").unwrap();
+        assert_eq!(fine[4], json!(1e-320));
+        assert_eq!(fine[5].as_f64(), Some(5e-324));
+        assert!(super::underflows("1e-400", 0.0) && !super::underflows("0.000e-400", 0.0));
     }
 
     /// An unpaired surrogate escape was "unexpected end of hex escape", or for a lone

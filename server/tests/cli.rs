@@ -570,6 +570,22 @@ fn a_set_name_given_twice_is_refused() {
     assert_eq!(code, 0, "{err}");
 }
 
+/// A `--set` value below the smallest f64 was read as 0 without a word (`r=1e-400`
+/// became a noise-free sensor; `r=1e-200` is refused by the SKO's range).
+#[test]
+fn a_set_value_that_underflows_is_refused() {
+    let (code, _, err) = kea(&["analyze", "preset:cv-tracker", "--set", "r=1e-400"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(
+            "`r=1e-400`: the value is below the smallest f64 (≈ 4.9e-324) and would be read as 0"
+        ),
+        "{err}"
+    );
+    let (code, _, err) = kea(&["analyze", "preset:cv-tracker", "--set", "r=0e-400"]);
+    assert_eq!(code, 0, "{err}");
+}
+
 /// A model that diverges: A = 1 + aΔt = 1 − 10⁴ at Δt = 0.01, so its covariance
 /// overflows within a few dozen steps and the run fails (exit 1).
 const DIVERGING_MODEL: &str = r#"{

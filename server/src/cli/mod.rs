@@ -289,12 +289,18 @@ pub fn parse_override(arg: &str) -> Result<(String, f64), String> {
     if name.is_empty() {
         return Err(format!("missing the parameter name before `=` in `{arg}`"));
     }
+    let value_text = value;
     let value: f64 = value
         .trim()
         .parse()
         .map_err(|_| format!("`{}` is not a number (in `{arg}`)", value.trim()))?;
     if !value.is_finite() {
         return Err(format!("`{arg}`: the value must be finite"));
+    }
+    if kea_core::json::underflows(value_text.trim(), value) {
+        return Err(format!(
+            "`{arg}`: the value is below the smallest f64 (≈ 4.9e-324) and would be read as 0: write 0 if 0 is meant"
+        ));
     }
     Ok((name.to_string(), value))
 }

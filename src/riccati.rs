@@ -169,15 +169,48 @@ impl Prepared {
                     linv[i * nk + j] = s;
                 }
             }
+            // How far a noise-free whitened row may be rounding residue (below): L⁻¹'s
+            // entries carry errors of about ε times Rv's condition, which the pivots'
+            // spread estimates.
+            let (d_max, d_min) = self.d[..nk]
+                .iter()
+                .filter(|&&d| d > 0.0)
+                .fold((0.0, f64::INFINITY), |(hi, lo): (f64, f64), &d| {
+                    (hi.max(d), lo.min(d))
+                });
+            let residue = if d_max > 0.0 {
+                DEPENDENT_ROW.max(16.0 * f64::EPSILON * d_max / d_min)
+            } else {
+                DEPENDENT_ROW
+            };
             // In place, last row first: row i needs the original rows k < i.
             for i in (0..nk).rev() {
                 let (before, from_i) = self.rows.split_at_mut(i * n);
                 let row = &mut from_i[..n];
+                // The size of the terms each entry sums, for the test below.
+                let mut scale = row.iter().fold(0.0, |m: f64, x| m.max(x.abs()));
+                for x in 0..n {
+                    let terms = row[x].abs()
+                        + (0..i)
+                            .map(|k| (linv[i * nk + k] * before[k * n + x]).abs())
+                            .sum::<f64>();
+                    scale = scale.max(terms);
+                }
                 for k in 0..i {
                     let l = linv[i * nk + k];
                     for (x, o) in row.iter_mut().zip(&before[k * n..k * n + n]) {
                         *x += l * o;
                     }
+                }
+                // A noise-free whitened measurement (zero pivot) whose row cancelled to
+                // rounding level is a measurement that repeats the others, noise and
+                // all: its row is 0, as it is where the cancellation comes out exact,
+                // and the step reports q singular. Kept, the residue (≈ 1e-17 of the
+                // terms, up to ≈ 1e-10 with an ill-conditioned Rv) made a noise-free
+                // "measurement" with a gain of 1/residue (≈ 7e16).
+                let left = row.iter().fold(0.0, |m: f64, x| m.max(x.abs()));
+                if self.d[i] == 0.0 && left <= residue * scale {
+                    row.fill(0.0);
                 }
             }
             self.whitened = true;
@@ -252,6 +285,11 @@ impl Prepared {
         self.idx.is_empty()
     }
 }
+
+/// A noise-free whitened row at most this fraction of the terms it was summed from is
+/// rounding residue (the same relative level as `ldl`'s zero pivots; more where Rv is
+/// ill-conditioned, see `prepare`): the measurement is a combination of the others.
+const DEPENDENT_ROW: f64 = 1e-14;
 
 /// The largest innovation-to-noise variance ratio q/d for which the block gain is
 /// read off the updated covariance instead of composed from the scalar gains.

@@ -1217,6 +1217,35 @@ fn a_singular_innovation_covariance_names_the_measurement() {
         "measurement.c[1]",
         "measurement \"z2\" adds nothing to \"z1\"",
     );
+    // The same where the cancellation is not exact in floating point: z2 = 3·z1 with
+    // coefficients 0.1 and 0.3 left a whitened row of 1.4e-17, taken as a noise-free
+    // measurement (a gain of 7.2e16, χ 1.4e16, exit 0).
+    expect_error(
+        model(json!({
+            "names": ["z1", "z2"], "c": [[0.1, 0], [0.3, 0]],
+            "gamma": [[0.1, 0], [0.3, 0]], "psi": [1, 1]
+        })),
+        "measurement.c[1]",
+        "measurement \"z2\" adds nothing to \"z1\"",
+    );
+    // z3 = 0.673 z1 − 0.047 z2, noise and all, with noises of unequal size (Rv less
+    // well conditioned: the residue was ≈ 1e-15 of the terms).
+    expect_error(
+        json!({
+            "time": {"t0": 0.0, "t_end": 1.0, "steps": 2},
+            "system": {
+                "states": ["x1", "x2", "x3"], "a": [[0, 0, 0], [0, 0, 0], [0, 0, 0]],
+                "b": [[1], [0], [0]], "phi": [1], "y0": [1, 1, 1], "eta0": [1, 1, 1]
+            },
+            "measurement": {
+                "names": ["z1", "z2", "z3"],
+                "c": [[-0.481, -0.531, 0], [0.991, -0.059, 0], [-0.37029, -0.35459, 0]],
+                "gamma": [[1, 0], [0, 1], [0.673, -0.047]], "psi": [0.36, 0.004]
+            }
+        }),
+        "measurement.c[2]",
+        "adds nothing to",
+    );
 }
 
 /// Run `v` and expect an error at `path` containing `fragment`.

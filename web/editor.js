@@ -35,6 +35,17 @@ function showTitle(input) {
   else input.removeAttribute('title');
 }
 
+/** A selector that finds `control` again in a redrawn editor: its path, id or focus key. */
+function focusSelector(control) {
+  const d = control.dataset ?? {};
+  if (d.path) return `[data-path="${CSS.escape(d.path)}"]`;
+  if (control.id) return `#${CSS.escape(control.id)}`;
+  if (d.focus) return `[data-focus="${CSS.escape(d.focus)}"]`;
+  return null;
+}
+
+const byFocusKey = (key) => `[data-focus="${CSS.escape(key)}"]`;
+
 const zeros = (n) => Array.from({ length: n }, () => 0);
 const resizeVec = (v, n, fill = () => 0) =>
   Array.from({ length: n }, (_, i) => (v && i < v.length ? v[i] : fill(i)));
@@ -349,6 +360,7 @@ export class ModelEditor {
     this.core = []; // the core's last validation errors, kept across redraws
     this.previous = new Map(); // form choice → {form, texts, made}: the form a switch left (switchForm)
     this.notes = new Map(); // form choice → what its last switch could not convert; 'params': the last rename
+    this.focusNext = null; // a selector of the control to focus after the next render, if not the focused one's
     this.general = el('ul', { class: 'general-errors', 'aria-live': 'polite' });
     new ResizeObserver(() => this.updateScrollHints()).observe(root);
   }
@@ -372,9 +384,15 @@ export class ModelEditor {
 
   // ------------------------------------------------------------ rendering
 
+  /**
+   * Draw the editor anew. The focus stays on the control that had it (found again by
+   * its path, id or focus key), or goes where the change that redraws says (`focusNext`):
+   * a control the redraw took away leaves the keyboard where it was, not on the page.
+   */
   render() {
     const active = document.activeElement;
-    const focused = this.root.contains(active) ? active.dataset?.path : undefined;
+    const focused = this.focusNext ?? (this.root.contains(active) ? focusSelector(active) : null);
+    this.focusNext = null;
     this.fields.clear();
     this.local.clear();
     const m = this.model;
@@ -393,7 +411,7 @@ export class ModelEditor {
     );
     this.mark();
     this.updateScrollHints();
-    if (focused) this.root.querySelector(`[data-path="${CSS.escape(focused)}"]`)?.focus();
+    if (focused) this.root.querySelector(focused)?.focus();
   }
 
   register(path, input, holder) {
@@ -475,6 +493,7 @@ export class ModelEditor {
       valueInput.dataset.path = `params.${name}`;
       valueInput.setAttribute('aria-label', `value of ${name}`);
       remove.setAttribute('aria-label', `remove parameter ${name}`);
+      remove.dataset.focus = `remove-param:${name}`;
       remove.title = `Remove ${name}`;
       this.register(`params.${name}.name`, nameInput, nameCell);
       this.register(`params.${name}`, valueInput, valueCell);
@@ -525,6 +544,12 @@ export class ModelEditor {
       this.changed();
     });
     remove.addEventListener('click', () => {
+      // The focus goes to the × of the row that takes this one's place (or of the row
+      // above, the last one removed), then to "Add parameter".
+      const names = Object.keys(m.params);
+      const at = names.indexOf(name);
+      const next = names[at + 1] ?? names[at - 1];
+      this.focusNext = byFocusKey(next === undefined ? 'add-param' : `remove-param:${next}`);
       delete m.params[name];
       this.render();
       this.changed();
@@ -579,6 +604,7 @@ export class ModelEditor {
     const add = el('button', {
       type: 'button',
       text: 'Add parameter',
+      'data-focus': 'add-param',
       onclick: () => {
         let i = 1;
         while (`p${i}` in m.params) i++;

@@ -1,11 +1,13 @@
 // The model editor: params, time, dimensions, and every matrix as a grid of cells
 // that accept a number or an expression in t and the params. Edits change the model
 // object in place (fields the editor does not show are kept), and the core's
-// validation messages are shown at the cell their path names. Fields that take only a
-// number (params, t₀, t_E, P, …) are also checked here, so their messages say what to
-// type rather than what the JSON parser expected.
+// validation messages are shown at the cell or field their path names. Fields that take only a number (params, t₀, t_E, P, N, …) are
+// also checked here, so their messages say what to type rather than what the JSON
+// parser expected. A change of dimension goes through dimensions.js, which keeps every
+// member consistent and what a smaller dimension removed for Undo.
 
 import { cellProblem, numberProblem, parseCell } from './numbers.js';
+import { MAX_DIMENSION, Shelf, dimensions, membersAlong, removeAt, removedOnlyDefaults, resize, restoreAt } from './dimensions.js';
 
 export { parseCell };
 
@@ -246,48 +248,6 @@ function eachExpression(model, f) {
   }
 }
 
-/** The model's dimensions N, n, L, M (METHOD §1.1). */
-export function dimensions(model) {
-  const s = model.system ?? {};
-  const m = model.measurement ?? {};
-  const noise = m.gamma ?? m.g;
-  return {
-    N: s.states?.length ?? 0,
-    n: m.names?.length ?? 0,
-    L: s.b?.[0]?.length ?? s.phi?.length ?? s.W?.length ?? 0,
-    M: noise?.[0]?.length ?? m.psi?.length ?? m.V?.length ?? 0,
-  };
-}
-
-/** Resize every matrix of the model to new dimensions (new entries 0). */
-export function resize(model, { N, n, L, M }) {
-  const s = model.system;
-  const m = model.measurement;
-  s.states = resizeVec(s.states, N, (i) => `y${i + 1}`);
-  s.a = resizeMat(s.a, N, N);
-  s.b = resizeMat(s.b, N, L);
-  for (const k of ['u', 'y0', 'eta0']) if (s[k]) s[k] = resizeVec(s[k], N);
-  if (s.W) s.W = resizeMat(s.W, L, L);
-  else s.phi = resizeVec(s.phi, L);
-  const measured = m.names?.length ?? 0;
-  m.names = resizeVec(m.names, n, (j) => `z${j + 1}`);
-  m.c = resizeMat(m.c, n, N);
-  // A new measurement measures the first state no row of C measures yet (an all-zero
-  // row with no noise would make the innovation covariance singular).
-  for (let j = measured; j < n && N > 0; j++) m.c[j][firstUnmeasured(m.c.slice(0, j), N)] = 1;
-  if (m.g) m.g = resizeMat(m.g, N, M);
-  else m.gamma = resizeMat(m.gamma, n, M);
-  if (m.V) m.V = resizeMat(m.V, M, M);
-  else m.psi = resizeVec(m.psi, M);
-}
-
-/** The first column of `rows` (C's rows) that is 0 in every row; 0 when none is. */
-function firstUnmeasured(rows, N) {
-  const zero = (x) => x === undefined || x === null || x === 0 || x === '0' || x === '';
-  for (let k = 0; k < N; k++) if (rows.every((row) => zero(row?.[k]))) return k;
-  return 0;
-}
-
 /**
  * Why `value` cannot be loaded as a model, or null when it can: it must be a JSON
  * object with at least one of a model's parts (the core's validation names the rest).
@@ -343,7 +303,55 @@ const FIELD_LABELS = {
   'criteria.confidence': 'Confidence P',
   'options.trace_points': 'Trace points',
   'options.steady_state_shortcut': 'Steady-state shortcut',
+  'dimensions.N': 'States N',
+  'dimensions.n': 'Measurements n',
+  'dimensions.L': 'Model errors L',
+  'dimensions.M': 'Meas. errors M',
 };
+
+/** The dimensions' words: what one index is, and the names of the indices of a model. */
+const DIMENSIONS = {
+  N: { one: 'state', many: 'states', help: 'state dimension', names: (m) => m.system?.states ?? [] },
+  n: { one: 'measurement', many: 'measurements', help: 'number of measurements', names: (m) => m.measurement?.names ?? [] },
+  L: {
+    one: 'model-error source',
+    many: 'model-error sources',
+    help: 'model-error sources F (columns of b)',
+    names: (m) => Array.from({ length: dimensions(m).L }, (_, l) => `F${l + 1}`),
+  },
+  M: {
+    one: 'measurement-error source',
+    many: 'measurement-error sources',
+    help: 'measurement-error sources Φ',
+    names: (m) => Array.from({ length: dimensions(m).M }, (_, k) => `Φ${k + 1}`),
+  },
+};
+
+/**
+ * Why the text of dimension `key`'s field cannot be applied (null: it can): a whole
+ * number from 1 to 200 (kea's limits), and n ≤ N. `badInput`: the browser could not
+ * read the text as a number.
+ */
+function dimensionProblem(key, text, badInput, dims) {
+  const max = key === 'n' ? Math.min(dims.N, MAX_DIMENSION) : MAX_DIMENSION;
+  const range = `enter a whole number from 1 to ${max}; ${key} stays ${dims[key]}`;
+  if (badInput) return `not a number: ${range}`;
+  if (text.trim() === '') return `empty: ${range}`;
+  const value = Number(text);
+  if (!Number.isInteger(value)) return `${text} is not a whole number: ${range}`;
+  if (value < 1) return `the model needs at least one ${DIMENSIONS[key].one}: ${range}`;
+  if (value <= max) return null;
+  if (key === 'n' && value <= MAX_DIMENSION) return `${value} measurements of ${dims.N} states: kea needs n ≤ N; ${range}`;
+  return `${value} is more than kea's limit of ${MAX_DIMENSION}: ${range}`;
+}
+
+/** The members of `model` indexed by dimension `axis`, as the editor names them: “a, b, u, y₀, C”. */
+function memberList(model, axis) {
+  const names = membersAlong(model, axis)
+    .filter((path) => path !== 'system.states' && path !== 'measurement.names')
+    .map((path) => (path.startsWith('criteria.weights') ? 'weights' : placeName(path)));
+  return [...new Set(names)].join(', ');
+}
 
 /** A number field's check (null: fine). */
 const aNumber = (text) => numberProblem(text);
@@ -360,6 +368,9 @@ export class ModelEditor {
     this.core = []; // the core's last validation errors, kept across redraws
     this.previous = new Map(); // form choice → {form, texts, made}: the form a switch left (switchForm)
     this.notes = new Map(); // form choice → what its last switch could not convert; 'params': the last rename
+    this.shelf = new Shelf(); // what smaller dimensions removed, for larger ones to restore (dimensions.js)
+    this.undo = null; // the last removal (a smaller N, n, L or M, or a ×): {where, text, dims, focus, apply()} (undoNote)
+    this.pendingDims = new Map(); // dimension → a text typed in its field that is not applied (dimensionProblem)
     this.focusNext = null; // a selector of the control to focus after the next render, if not the focused one's
     this.general = el('ul', { class: 'general-errors', 'aria-live': 'polite' });
     new ResizeObserver(() => this.updateScrollHints()).observe(root);
@@ -370,6 +381,9 @@ export class ModelEditor {
     this.core = [];
     this.previous.clear();
     this.notes.clear();
+    this.shelf = new Shelf();
+    this.undo = null;
+    this.pendingDims.clear();
     this.render();
   }
 
@@ -393,6 +407,7 @@ export class ModelEditor {
     const active = document.activeElement;
     const focused = this.focusNext ?? (this.root.contains(active) ? focusSelector(active) : null);
     this.focusNext = null;
+    if (this.undo && JSON.stringify(this.undo.dims) !== JSON.stringify(dimensions(this.model))) this.undo = null;
     this.fields.clear();
     this.local.clear();
     const m = this.model;
@@ -638,17 +653,6 @@ export class ModelEditor {
 
   sectionTime(dims) {
     const m = this.model;
-    const dim = (label, key, help) => {
-      const id = `dim-${key}`;
-      const input = el('input', { id, type: 'number', min: 1, max: 200, step: 1, value: dims[key] });
-      input.addEventListener('change', () => {
-        const v = Math.max(1, Math.min(200, Math.round(Number(input.value)) || 1));
-        resize(m, { ...dimensions(m), [key]: v });
-        this.render();
-        this.changed();
-      });
-      return el('div', { class: 'field' }, el('label', { for: id, text: label, title: help }), input);
-    };
     const steps = (s) => (s.trim() === 'auto' ? 'auto' : parseCell(s));
     const stepsProblem = (s) => {
       const problem = s.trim() === 'auto' ? null : numberProblem(s, { integer: true, min: 1 });
@@ -665,15 +669,147 @@ export class ModelEditor {
         this.field(FIELD_LABELS['time.t_end'], 'time.t_end', m.time, 't_end', { check: aNumber }),
         this.field(`${FIELD_LABELS['time.steps']} (or auto)`, 'time.steps', m.time, 'steps', { parse: steps, check: stepsProblem }),
       ),
-      el(
-        'div',
-        { class: 'row' },
-        dim('States N', 'N', 'state dimension'),
-        dim('Measurements n', 'n', 'number of measurements'),
-        dim('Model errors L', 'L', 'model-error sources F (columns of b)'),
-        dim('Meas. errors M', 'M', 'measurement-error sources Φ'),
-      ),
+      el('div', { class: 'row dimensions' }, ...['N', 'n', 'L', 'M'].map((key) => this.dimensionField(key, dims))),
+      this.undoNote('dims'),
     );
+  }
+
+  /**
+   * The field of dimension `key` (N, n, L or M). A whole number in its range is applied
+   * when the field changes (Enter, Tab, an arrow key's step); anything else is marked at
+   * the field and not applied: the model keeps its size (Esc puts the size back in the
+   * field). The focus stays in the field across the redraw.
+   */
+  dimensionField(key, dims) {
+    const id = `dim-${key}`;
+    const path = `dimensions.${key}`;
+    const pending = this.pendingDims.get(key);
+    const input = el('input', {
+      id,
+      type: 'number',
+      min: 1,
+      max: key === 'n' ? Math.min(dims.N, MAX_DIMENSION) : MAX_DIMENSION,
+      step: 1,
+      value: pending ?? dims[key],
+      title: DIMENSIONS[key].help,
+    });
+    const problem = () => dimensionProblem(key, input.value, input.validity.badInput, dims);
+    if (pending !== undefined) this.setLocal(path, problem(), false);
+    input.addEventListener('input', () => {
+      const now = problem();
+      if ((this.local.get(path) ?? null) !== now) this.setLocal(path, now);
+    });
+    input.addEventListener('change', () => {
+      const now = problem();
+      if (now) {
+        this.pendingDims.set(key, input.value);
+        this.setLocal(path, now);
+        return;
+      }
+      this.pendingDims.delete(key);
+      this.setLocal(path, null);
+      this.setDimension(key, Number(input.value));
+    });
+    input.addEventListener('keydown', (e) => {
+      if (e.key !== 'Escape' || !this.local.has(path)) return;
+      input.value = String(dims[key]);
+      this.pendingDims.delete(key);
+      this.setLocal(path, null);
+    });
+    const wrap = el('div', { class: 'field' }, el('label', { for: id, text: FIELD_LABELS[path], title: DIMENSIONS[key].help }), input);
+    this.register(path, input, wrap);
+    return wrap;
+  }
+
+  /**
+   * Resize the model to `size` in dimension `key`. What a smaller size removes stays on
+   * the shelf (a larger size takes it back); when it was more than the zeros and names
+   * growing back creates, a note says what went and offers Undo.
+   */
+  setDimension(key, size) {
+    const m = this.model;
+    const before = dimensions(m);
+    if (size === before[key]) return;
+    const old = structuredClone(m);
+    resize(m, { ...before, [key]: size }, this.shelf);
+    if (size < before[key] && !removedOnlyDefaults(old, m)) {
+      const { one, many, names } = DIMENSIONS[key];
+      const gone = names(old).slice(size);
+      const list = gone.map((x) => `“${x}”`).join(', ');
+      this.undo = {
+        where: 'dims',
+        dims: dimensions(m),
+        text:
+          `${key} ${before[key]} → ${size} removed the ${gone.length === 1 ? one : many} ${list} with ${gone.length === 1 ? 'its' : 'their'} entries in ` +
+          `${memberList(old, key)}. Growing ${key} back restores them (until another model is loaded).`,
+        focus: `#dim-${key}`,
+        apply: () => resize(m, { ...dimensions(m), [key]: before[key] }, this.shelf),
+      };
+    }
+    this.render();
+    this.changed();
+  }
+
+  /**
+   * Remove state (`axis` 'N') or measurement ('n') number `k`, from every member; a note
+   * offers Undo, which puts it back in its place. The focus goes to the × of the row
+   * that takes its place (or of the row above, for the last row).
+   */
+  removeOne(axis, k) {
+    const m = this.model;
+    const before = structuredClone(m);
+    const { one } = DIMENSIONS[axis];
+    const name = DIMENSIONS[axis].names(m)[k];
+    const members = memberList(m, axis);
+    const pairs = removeAt(m, axis, k, this.shelf);
+    const where = axis === 'N' ? 'system' : 'measurement';
+    const left = DIMENSIONS[axis].names(m).length;
+    this.undo = {
+      where,
+      dims: dimensions(m),
+      text: `Removed the ${one} “${name}” with its entries in ${members}${pairs.length ? ' and its pair in pairs' : ''}.`,
+      focus: byFocusKey(`remove-${one}:${k}`),
+      apply: () => restoreAt(m, axis, k, before, pairs, this.shelf),
+    };
+    this.focusNext = left > 1 ? byFocusKey(`remove-${one}:${Math.min(k, left - 1)}`) : byFocusKey(`undo-${where}`);
+    this.render();
+    this.changed();
+  }
+
+  /** The × that removes state or measurement `i` (`axis` 'N' or 'n'), beside its name. */
+  removeButton(axis, i, count, names) {
+    const { one } = DIMENSIONS[axis];
+    const name = names?.[i] ?? '';
+    return el('button', {
+      type: 'button',
+      class: 'icon',
+      text: '×',
+      'aria-label': `remove ${one} ${name}`,
+      title: count > 1 ? `Remove ${one} ${name} (its entries in every matrix; Undo brings it back)` : `The model needs at least one ${one}`,
+      disabled: count <= 1,
+      'data-focus': `remove-${one}:${i}`,
+      'data-remove-of': `${axis === 'N' ? 'system.states' : 'measurement.names'}[${i}]`,
+      onclick: () => this.removeOne(axis, i),
+    });
+  }
+
+  /** The note on the last removal shown at `where` ('dims', 'system', 'measurement'), with its Undo; null when none. */
+  undoNote(where) {
+    const undo = this.undo;
+    if (!undo || undo.where !== where) return null;
+    const button = el('button', {
+      type: 'button',
+      text: 'Undo',
+      'data-focus': `undo-${where}`,
+      onclick: () => {
+        this.undo = null;
+        undo.apply();
+        this.focusNext = undo.focus;
+        this.render();
+        this.changed();
+      },
+    });
+    return el('p', { class: 'help undo-note', role: 'status', 'data-note': `undo-${where}` }, `${undo.text} `, button);
   }
 
   /**
@@ -681,8 +817,9 @@ export class ModelEditor {
    * inside `obj[key]`; absent optional vectors show 0 and are created on first edit, as
    * are rows and entries a ragged matrix lacks. `rowNames`/`colNames` are the paths of
    * the name vectors that label the rows/columns (kept current as the names are typed).
+   * `rowAction(i)`, if given, is a control at the end of row i (a name's ×).
    */
-  grid({ title, path, obj, key, rows, cols, rowLabels, colLabels, rowNames, colNames, create, text = false }) {
+  grid({ title, path, obj, key, rows, cols, rowLabels, colLabels, rowNames, colNames, create, text = false, rowAction }) {
     const table = el('table', { class: 'grid', 'data-grid': path });
     const caption = el('caption', {}, title, el('span', { class: 'scroll-hint', text: ' — scroll sideways for more ↔' }));
     table.append(caption);
@@ -738,14 +875,27 @@ export class ModelEditor {
             for (const th of this.root.querySelectorAll(`[data-label-of="${CSS.escape(cellPath)}"]`)) {
               th.textContent = input.value;
             }
+            for (const button of this.root.querySelectorAll(`[data-remove-of="${CSS.escape(cellPath)}"]`)) {
+              button.setAttribute('aria-label', button.getAttribute('aria-label').replace(/^(remove \S+) .*$/s, `$1 ${input.value}`));
+            }
           }
           this.changed();
         });
+        if (text) {
+          // A name's rename reaches the pairs that name it, when the edit is done.
+          let named = input.value;
+          input.addEventListener('focus', () => (named = input.value));
+          input.addEventListener('change', () => {
+            this.renameInPairs(path, named, input.value);
+            named = input.value;
+          });
+        }
         input.addEventListener('keydown', (e) => this.gridKey(e, table));
         const td = el('td', { 'data-path': cellPath }, input);
         this.register(cellPath, input, td);
         tr.append(td);
       }
+      if (rowAction) tr.append(el('td', {}, rowAction(i)));
       body.append(tr);
     }
     table.append(body);
@@ -753,6 +903,27 @@ export class ModelEditor {
     const wrap = el('div', { class: 'grid-wrap' }, table);
     wrap.addEventListener('scroll', () => this.scrollHint(wrap), { passive: true });
     return wrap;
+  }
+
+  /**
+   * A state's or measurement's rename (`names`: 'system.states' or 'measurement.names')
+   * in `measurement.pairs`, which names them: the pairs of `old` follow it, unless
+   * another state (measurement) is still called `old`.
+   */
+  renameInPairs(names, old, wanted) {
+    const m = this.model.measurement;
+    const field = names === 'system.states' ? 'state' : names === 'measurement.names' ? 'measurement' : null;
+    if (!field || old === wanted || !Array.isArray(m.pairs)) return;
+    const list = names === 'system.states' ? this.model.system.states : m.names;
+    if (list.includes(old)) return;
+    let renamed = false;
+    for (const pair of m.pairs) {
+      if (pair?.[field] === old) {
+        pair[field] = wanted;
+        renamed = true;
+      }
+    }
+    if (renamed) this.changed();
   }
 
   /** Mark the grids wider than their box: a caption hint and a faded edge per side with more. */
@@ -839,10 +1010,21 @@ export class ModelEditor {
       'fieldset',
       { class: 'section' },
       el('legend', { text: 'System  dY/dt = a Y + u + b F' }),
+      this.undoNote('system'),
       el(
         'div',
         { class: 'grids' },
-        this.grid({ title: 'State names', path: 'system.states', obj: s, key: 'states', rows: N, cols: 0, text: true, create: () => [] }),
+        this.grid({
+          title: 'State names',
+          path: 'system.states',
+          obj: s,
+          key: 'states',
+          rows: N,
+          cols: 0,
+          text: true,
+          create: () => [],
+          rowAction: (i) => this.removeButton('N', i, N, states),
+        }),
         this.grid({ title: 'a (N×N)', path: 'system.a', obj: s, key: 'a', rows: N, cols: N, rowLabels: states, colLabels: states, rowNames: 'system.states', colNames: 'system.states', create: () => resizeMat([], N, N) }),
         this.grid({ title: 'b (N×L)', path: 'system.b', obj: s, key: 'b', rows: N, cols: L, rowLabels: states, colLabels: lcols, rowNames: 'system.states', create: () => resizeMat([], N, L) }),
         this.grid({ title: 'u (N)', path: 'system.u', obj: s, key: 'u', rows: N, cols: 0, rowLabels: states, rowNames: 'system.states', create: () => zeros(N) }),
@@ -881,10 +1063,21 @@ export class ModelEditor {
       'fieldset',
       { class: 'section' },
       el('legend', { text: 'Measurements  Z = C y + Γ Φ' }),
+      this.undoNote('measurement'),
       el(
         'div',
         { class: 'grids' },
-        this.grid({ title: 'Measurement names', path: 'measurement.names', obj: m, key: 'names', rows: n, cols: 0, text: true, create: () => [] }),
+        this.grid({
+          title: 'Measurement names',
+          path: 'measurement.names',
+          obj: m,
+          key: 'names',
+          rows: n,
+          cols: 0,
+          text: true,
+          create: () => [],
+          rowAction: (j) => this.removeButton('n', j, n, names),
+        }),
         this.grid({ title: 'C (n×N)', path: 'measurement.c', obj: m, key: 'c', rows: n, cols: N, rowLabels: names, colLabels: states, rowNames: 'measurement.names', colNames: 'system.states', create: () => resizeMat([], n, N) }),
         el(
           'div',
@@ -991,6 +1184,7 @@ export function modelPlace(path) {
     'system.phi': 'φ', 'system.W': 'W', 'measurement.c': 'C', 'measurement.gamma': 'Γ',
     'measurement.g': 'g', 'measurement.psi': 'ψ', 'measurement.V': 'V',
     'system.states': 'state names', 'measurement.names': 'measurement names',
+    'measurement.schedule': 'schedule', 'measurement.pairs': 'pairs',
   };
   const m = (path ?? '').match(/^([a-z]+\.[A-Za-z0-9_]+)((\[\d+\])*)$/);
   if (!m || !names[m[1]]) return path ? `${path}: ` : '';

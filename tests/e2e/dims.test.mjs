@@ -1,5 +1,9 @@
-// The model's dimensions in the editor, and the keyboard focus, which stays where it
-// was through every redraw.
+// The model's dimensions in the editor: a dimension field applies only a whole number
+// in its range (anything else is marked there, and the model keeps its size); what a
+// smaller dimension removes comes back when it grows back, or with Undo; any state or
+// measurement can be removed by the × beside its name; resizing keeps the schedule,
+// pairs and weights consistent; and the keyboard focus stays where it was through every
+// redraw.
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
@@ -73,6 +77,74 @@ async function refusedRun() {
   return page.textContent('#status');
 }
 
+test('an empty or out-of-range dimension is marked at its field and not applied: the model keeps its size', async () => {
+  await preset('helicopter-range');
+  const original = await exported();
+  // Cleared, then a click elsewhere before typing the new value.
+  await page.click('#dim-N', { clickCount: 3 });
+  await page.keyboard.press('Backspace');
+  await page.click('input[data-path=name]');
+  await page.waitForTimeout(300);
+  assert.deepEqual(await states(), original.system.states, 'no state was removed');
+  assert.deepEqual(await messagesAt('dimensions.N'), ['empty: enter a whole number from 1 to 200; N stays 6']);
+  assert.equal(await page.getAttribute('#dim-N', 'aria-invalid'), 'true');
+  assert.match(await refusedRun(), /fields to fix first/, 'a run does not take the model for what the field shows');
+  for (const [text, message] of [
+    ['0', /^the model needs at least one state/],
+    ['250', /^250 is more than kea's limit of 200/],
+    ['2.5', /^2\.5 is not a whole number/],
+  ]) {
+    await setDimension('N', text);
+    assert.deepEqual(await states(), original.system.states, text);
+    const shown = await messagesAt('dimensions.N');
+    assert.equal(shown.length, 1, `${text}: ${shown}`);
+    assert.match(shown[0], message);
+  }
+  // Esc puts the model's size back in the field.
+  await page.focus('#dim-N');
+  await page.keyboard.press('Escape');
+  assert.equal(await page.inputValue('#dim-N'), '6');
+  assert.deepEqual(await messagesAt('dimensions.N'), []);
+  // n ≤ N.
+  await setDimension('n', '7');
+  assert.match((await messagesAt('dimensions.n'))[0], /^7 measurements of 6 states: kea needs n ≤ N; enter a whole number from 1 to 6; n stays 4/);
+  assert.equal((await measurements()).length, 4);
+  await setDimension('n', '4');
+  assert.deepEqual(await editorMessages(), []);
+  assert.deepEqual(await exported(), original, 'nothing changed');
+});
+
+test('a smaller N removes states, and growing N back restores them; Undo does too', async () => {
+  await preset('helicopter-range');
+  const original = await exported();
+  await setDimension('N', '4');
+  assert.deepEqual(await states(), ['D_f', 'V_f', 'j_f', 'D_b']);
+  const note = await page.textContent('[data-note="undo-dims"]');
+  assert.match(note, /^N 6 → 4 removed the states “V_b”, “j_b” with their entries in a, b, y₀, η₀, C\. Growing N back restores them/);
+  await setDimension('N', '5');
+  await setDimension('N', '6');
+  assert.deepEqual(await exported(), original, 'grown back: the model as it was');
+  assert.equal(await page.$('[data-note="undo-dims"]'), null);
+
+  // Undo, after an edit of a state that was kept (the edit stays).
+  await setDimension('N', '2');
+  await page.fill('input[data-path="system.y0[0]"]', '7');
+  await page.click('[data-note="undo-dims"] button');
+  await page.waitForTimeout(300);
+  assert.equal(await focused(), 'dim-N', 'the focus goes to the field Undo changed');
+  const undone = await exported();
+  assert.deepEqual(undone.system.y0, [7, ...original.system.y0.slice(1)]);
+  await page.fill('input[data-path="system.y0[0]"]', String(original.system.y0[0]));
+  assert.deepEqual(await exported(), original);
+  assert.deepEqual(await editorMessages(), []);
+
+  // Growing and shrinking over new, empty states says nothing: nothing of value went.
+  await setDimension('N', '8');
+  await setDimension('N', '6');
+  assert.equal(await page.$('[data-note="undo-dims"]'), null);
+  assert.deepEqual(await exported(), original);
+});
+
 test('arrow keys step a dimension and keep the focus in its field', async () => {
   await preset('cv-tracker');
   await page.focus('#dim-N');
@@ -103,6 +175,82 @@ test('arrow keys step a dimension and keep the focus in its field', async () => 
     assert.equal(await focused(), `dim-${key}`, key);
   }
   assert.deepEqual(await exported(), JSON.parse(kea('preset', 'cv-tracker')), 'stepped up and back: the preset');
+});
+
+test("the × beside a state's name removes that state from every member; Undo puts it back in its place", async () => {
+  await preset('helicopter-range');
+  const original = await exported();
+  await page.focus('button[aria-label="remove state V_f"]');
+  await page.keyboard.press('Enter');
+  await page.waitForTimeout(300);
+  assert.deepEqual(await states(), ['D_f', 'j_f', 'D_b', 'V_b', 'j_b']);
+  assert.equal(await focused(), 'remove-state:1', 'the focus goes to the × of the state in its place');
+  assert.equal(await page.getAttribute('[data-focus="remove-state:1"]', 'aria-label'), 'remove state j_f');
+  const without = (rows, k) => rows.filter((_, i) => i !== k);
+  const model = await exported();
+  assert.deepEqual(model.system.a, without(original.system.a, 1).map((row) => without(row, 1)));
+  assert.deepEqual(model.system.b, without(original.system.b, 1));
+  assert.deepEqual(model.system.eta0, without(original.system.eta0, 1));
+  assert.deepEqual(model.measurement.c, original.measurement.c.map((row) => without(row, 1)));
+  assert.match(await page.textContent('[data-note="undo-system"]'), /^Removed the state “V_f” with its entries in a, b, y₀, η₀, C\./);
+  await page.click('[data-note="undo-system"] button');
+  await page.waitForTimeout(300);
+  assert.equal(await focused(), 'remove-state:1', 'the focus goes to the restored state’s ×');
+  assert.equal(await page.getAttribute('[data-focus="remove-state:1"]', 'aria-label'), 'remove state V_f');
+  assert.deepEqual(await exported(), original);
+
+  // A measurement, by its own ×, with its schedule entry (helicopter-hover: V_f_meas has one).
+  await preset('helicopter-hover');
+  const hover = await exported();
+  await page.click('button[aria-label="remove measurement V_f_meas"]');
+  await page.waitForTimeout(300);
+  assert.deepEqual(await measurements(), ['D_f_meas', 'D_b_meas', 'V_b_meas']);
+  const removed = await exported();
+  assert.deepEqual(removed.measurement.schedule, [null, null, null]);
+  assert.deepEqual(removed.measurement.c, without(hover.measurement.c, 1));
+  assert.deepEqual(await editorMessages(), []);
+  await page.click('[data-note="undo-measurement"] button');
+  await page.waitForTimeout(300);
+  assert.deepEqual(await exported(), hover);
+
+  // The only state cannot be removed.
+  await preset('seed-example');
+  assert.equal(await page.isDisabled('button[aria-label="remove state Y"]'), true);
+});
+
+test('resizing keeps the schedule, pairs and weights consistent, and growing back restores them', async () => {
+  // helicopter-hover's schedule has one entry per measurement.
+  await preset('helicopter-hover');
+  const hover = await exported();
+  await setDimension('n', '3');
+  assert.deepEqual(await editorMessages(), [], 'no “schedule has 4 entries” nobody could fix');
+  assert.equal((await exported()).measurement.schedule.length, 3);
+  await setDimension('n', '4');
+  assert.deepEqual(await exported(), hover, 'the fourth measurement came back as it was');
+
+  const model = JSON.parse(kea('preset', 'helicopter-range'));
+  model.measurement.pairs = ['D_f', 'V_f', 'D_b', 'V_b'].map((s) => ({ state: s, measurement: `${s}_meas` }));
+  model.criteria.weights = { yz: [0.25, 0.25, 0, 0.25, 0.25, 0], yx: [0.5, 0.1, 0.1, 0.1, 0.1, 0.1] };
+  await importModel(model, 'weighted.json');
+  assert.deepEqual(await editorMessages(), []);
+  const original = await exported();
+  await setDimension('N', '4');
+  const shrunk = await exported();
+  assert.deepEqual(shrunk.criteria.weights, { yz: [0.25, 0.25, 0, 0.25], yx: [0.5, 0.1, 0.1, 0.1] });
+  assert.deepEqual(shrunk.measurement.pairs.map((p) => p.state), ['D_f', 'V_f', 'D_b'], 'the pair of V_b went with it');
+  // The weights no longer sum to 1: said, with their place.
+  const said = await editorMessages();
+  assert.ok(said.some((m) => /^criteria\.weights\.yz: weights must sum to 1/.test(m)), `${said}`);
+  await setDimension('N', '6');
+  assert.deepEqual(await exported(), original);
+  assert.deepEqual(await editorMessages(), []);
+
+  // A state renamed: its pairs follow.
+  await page.fill('input[data-path="system.states[0]"]', 'range');
+  await page.press('input[data-path="system.states[0]"]', 'Tab');
+  await page.waitForTimeout(300);
+  assert.equal((await exported()).measurement.pairs[0].state, 'range');
+  assert.deepEqual(await editorMessages(), []);
 });
 
 test('the focus stays on the control after removing a parameter or switching a form with the keyboard', async () => {

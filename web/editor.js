@@ -1,7 +1,8 @@
 // The model editor: params, time, dimensions, and every matrix as a grid of cells
-// that accept a number or an expression in t and the params. Edits change the model
-// object in place (fields the editor does not show are kept), and the core's
-// validation messages are shown at the cell or field their path names. Fields that take only a number (params, t₀, t_E, P, N, …) are
+// that accept a number or an expression in t and the params; the members without a
+// grid (schedule, pairs, weights, a misspelt member) as JSON text. Edits change the
+// model object in place, and the core's validation messages are shown at the cell or
+// field their path names. Fields that take only a number (params, t₀, t_E, P, N, …) are
 // also checked here, so their messages say what to type rather than what the JSON
 // parser expected. A change of dimension goes through dimensions.js, which keeps every
 // member consistent and what a smaller dimension removed for Undo.
@@ -353,6 +354,101 @@ function memberList(model, axis) {
   return [...new Set(names)].join(', ');
 }
 
+// ------------------------------------------------------------ members without a grid
+
+/** The members each part's section shows with a field or grid of its own ('': the top level). */
+function shownMembers(model) {
+  const s = model.system ?? {};
+  const m = model.measurement ?? {};
+  return {
+    '': ['kea_model', 'name', 'description', 'params', 'time', 'system', 'measurement', 'criteria', 'options'],
+    time: ['t0', 't_end', 'steps'],
+    system: ['states', 'a', 'b', 'u', 'y0', 'eta0', s.W ? 'W' : 'phi'],
+    measurement: ['names', 'c', m.g ? 'g' : 'gamma', m.V ? 'V' : 'psi'],
+    criteria: ['confidence'],
+    options: ['trace_points', 'steady_state_shortcut'],
+  };
+}
+
+/** Optional members shown as JSON whether the model has them or not (empty: absent, the default). */
+const OPTIONAL_MEMBERS = {
+  measurement: {
+    schedule: {
+      label: 'Schedule (measurement.schedule)',
+      help: 'one entry per measurement: null (always), {"every": k, "offset": j}, {"when": "expr in t"} or {"unavailable": [[t1, t2], …]}; empty: every measurement at every step',
+      empty: 'none: every measurement at every step',
+      summary: scheduleSummary,
+    },
+    pairs: {
+      label: 'Pairs (measurement.pairs)',
+      help: '[{"state": "…", "measurement": "…"}, …], each measurement measuring its state; empty: the default pairing (a row of C with one non-zero pairs its state)',
+      empty: 'none: the default pairing',
+    },
+  },
+  criteria: {
+    weights: {
+      label: 'Weights (criteria.weights)',
+      help: '{"yz": [N weights ≥ 0 summing to 1], "zx": […], "yx": […]}, each optional; empty: equal weights over the states where the criterion is defined',
+      empty: 'none: equal weights',
+    },
+  },
+};
+
+/** Members kea knows that have no field: shown as JSON when the model has them. */
+const OTHER_MEMBERS = {
+  'time.auto': {
+    label: 'Step-size selection (time.auto)',
+    help: '{"tolerance": 1e-9, "initial_steps": 1000, "max_steps": 4096000}; used when Steps D is auto',
+  },
+  'system.phi': { label: 'φ (system.phi) beside W', help: 'the model errors are given as W: give φ or W, not both; remove the one not wanted' },
+  'system.W': { label: 'W (system.W) beside φ', help: 'the model errors are given as φ: give φ or W, not both; remove the one not wanted' },
+  'measurement.gamma': { label: 'Γ (measurement.gamma) beside g', help: 'the noise matrix is given as g: give Γ or g, not both; remove the one not wanted' },
+  'measurement.g': { label: 'g (measurement.g) beside Γ', help: 'the noise matrix is given as Γ: give Γ or g, not both; remove the one not wanted' },
+  'measurement.psi': { label: 'ψ (measurement.psi) beside V', help: 'the measurement errors are given as V: give ψ or V, not both; remove the one not wanted' },
+  'measurement.V': { label: 'V (measurement.V) beside ψ', help: 'the measurement errors are given as ψ: give ψ or V, not both; remove the one not wanted' },
+};
+
+/** The label and help of a member the format does not have. */
+function unknownMember(part, key) {
+  const where = part ? `${part}` : 'a model';
+  return {
+    label: `“${key}” (${part ? `${part}.${key}` : key})`,
+    help: `kea's model format has no member “${key}” in ${where} (a misspelling?): remove it, or write its value into the right field`,
+  };
+}
+
+/** A member's value as the JSON text its field shows: one entry (or key) per line for arrays of objects and for objects. */
+function showJson(value) {
+  if (value === undefined) return '';
+  if (Array.isArray(value) && value.some((x) => x !== null && typeof x === 'object')) {
+    return `[\n${value.map((x) => `  ${JSON.stringify(x)}`).join(',\n')}\n]`;
+  }
+  if (value !== null && typeof value === 'object' && !Array.isArray(value) && Object.keys(value).length) {
+    return `{\n${Object.entries(value).map(([k, v]) => `  ${JSON.stringify(k)}: ${JSON.stringify(v)}`).join(',\n')}\n}`;
+  }
+  return JSON.stringify(value);
+}
+
+/** A schedule in words: “z2: unavailable in [8, 14]; the others at every step”. */
+function scheduleSummary(schedule, model) {
+  if (!Array.isArray(schedule)) return '';
+  const names = model.measurement?.names ?? [];
+  const say = (entry) => {
+    if (entry === null) return null;
+    if (typeof entry !== 'object') return JSON.stringify(entry);
+    if ('every' in entry) return `every ${entry.every} steps (offset ${entry.offset ?? 0})`;
+    if ('when' in entry) return `where ${entry.when} > 0`;
+    if (Array.isArray(entry.unavailable)) {
+      return `unavailable in ${entry.unavailable.map((iv) => (Array.isArray(iv) ? `[${iv.join(', ')}]` : JSON.stringify(iv))).join(', ')}`;
+    }
+    return JSON.stringify(entry);
+  };
+  const said = schedule.map((entry, j) => [names[j] ?? `measurement ${j + 1}`, say(entry)]).filter(([, text]) => text !== null);
+  if (!said.length) return 'every measurement at every step';
+  const rest = said.length < schedule.length ? '; the others at every step' : '';
+  return `${said.map(([name, text]) => `${name}: ${text}`).join('; ')}${rest}`;
+}
+
 /** A number field's check (null: fine). */
 const aNumber = (text) => numberProblem(text);
 const wholeAtLeast = (min) => (text) => numberProblem(text, { integer: true, min });
@@ -422,7 +518,7 @@ export class ModelEditor {
       this.sectionTime(dims),
       this.sectionSystem(dims),
       this.sectionMeasurement(dims),
-      this.sectionCriteria(),
+      ...[this.sectionCriteria(), this.sectionOther()].filter(Boolean),
     );
     this.mark();
     this.updateScrollHints();
@@ -671,6 +767,7 @@ export class ModelEditor {
       ),
       el('div', { class: 'row dimensions' }, ...['N', 'n', 'L', 'M'].map((key) => this.dimensionField(key, dims))),
       this.undoNote('dims'),
+      ...this.otherMembers('time'),
     );
   }
 
@@ -923,6 +1020,8 @@ export class ModelEditor {
         renamed = true;
       }
     }
+    const shown = this.fields.get('measurement.pairs')?.input;
+    if (renamed && shown && !this.local.has('measurement.pairs')) shown.value = showJson(m.pairs);
     if (renamed) this.changed();
   }
 
@@ -1041,6 +1140,7 @@ export class ModelEditor {
           errorsGrid,
         ),
       ),
+      ...this.otherMembers('system'),
     );
   }
 
@@ -1100,6 +1200,7 @@ export class ModelEditor {
           errorsGrid,
         ),
       ),
+      ...this.otherMembers('measurement'),
     );
   }
 
@@ -1119,7 +1220,121 @@ export class ModelEditor {
         this.field(FIELD_LABELS['options.trace_points'], 'options.trace_points', m.options, 'trace_points', { check: wholeAtLeast(0), optional: true, placeholder: '1000' }),
         this.field(FIELD_LABELS['options.steady_state_shortcut'], 'options.steady_state_shortcut', m.options, 'steady_state_shortcut', { type: 'checkbox' }),
       ),
+      ...this.otherMembers('criteria'),
+      ...this.otherMembers('options'),
     );
+  }
+
+  /** The model's top-level members the editor has no section for (a misspelt `"optoins"`), if any. */
+  sectionOther() {
+    const fields = this.otherMembers('');
+    if (!fields.length) return null;
+    return el('fieldset', { class: 'section' }, el('legend', { text: 'Other members' }), ...fields);
+  }
+
+  // ------------------------------------------------------------ members without a grid
+
+  /**
+   * The members of `part` ('' for the top level) that have no field of their own, each
+   * as its JSON text, editable, with a Remove button: `measurement.schedule`,
+   * `measurement.pairs` and `criteria.weights` (always shown: empty is absent, the
+   * default), `time.auto`, a form not shown beside the one shown (φ beside W), and
+   * members the format does not have (a misspelt `"stpes"`). The core's messages at
+   * them, and inside them, are shown at them.
+   */
+  otherMembers(part) {
+    const holder = part ? this.model[part] : this.model;
+    if (holder === null || typeof holder !== 'object' || Array.isArray(holder)) return [];
+    const fields = [];
+    for (const [key, about] of Object.entries(OPTIONAL_MEMBERS[part] ?? {})) {
+      fields.push(this.memberField(part, holder, key, { ...about, optional: true }));
+    }
+    const shown = shownMembers(this.model)[part] ?? [];
+    for (const key of Object.keys(holder)) {
+      if (shown.includes(key) || Object.hasOwn(OPTIONAL_MEMBERS[part] ?? {}, key)) continue;
+      const path = part ? `${part}.${key}` : key;
+      fields.push(this.memberField(part, holder, key, OTHER_MEMBERS[path] ?? unknownMember(part, key)));
+    }
+    return fields;
+  }
+
+  /**
+   * `holder[key]` (the member `part.key`) as its JSON text: the model takes the text
+   * when it parses; Remove deletes the member. `optional`: an empty text is the
+   * member's absence. `summary(value, model)` says in words what the value does.
+   */
+  memberField(part, holder, key, { label, help, optional = false, empty, summary }) {
+    const path = part ? `${part}.${key}` : key;
+    const id = `f-${path.replace(/[^a-zA-Z0-9]/g, '-')}`;
+    const area = el('textarea', {
+      id,
+      'data-path': path,
+      spellcheck: 'false',
+      autocomplete: 'off',
+      placeholder: optional ? empty : undefined,
+      'aria-describedby': `${id}-help`,
+    });
+    area.value = showJson(holder[key]);
+    area.rows = Math.min(8, Math.max(1, area.value.split('\n').length));
+    const said = summary ? el('p', { class: 'help member-summary', 'data-summary': path }) : null;
+    const remove = el('button', {
+      type: 'button',
+      text: 'Remove',
+      'aria-label': `remove ${path}`,
+      title: `Remove ${path} from the model`,
+      'data-focus': `remove-member:${path}`,
+      hidden: holder[key] === undefined,
+    });
+    const say = () => {
+      if (said) said.textContent = holder[key] === undefined ? '' : summary(holder[key], this.model);
+      remove.hidden = holder[key] === undefined;
+    };
+    say();
+    area.addEventListener('input', () => {
+      let problem = null;
+      if (optional && area.value.trim() === '') delete holder[key];
+      else {
+        try {
+          holder[key] = JSON.parse(area.value);
+        } catch (e) {
+          problem = `not JSON (${e.message}); the model keeps the last JSON this field had`;
+        }
+      }
+      this.setLocal(path, problem);
+      say();
+      this.changed();
+    });
+    remove.addEventListener('click', () => {
+      delete holder[key];
+      this.local.delete(path);
+      // The core's marks at it are gone with it; the focus stays at its field (an
+      // optional member's, now empty), else moves to the control before it.
+      this.core = this.core.filter((e) => !(e.path === path || e.path?.startsWith(`${path}.`) || e.path?.startsWith(`${path}[`)));
+      this.focusNext = optional ? `#${CSS.escape(id)}` : this.controlBefore(area);
+      this.render();
+      this.changed();
+    });
+    const wrap = el(
+      'div',
+      { class: 'field wide member' },
+      el('label', { for: id, text: label }),
+      el('div', { class: 'member-row' }, area, remove),
+      el('small', { id: `${id}-help`, class: 'help', text: help }),
+      said,
+    );
+    this.register(path, area, wrap);
+    return wrap;
+  }
+
+  /** A selector of the focusable control before `control` in the editor (for the focus when it goes). */
+  controlBefore(control) {
+    const all = [...this.root.querySelectorAll('input, textarea, select, button')].filter((e) => !e.disabled && !e.hidden);
+    const at = all.indexOf(control);
+    for (let i = at - 1; i >= 0; i--) {
+      const selector = focusSelector(all[i]);
+      if (selector) return selector;
+    }
+    return null;
   }
 
   // ------------------------------------------------------------ validation
@@ -1186,8 +1401,9 @@ export function modelPlace(path) {
     'system.states': 'state names', 'measurement.names': 'measurement names',
     'measurement.schedule': 'schedule', 'measurement.pairs': 'pairs',
   };
-  const m = (path ?? '').match(/^([a-z]+\.[A-Za-z0-9_]+)((\[\d+\])*)$/);
+  // A place inside an entry keeps its JSON path after the entry: `schedule [2].every`.
+  const m = (path ?? '').match(/^([a-z]+\.[A-Za-z0-9_]+)((\[\d+\])*)((\.[A-Za-z0-9_]+|\[\d+\])*)$/);
   if (!m || !names[m[1]]) return path ? `${path}: ` : '';
   const idx = [...m[2].matchAll(/\[(\d+)\]/g)].map((x) => Number(x[1]) + 1);
-  return `${names[m[1]]}${idx.length ? ` [${idx.join(', ')}]` : ''}: `;
+  return `${names[m[1]]}${idx.length ? ` [${idx.join(', ')}]` : ''}${m[4]}: `;
 }

@@ -2,8 +2,9 @@
 // in its range (anything else is marked there, and the model keeps its size); what a
 // smaller dimension removes comes back when it grows back, or with Undo; any state or
 // measurement can be removed by the × beside its name; resizing keeps the schedule,
-// pairs and weights consistent; and the keyboard focus stays where it was through every
-// redraw.
+// pairs and weights consistent; members without a grid (schedule, pairs, weights, a
+// misspelt member) are shown, their errors marked there with a way to remove them; and
+// the keyboard focus stays where it was through every redraw.
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
@@ -238,9 +239,11 @@ test('resizing keeps the schedule, pairs and weights consistent, and growing bac
   const shrunk = await exported();
   assert.deepEqual(shrunk.criteria.weights, { yz: [0.25, 0.25, 0, 0.25], yx: [0.5, 0.1, 0.1, 0.1] });
   assert.deepEqual(shrunk.measurement.pairs.map((p) => p.state), ['D_f', 'V_f', 'D_b'], 'the pair of V_b went with it');
-  // The weights no longer sum to 1: said, with their place.
-  const said = await editorMessages();
-  assert.ok(said.some((m) => /^criteria\.weights\.yz: weights must sum to 1/.test(m)), `${said}`);
+  // The weights no longer sum to 1: said at the weights' field, with their place.
+  const atWeights = await page.$$eval('[data-path="criteria.weights"] ~ .cell-error, .member:has([data-path="criteria.weights"]) .cell-error', (es) =>
+    es.map((e) => e.textContent),
+  );
+  assert.ok(atWeights.some((m) => /weights must sum to 1/.test(m)), `${atWeights}`);
   await setDimension('N', '6');
   assert.deepEqual(await exported(), original);
   assert.deepEqual(await editorMessages(), []);
@@ -250,7 +253,48 @@ test('resizing keeps the schedule, pairs and weights consistent, and growing bac
   await page.press('input[data-path="system.states[0]"]', 'Tab');
   await page.waitForTimeout(300);
   assert.equal((await exported()).measurement.pairs[0].state, 'range');
+  assert.match(await page.inputValue('textarea[data-path="measurement.pairs"]'), /"state":"range"/);
   assert.deepEqual(await editorMessages(), []);
+});
+
+test('members without a grid are shown; an error at one is marked there, with a way to remove it', async () => {
+  await preset('helicopter-hover');
+  assert.match(await page.inputValue('textarea[data-path="measurement.schedule"]'), /"unavailable":\[\[8,14\]\]/);
+  assert.equal(await page.textContent('[data-summary="measurement.schedule"]'), 'V_f_meas: unavailable in [8, 14]; the others at every step');
+  assert.equal(await page.inputValue('textarea[data-path="measurement.pairs"]'), '', 'no pairs: the default pairing');
+
+  // An entry the core refuses, marked at the schedule, which Remove takes away.
+  await page.fill('textarea[data-path="measurement.schedule"]', '[null, {"every": 0}, null, null]');
+  await page.waitForTimeout(400);
+  const marked = await page.$$eval('.member:has([data-path="measurement.schedule"]) .cell-error', (es) => es.map((e) => e.textContent));
+  assert.equal(marked.length, 1, `${marked}`);
+  assert.match(marked[0], /^schedule \[2\]/);
+  assert.match(await refusedRun(), /^schedule \[2\].*\(see the marked fields\)/);
+  await page.fill('textarea[data-path="measurement.schedule"]', '[null, {"every": ');
+  await page.waitForTimeout(300);
+  assert.match((await messagesAt('measurement.schedule'))[0], /^not JSON/);
+  await page.click('button[aria-label="remove measurement.schedule"]');
+  await page.waitForTimeout(300);
+  assert.equal(await focused(), 'f-measurement-schedule', 'the focus stays at the (now empty) field');
+  assert.equal((await exported()).measurement.schedule, undefined);
+  assert.deepEqual(await editorMessages(), []);
+
+  // A misspelt member from a file: shown where it belongs, its error there, removable.
+  const typo = JSON.parse(kea('preset', 'seed-example'));
+  typo.time = { t0: 0, t_end: 10, stpes: 1000 };
+  await importModel(typo, 'typo.json');
+  await page.fill('input[data-path="time.steps"]', '1000');
+  await page.waitForTimeout(400);
+  assert.deepEqual(await editorMessages(), ['unknown member; expected one of: t0, t_end, steps, auto']);
+  assert.deepEqual(await messagesAt('time.stpes'), ['unknown member; expected one of: t0, t_end, steps, auto']);
+  assert.match(await page.textContent('label[for="f-time-stpes"]'), /“stpes”/);
+  await page.focus('button[aria-label="remove time.stpes"]');
+  await page.keyboard.press('Enter');
+  await page.waitForTimeout(400);
+  assert.equal(await page.$('[data-path="time.stpes"]'), null);
+  assert.deepEqual(await editorMessages(), []);
+  assert.deepEqual((await exported()).time, { t0: 0, t_end: 10, steps: 1000 });
+  assert.notEqual(await focused(), 'BODY', 'the focus stays in the editor');
 });
 
 test('the focus stays on the control after removing a parameter or switching a form with the keyboard', async () => {

@@ -838,7 +838,7 @@ export class ModelEditor {
         dims: dimensions(m),
         text:
           `${key} ${before[key]} → ${size} removed the ${gone.length === 1 ? one : many} ${list} with ${gone.length === 1 ? 'its' : 'their'} entries in ` +
-          `${memberList(old, key)}. Growing ${key} back restores them (until another model is loaded).`,
+          `${memberList(old, key)}. Growing ${key} back restores ${gone.length === 1 ? 'it' : 'them'} (until another model is loaded).`,
         focus: `#dim-${key}`,
         apply: () => resize(m, { ...dimensions(m), [key]: before[key] }, this.shelf),
       };

@@ -93,6 +93,9 @@ pub struct Prepared {
     /// L⁻¹ (nk × nk, unit lower), used when `whitened` (Rv is not diagonal).
     linv: Vec<f64>,
     whitened: bool,
+    /// The spread of the whitening's non-zero pivots, max D / min D (1 when Rv is
+    /// diagonal): about the condition of Rv, whose log10 is the digits whitening loses.
+    pub spread: f64,
     work: Vec<f64>,
     /// P: the row of the factored matrix that became row j, and `idx` in that order.
     perm: Vec<usize>,
@@ -108,6 +111,7 @@ impl Prepared {
             d: vec![0.0; nm],
             linv: vec![0.0; nm * nm],
             whitened: false,
+            spread: 1.0,
             work: vec![0.0; nm * nm],
             perm: vec![0; nm],
             permuted: Vec::with_capacity(nm),
@@ -140,6 +144,7 @@ impl Prepared {
                 self.d[r] = rv[j * nm + j];
             }
             self.whitened = false;
+            self.spread = 1.0;
         } else {
             // P Rv_k Pᵀ = L D Lᵀ, the measurements (and their rows of C) taken in P's
             // order, then L⁻¹ by forward substitution, rows := L⁻¹ P C.
@@ -178,6 +183,7 @@ impl Prepared {
                 .fold((0.0, f64::INFINITY), |(hi, lo): (f64, f64), &d| {
                     (hi.max(d), lo.min(d))
                 });
+            self.spread = if d_max > 0.0 { d_max / d_min } else { 1.0 };
             let residue = if d_max > 0.0 {
                 DEPENDENT_ROW.max(16.0 * f64::EPSILON * d_max / d_min)
             } else {

@@ -585,6 +585,58 @@ fn refuses_a_data_directory_another_kea_is_using() {
     assert_eq!(again.get("/healthz").status, 200);
 }
 
+/// Limits that refuse all work (0, NaN) were accepted at start-up; the server then
+/// turned every request away ("above the limit of NaN"). They are refused up front,
+/// as the CLI's --max-work is.
+#[test]
+fn refuses_limits_that_would_refuse_everything() {
+    for (option, value, expected) in [
+        ("--max-work", "nan", "expected a positive number (or inf)"),
+        (
+            "--sync-work-limit",
+            "0",
+            "expected a positive number (or inf)",
+        ),
+        (
+            "--job-time-limit",
+            "0",
+            "expected a whole number of at least 1",
+        ),
+        (
+            "--queue-limit",
+            "0",
+            "expected a whole number of at least 1",
+        ),
+        (
+            "--max-body-bytes",
+            "0",
+            "expected a whole number of at least 1",
+        ),
+        (
+            "--read-timeout",
+            "0",
+            "expected a whole number of at least 1",
+        ),
+    ] {
+        let dir = tmp();
+        let out = Command::new(common::KEA)
+            .args([
+                "serve",
+                "--addr",
+                "127.0.0.1:0",
+                option,
+                value,
+                "--data-dir",
+            ])
+            .arg(dir.path())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{option} {value}: {err}");
+        assert!(err.contains(option) && err.contains(expected), "{err}");
+    }
+}
+
 #[test]
 fn refuses_a_public_address_without_a_token() {
     let dir = tmp();

@@ -372,7 +372,7 @@ impl WorkLimit {
 }
 
 /// Parse `--max-work`: a positive number (or `inf`).
-fn parse_limit(arg: &str) -> Result<f64, String> {
+pub(crate) fn parse_limit(arg: &str) -> Result<f64, String> {
     match arg.trim().parse::<f64>() {
         Ok(x) if x > 0.0 => Ok(x),
         _ => Err(format!("expected a positive number (or inf), got `{arg}`")),

@@ -60,24 +60,26 @@ pub struct Args {
     #[arg(long, env = "KEA_WORKERS", value_parser = crate::cli::parse_threads)]
     pub workers: Option<usize>,
     /// Largest request body, bytes.
-    #[arg(long, env = "KEA_MAX_BODY_BYTES", default_value_t = 2 * 1024 * 1024)]
+    #[arg(long, env = "KEA_MAX_BODY_BYTES", default_value_t = 2 * 1024 * 1024,
+          value_parser = at_least_one::<usize>)]
     pub max_body_bytes: usize,
     /// Seconds a request's line and headers may take to arrive (then the connection is
     /// closed), and then its body, whole (then 408): 2 MiB at 100 kB/s is 21 s.
-    #[arg(long, env = "KEA_READ_TIMEOUT", default_value_t = 30)]
+    #[arg(long, env = "KEA_READ_TIMEOUT", default_value_t = 30, value_parser = at_least_one::<u64>)]
     pub read_timeout: u64,
     /// Largest estimated work (about 1 ns of one core a unit; openapi.yaml, "Work") that
     /// POST /v1/analyze answers synchronously: ≈ half a second.
-    #[arg(long, env = "KEA_SYNC_WORK_LIMIT", default_value_t = 5e8)]
+    #[arg(long, env = "KEA_SYNC_WORK_LIMIT", default_value_t = 5e8,
+          value_parser = crate::cli::parse_limit)]
     pub sync_work_limit: f64,
     /// Largest work accepted at all; above it a request is refused.
-    #[arg(long, env = "KEA_MAX_WORK", default_value_t = 1e12)]
+    #[arg(long, env = "KEA_MAX_WORK", default_value_t = 1e12, value_parser = crate::cli::parse_limit)]
     pub max_work: f64,
     /// Wall-clock limit of one job, seconds.
-    #[arg(long, env = "KEA_JOB_TIME_LIMIT", default_value_t = 3600)]
+    #[arg(long, env = "KEA_JOB_TIME_LIMIT", default_value_t = 3600, value_parser = at_least_one::<u64>)]
     pub job_time_limit: u64,
     /// Most queued jobs; further submissions get 429.
-    #[arg(long, env = "KEA_QUEUE_LIMIT", default_value_t = 10_000)]
+    #[arg(long, env = "KEA_QUEUE_LIMIT", default_value_t = 10_000, value_parser = at_least_one::<u64>)]
     pub queue_limit: u64,
     /// On shutdown, seconds running jobs may take to finish before being re-queued.
     #[arg(long, env = "KEA_SHUTDOWN_GRACE", default_value_t = 10)]
@@ -97,6 +99,17 @@ impl Run for Args {
                 ExitCode::from(code)
             }
         }
+    }
+}
+
+/// A count or a number of seconds that must be at least 1: 0 would make the server
+/// refuse (or time out) every request it exists to serve.
+fn at_least_one<T: std::str::FromStr + PartialOrd + From<u8>>(arg: &str) -> Result<T, String> {
+    match arg.trim().parse::<T>() {
+        Ok(x) if x >= T::from(1) => Ok(x),
+        _ => Err(format!(
+            "expected a whole number of at least 1, got `{arg}`"
+        )),
     }
 }
 

@@ -570,6 +570,43 @@ fn a_set_name_given_twice_is_refused() {
     assert_eq!(code, 0, "{err}");
 }
 
+/// The CLI read its input whole, without a limit: `kea analyze /dev/zero` grew until
+/// memory ran out. Beyond 64 MiB it is refused (exit 2), from a file or stdin.
+#[test]
+fn an_endless_input_is_refused_at_the_read_limit() {
+    let (code, _, err) = kea(&["analyze", "/dev/zero"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("cannot read /dev/zero: it is larger than 64 MiB, beyond what kea reads"),
+        "{err}"
+    );
+    let mut child = Command::new(KEA)
+        .args(["analyze", "-"])
+        .stdin(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let feeder = std::thread::spawn(move || {
+        let block = vec![b' '; 1 << 20];
+        // Until kea stops reading (a broken pipe), or far past the limit.
+        for _ in 0..200 {
+            if std::io::Write::write_all(&mut stdin, &block).is_err() {
+                break;
+            }
+        }
+    });
+    let out = child.wait_with_output().unwrap();
+    feeder.join().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("cannot read stdin: it is larger than 64 MiB"),
+        "{err}"
+    );
+}
+
 /// A `--set` value below the smallest f64 was read as 0 without a word (`r=1e-400`
 /// became a noise-free sensor; `r=1e-200` is refused by the SKO's range).
 #[test]

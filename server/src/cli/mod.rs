@@ -79,21 +79,41 @@ pub fn read_json(arg: &str) -> Result<serde_json::Value, ExitCode> {
     }
     // (Read as bytes: the parser names the encoding of a text that is not UTF-8.)
     if arg == "-" {
-        let mut text = Vec::new();
-        std::io::Read::read_to_end(&mut std::io::stdin(), &mut text)
+        let text = read_capped(std::io::stdin())
             .map_err(|e| invalid(format!("cannot read stdin: {e}")))?;
         return kea_core::parse_json(&text)
             .map_err(|e| invalid(format!("stdin: not valid JSON: {e}")));
     }
-    let text = std::fs::read(arg).map_err(|e| {
-        let hint = if kea_core::presets::get_json(arg).is_some() {
-            format!(" (for the preset, write preset:{arg})")
-        } else {
-            String::new()
-        };
-        invalid(format!("cannot read {arg}: {e}{hint}"))
-    })?;
+    let text = std::fs::File::open(arg)
+        .and_then(read_capped)
+        .map_err(|e| {
+            let hint = if kea_core::presets::get_json(arg).is_some() {
+                format!(" (for the preset, write preset:{arg})")
+            } else {
+                String::new()
+            };
+            invalid(format!("cannot read {arg}: {e}{hint}"))
+        })?;
     kea_core::parse_json(&text).map_err(|e| invalid(format!("{arg}: not valid JSON: {e}")))
+}
+
+/// The most a command reads of its JSON input: 32 times the server's default body
+/// limit, far beyond any model (a 200 × 200 matrix of 1000-character expressions is
+/// refused by the expression limits long before), so that `/dev/zero` or a wrong
+/// multi-gigabyte file is refused instead of read until memory runs out.
+pub const MAX_INPUT_BYTES: u64 = 64 * 1024 * 1024;
+
+/// All of `source`, or an error once it passes [`MAX_INPUT_BYTES`].
+fn read_capped(source: impl std::io::Read) -> std::io::Result<Vec<u8>> {
+    let mut text = Vec::new();
+    std::io::Read::read_to_end(&mut source.take(MAX_INPUT_BYTES + 1), &mut text)?;
+    if text.len() as u64 > MAX_INPUT_BYTES {
+        return Err(std::io::Error::other(format!(
+            "it is larger than {} MiB, beyond what kea reads (a model or request is far smaller: is it the right file?)",
+            MAX_INPUT_BYTES / (1024 * 1024)
+        )));
+    }
+    Ok(text)
 }
 
 /// The one wording of an unknown preset, with the list.

@@ -18,7 +18,7 @@
 use crate::exec::Executor;
 use crate::model::Model;
 use crate::result::{AnalysisResult, Timing};
-use crate::{Error, FieldError, NoProgress, Overrides, Progress};
+use crate::{Error, FieldError, Overrides, Progress};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
@@ -770,8 +770,9 @@ const PART_WORK: f64 = crate::simulation::CHUNK_WORK;
 
 /// Points of a batch analysed between two progress reports: `threads` points
 /// (one each) at least, more while each thread's share stays within [`PART_WORK`].
-/// An analysis that runs beside others reports nothing, so a cancel waits for the
-/// part in hand: about [`PART_WORK`], or one analysis where that is more.
+/// An analysis that runs beside others reports nothing, so a cancel is seen between
+/// parts, or, where the executor can say so ([`Executor::stop_requested`]), by each
+/// analysis within about a millisecond of its work.
 fn part_points(analysis_work: f64, threads: usize) -> usize {
     let each = crate::cost::fitting(PART_WORK, analysis_work, 1_000_000);
     threads.max(1).saturating_mul(each as usize)
@@ -900,7 +901,16 @@ impl Ctx<'_> {
                 }
                 let this = &*self;
                 let part: Vec<_> = points.by_ref().take(part).collect();
-                results.extend(exec.map(part, |p| this.eval(&p, &mut NoProgress)));
+                let stop = |_: f64| match exec.stop_requested() {
+                    true => ControlFlow::Break(()),
+                    false => ControlFlow::Continue(()),
+                };
+                results.extend(exec.map(part, |p| this.eval(&p, &mut { stop })));
+                if results.iter().any(|r| matches!(r, Err(Error::Cancelled))) {
+                    // Stopped inside the part: the caller's progress says why.
+                    let _ = progress.report((done as f64 / total).min(1.0));
+                    return Err(Error::Cancelled);
+                }
             }
             results
         };

@@ -6,25 +6,41 @@ use kea_core::exec::Executor;
 use rayon::prelude::*;
 
 /// Runs batches on a rayon pool: the global one (every core) or one of `threads`.
-pub struct Rayon {
+pub struct Rayon<'s> {
     pool: Option<rayon::ThreadPool>,
+    /// Asked by the batch's computations whether to stop ([`Executor::stop_requested`]).
+    stop: Option<&'s (dyn Fn() -> bool + Sync)>,
 }
 
-impl Rayon {
+impl<'s> Rayon<'s> {
     /// `None` or `Some(0)`: every core (rayon's global pool); `Some(n)`: n threads.
-    pub fn new(threads: Option<usize>) -> Result<Rayon, String> {
+    pub fn new(threads: Option<usize>) -> Result<Rayon<'s>, String> {
         match threads {
-            None | Some(0) => Ok(Rayon { pool: None }),
+            None | Some(0) => Ok(Rayon {
+                pool: None,
+                stop: None,
+            }),
             Some(n) => rayon::ThreadPoolBuilder::new()
                 .num_threads(n)
                 .build()
-                .map(|pool| Rayon { pool: Some(pool) })
+                .map(|pool| Rayon {
+                    pool: Some(pool),
+                    stop: None,
+                })
                 .map_err(|e| format!("cannot start {n} threads: {e}")),
+        }
+    }
+
+    /// The same executor, whose computations stop when `stop` says so.
+    pub fn stopping_when(self, stop: &'s (dyn Fn() -> bool + Sync)) -> Rayon<'s> {
+        Rayon {
+            stop: Some(stop),
+            ..self
         }
     }
 }
 
-impl Executor for Rayon {
+impl Executor for Rayon<'_> {
     fn map<T: Send, R: Send, F: Fn(T) -> R + Sync>(&self, items: Vec<T>, f: F) -> Vec<R> {
         let run = || items.into_par_iter().map(&f).collect();
         match &self.pool {
@@ -38,6 +54,10 @@ impl Executor for Rayon {
             Some(pool) => pool.current_num_threads(),
             None => rayon::current_num_threads(),
         }
+    }
+
+    fn stop_requested(&self) -> bool {
+        self.stop.is_some_and(|stop| stop())
     }
 }
 

@@ -328,7 +328,13 @@ impl Pool {
                     None => ControlFlow::Continue(()),
                 }
             };
-            prepared.run(&mut progress)
+            // The same reasons, for the computations that run beside others.
+            let stop_requested = || {
+                live.cancel.load(Ordering::Relaxed)
+                    || self.state.load(Ordering::Relaxed) == STOPPING
+                    || started.elapsed() > self.job_time_limit
+            };
+            prepared.run(&mut progress, &stop_requested)
         }));
         let outcome = match result {
             Ok(Ok(out)) => Outcome::Succeeded {

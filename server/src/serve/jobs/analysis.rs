@@ -67,7 +67,11 @@ impl PreparedJob for Prepared {
         self.work.clone()
     }
 
-    fn run(self: Box<Self>, progress: &mut dyn Progress) -> Result<JobOutput, Error> {
+    fn run(
+        self: Box<Self>,
+        progress: &mut dyn Progress,
+        _stop: &(dyn Fn() -> bool + Sync),
+    ) -> Result<JobOutput, Error> {
         let start = Instant::now();
         let mut result =
             kea_core::analyze(&self.model, &self.set, progress).map_err(request::locate)?;

@@ -29,7 +29,13 @@ pub trait PreparedJob: Send {
     /// The estimated work, used to choose sync vs job and to refuse the absurd.
     fn work(&self) -> Work;
     /// Run to completion, reporting progress; `Error::Cancelled` when progress said stop.
-    fn run(self: Box<Self>, progress: &mut dyn Progress) -> Result<JobOutput, Error>;
+    /// `stop` says the same as progress's answer, from any thread: for computations
+    /// running beside others, which do not report (a synthesis's analyses).
+    fn run(
+        self: Box<Self>,
+        progress: &mut dyn Progress,
+        stop: &(dyn Fn() -> bool + Sync),
+    ) -> Result<JobOutput, Error>;
 }
 
 /// A work estimate, in units of about a nanosecond of one core ([`cost`]).

@@ -168,7 +168,11 @@ impl PreparedJob for Prepared {
         self.work.clone()
     }
 
-    fn run(self: Box<Self>, progress: &mut dyn Progress) -> Result<JobOutput, Error> {
+    fn run(
+        self: Box<Self>,
+        progress: &mut dyn Progress,
+        _stop: &(dyn Fn() -> bool + Sync),
+    ) -> Result<JobOutput, Error> {
         let start = Instant::now();
         let exec = Rayon::new(None).map_err(|e| Error::invalid("", e))?;
         let mut result =

@@ -133,8 +133,14 @@ impl PreparedJob for Prepared {
         self.work.clone()
     }
 
-    fn run(self: Box<Self>, progress: &mut dyn Progress) -> Result<JobOutput, Error> {
-        let exec = Rayon::new(None).map_err(|e| Error::invalid("", e))?;
+    fn run(
+        self: Box<Self>,
+        progress: &mut dyn Progress,
+        stop: &(dyn Fn() -> bool + Sync),
+    ) -> Result<JobOutput, Error> {
+        let exec = Rayon::new(None)
+            .map_err(|e| Error::invalid("", e))?
+            .stopping_when(stop);
         let start = Instant::now();
         let mut result = synthesis::synthesize(&self.request, &exec, progress)?;
         result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;

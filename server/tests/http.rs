@@ -178,6 +178,17 @@ fn models_are_stored_listed_paged_and_deleted() {
     let p2 = s.get(&format!("/v1/models?limit=2&cursor={cursor}")).json();
     assert_eq!(page_ids(&p2), vec![ids[0].clone()]);
     assert_eq!(p2["next_cursor"], Value::Null);
+    // UUID text is case-insensitive (RFC 9562): an upper-case id or cursor names the
+    // same model and page (they were 404 and 400).
+    let upper = s.get(&format!(
+        "/v1/models?limit=2&cursor={}",
+        cursor.to_uppercase()
+    ));
+    assert_eq!(upper.status, 200, "{}", upper.text);
+    assert_eq!(page_ids(&upper.json()), vec![ids[0].clone()]);
+    let got = s.get(&format!("/v1/models/{}", ids[2].to_uppercase()));
+    assert_eq!(got.status, 200, "{}", got.text);
+    assert_eq!(got.json()["id"], ids[2].as_str());
 
     assert_eq!(s.delete(&format!("/v1/models/{}", ids[0])).status, 204);
     assert_eq!(s.get(&format!("/v1/models/{}", ids[0])).status, 404);

@@ -199,7 +199,7 @@ fn drain_in_background(req: Request, within: std::time::Duration) {
 /// but refused as a problem+json 400 naming the parameter and what it should be —
 /// `/v1/jobs/%ff` decodes to no UTF-8 text, which axum answers in text/plain.
 macro_rules! path_param {
-    ($(#[$doc:meta])* $ty:ident, $name:literal, $expected:literal) => {
+    ($(#[$doc:meta])* $ty:ident, $name:literal, $expected:literal, $normal:expr) => {
         $(#[$doc])*
         pub struct $ty(pub String);
 
@@ -207,29 +207,42 @@ macro_rules! path_param {
             type Rejection = Problem;
 
             async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Problem> {
-                path_param(parts, state, $name, $expected).await.map($ty)
+                path_param(parts, state, $name, $expected).await.map($normal).map($ty)
             }
         }
     };
+}
+
+/// An id (a UUID) as this server writes it, hyphenated and lower-case, whatever the
+/// case it was given in (RFC 9562 §4: UUID text is case-insensitive); any other text
+/// as it is (a 404 then).
+fn canonical_id(text: String) -> String {
+    match uuid::Uuid::parse_str(&text) {
+        Ok(u) => u.hyphenated().to_string(),
+        Err(_) => text,
+    }
 }
 
 path_param!(
     /// `{id}` of `/v1/jobs/{id}…`.
     JobId,
     "id",
-    "a job id, as POST /v1/jobs returned it"
+    "a job id, as POST /v1/jobs returned it",
+    canonical_id
 );
 path_param!(
     /// `{id}` of `/v1/models/{id}`.
     ModelId,
     "id",
-    "a model id, as POST /v1/models returned it"
+    "a model id, as POST /v1/models returned it",
+    canonical_id
 );
 path_param!(
     /// `{name}` of `/v1/presets/{name}`.
     PresetName,
     "name",
-    "a preset name (GET /v1/presets lists them)"
+    "a preset name (GET /v1/presets lists them)",
+    |name| name
 );
 
 async fn path_param<S: Send + Sync>(
@@ -443,7 +456,7 @@ pub fn list_query(raw: Option<String>, extra: &[&str]) -> Result<ListQuery, Prob
                 )),
             },
             "cursor" => match check_cursor(&v) {
-                Ok(()) => cursor = Some(v),
+                Ok(canonical) => cursor = Some(canonical),
                 Err(message) => errors.push(FieldError::new("cursor", message)),
             },
             _ => {
@@ -507,9 +520,9 @@ fn query_pairs(
     out
 }
 
-/// A cursor is the id of the last item of a page: a UUID, lower-case and hyphenated,
-/// as `next_cursor` gives it.
-fn check_cursor(v: &str) -> Result<(), String> {
+/// A cursor is the id of the last item of a page: a UUID, as `next_cursor` gives it
+/// (hyphenated, lower-case; any case is read). The canonical form, or why not.
+fn check_cursor(v: &str) -> Result<String, String> {
     if v.is_empty() {
         return Err(
             "empty; omit `cursor` for the first page, or pass the `next_cursor` of the \
@@ -518,7 +531,9 @@ fn check_cursor(v: &str) -> Result<(), String> {
         );
     }
     match uuid::Uuid::parse_str(v) {
-        Ok(u) if u.hyphenated().to_string() == v => Ok(()),
+        Ok(u) if u.hyphenated().to_string() == v.to_ascii_lowercase() => {
+            Ok(u.hyphenated().to_string())
+        }
         _ => Err(format!(
             "`{v}` is not a cursor of this server; pass the `next_cursor` of the previous \
              page (an id such as 0190b2a4-7c1e-7d3a-9f00-2b6c1d8e4f10), or omit it for \

@@ -108,6 +108,20 @@ fn a_stored_model_is_returned_as_it_was_sent() {
     let r = s.post("/v1/analyze", &json!({"model_id": id}));
     assert_eq!(r.status, 200, "{}", r.text);
     assert_eq!(r.json()["steps"], 1000);
+    // In any case, as the path's ids.
+    let r = s.post("/v1/analyze", &json!({"model_id": id.to_uppercase()}));
+    assert_eq!(r.status, 200, "{}", r.text);
+    // A null id beside a model said "give either `model` or `model_id`, not both".
+    let r = s.post(
+        "/v1/analyze",
+        &json!({"model_id": null, "model": preset("cv-tracker")}),
+    );
+    assert_eq!(r.status, 422, "{}", r.text);
+    assert!(
+        r.text.contains("null beside `model`: leave `model_id` out"),
+        "{}",
+        r.text
+    );
 }
 
 /// An error in a stored model read `model.measurement.psi[0]` although the request

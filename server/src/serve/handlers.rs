@@ -153,10 +153,12 @@ pub async fn resolve_model_id(
         return Ok(None);
     };
     if obj.contains_key("model") {
-        return Err(Problem::invalid(vec![FieldError::new(
-            "model_id",
-            "give either `model` or `model_id`, not both",
-        )]));
+        let message = if idv.is_null() {
+            "null beside `model`: leave `model_id` out when the request gives its model"
+        } else {
+            "give either `model` or `model_id`, not both"
+        };
+        return Err(Problem::invalid(vec![FieldError::new("model_id", message)]));
     }
     let Value::String(id) = idv else {
         return Err(Problem::invalid(vec![FieldError::new(
@@ -167,6 +169,8 @@ pub async fn resolve_model_id(
             ),
         )]));
     };
+    // As the path's ids: any case.
+    let id = uuid::Uuid::parse_str(&id).map_or(id, |u| u.hyphenated().to_string());
     let key = id.clone();
     let record = state.db(move |s| s.get_model(&key)).await?.ok_or_else(|| {
         Problem::invalid(vec![FieldError::new(

@@ -1275,6 +1275,30 @@ fn names_have_no_control_characters() {
     );
 }
 
+/// Names that only look alike were distinct states: "x" and "x ", or a name with a
+/// zero-width space (which shows as nothing, in the table and the CSV header).
+#[test]
+fn names_that_look_like_others_are_refused() {
+    expect(
+        |v| v["system"]["states"] = json!(["x", "x "]),
+        &[],
+        "system.states[1]",
+        "a name must not begin or end with a space, got \"x \"",
+    );
+    expect(
+        |v| v["system"]["states"] = json!(["x", "\u{200B}"]),
+        &[],
+        "system.states[1]",
+        "a name must not be empty",
+    );
+    expect(
+        |v| v["measurement"]["names"] = json!(["z\u{200B}"]),
+        &[],
+        "measurement.names[0]",
+        "a name must not contain an invisible character (U+200B)",
+    );
+}
+
 /// `every` named no range for a wrong type ("a whole number ≥ 0") and another for 0
 /// ("must be at least 1"): now one range, from 1, in both.
 #[test]

@@ -1,6 +1,7 @@
 //! The work estimate: a cost model of the core's steps, in units of about a
-//! nanosecond of one core. The server's limits (`--sync-work-limit`, `--max-work`) and
-//! the command line's `--max-work` compare it, and the core spaces its progress
+//! nanosecond of one core. The server's limits (`--sync-work-limit`, `--max-work`),
+//! the command line's `--max-work` and the web page (before a run in the browser)
+//! compare it ([`analysis_work`], [`simulation_work`], [`synthesis_work`]), and the core spaces its progress
 //! reports (the callers' chance to cancel) by it
 //! ([`crate::analysis::steps_between_reports`]),
 //! so it must follow what the engine does per step (analysis.rs, inputs.rs,
@@ -41,11 +42,12 @@
 //! [`simulation_run_step`]); estimated 1.07–2.4 times the CPU time of the presets and of
 //! N = 10, L = M = 200 with 2 to 1000 runs.
 
-use crate::Model;
 use crate::model::Value;
 use crate::schedule::Availability;
-use crate::simulation::ModelError;
+use crate::simulation::{ModelError, SimulationRequest};
+use crate::synthesis::SynthesisRequest;
 use crate::validate::{CompiledModel, MeasurementNoise};
+use crate::{Error, Model};
 use std::collections::HashSet;
 
 /// How many items of `each` units fit in `budget` units: 1 to `max` (1 also where
@@ -316,6 +318,79 @@ pub fn simulation_run_start(compiled: &CompiledModel, model_error: ModelError) -
         ModelError::Constant => 5.0 * l + l * (l + 1.0) / 2.0,
     };
     100.0 + 5.0 * n + f
+}
+
+/// The estimated work at which a run is refused by default: `kea serve --max-work` and
+/// the command line's `--max-work` (≈ 17 minutes of one core). The web page asks before
+/// it runs more than this in the browser.
+pub const DEFAULT_MAX_WORK: f64 = 1e12;
+
+/// A run's estimated work, in units of about a nanosecond of one core: what the
+/// limits compare.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Work {
+    pub units: f64,
+    /// How it was computed, for messages (e.g. "D = 1000 steps × 272 (N³ + 16N² + 200 =
+    /// 272 (N = 2))").
+    pub explain: String,
+    /// The request member that drives it, for an error's path: `model.time.steps`
+    /// (an analysis), `runs` (a simulation), `mode` (a synthesis).
+    pub path: String,
+}
+
+/// The work of analysing a compiled model (`model`: its expressions' texts, see
+/// [`Expressions::of`]): D (for `"auto"` the cap) × the step's cost.
+pub fn analysis_work(compiled: &CompiledModel, model: Option<&Model>) -> Work {
+    let step = AnalysisStep::of(compiled, model);
+    let steps = compiled.max_steps();
+    Work {
+        units: steps as f64 * step.units(),
+        explain: format!(
+            "D = {steps} steps × {:.0} ({})",
+            step.units(),
+            step.explain()
+        ),
+        path: "model.time.steps".into(),
+    }
+}
+
+/// The work of a Monte Carlo simulation `sim` on a compiled model (`model`: its
+/// expressions' texts): the analysis it starts with, then per step the plan (the
+/// inputs and a dense Riccati step, [`simulation_plan_step`]) and every run's step
+/// ([`simulation_run_step`]).
+pub fn simulation_work(
+    compiled: &CompiledModel,
+    model: Option<&Model>,
+    sim: &SimulationRequest,
+) -> Work {
+    let analysis = analysis_work(compiled, model);
+    let steps = compiled.max_steps();
+    let plan = simulation_plan_step(compiled, model);
+    let run = simulation_run_step(compiled, sim.model_error);
+    let per_run_once = simulation_run_start(compiled, sim.model_error);
+    let runs = sim.runs as f64;
+    Work {
+        units: analysis.units + steps as f64 * (plan + runs * run) + runs * per_run_once,
+        explain: format!(
+            "the analysis {:.3e} + D = {steps} steps × (the plan {plan:.0} + runs R = {} × {run:.0} per run)",
+            analysis.units, sim.runs
+        ),
+        path: "runs".into(),
+    }
+}
+
+/// The work of a synthesis: at most its planned analyses
+/// ([`crate::synthesis::planned_analyses`]), each the analysis' estimate. Compiles the
+/// model (its errors at the model's own paths).
+pub fn synthesis_work(request: &SynthesisRequest) -> Result<Work, Error> {
+    let analyses = crate::synthesis::planned_analyses(request);
+    let compiled = crate::validate::compile(&request.model, &request.set)?;
+    let one = analysis_work(&compiled, Some(&request.model));
+    Ok(Work {
+        units: one.units * analyses as f64,
+        explain: format!("at most {analyses} analyses × {}", one.explain),
+        path: "mode".into(),
+    })
 }
 
 #[cfg(test)]

@@ -1023,7 +1023,7 @@ pub fn synthesize<E: Executor>(
         done: 0,
         steps: 0,
         analysis_work: crate::validate::compile(&req.model, &req.set).map_or(f64::NAN, |c| {
-            c.max_steps() as f64 * crate::cost::AnalysisStep::of(&c, Some(&req.model)).units()
+            crate::cost::analysis_work(&c, Some(&req.model)).units
         }),
     };
     let (status, message, answer, verification, details) = match &req.mode {

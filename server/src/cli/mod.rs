@@ -368,7 +368,7 @@ pub struct WorkLimit {
     /// of one core (the server's estimate, openapi.yaml "Work": for an analysis, steps
     /// × (N³ + 16N² + 200 + what varying inputs and expressions in t cost)), so the
     /// default is ≈ 17 minutes; `--max-work inf` lifts the limit.
-    #[arg(long, env = "KEA_MAX_WORK", default_value_t = 1e12, value_name = "UNITS",
+    #[arg(long, env = "KEA_MAX_WORK", default_value_t = kea_core::cost::DEFAULT_MAX_WORK, value_name = "UNITS",
           value_parser = parse_limit)]
     pub max_work: f64,
 }
@@ -447,6 +447,18 @@ impl kea_core::Progress for Bar {
 #[cfg(test)]
 mod tests {
     use super::{parse_limit, parse_override};
+
+    /// The limit the web page asks about before a run in the browser (the core's
+    /// `DEFAULT_MAX_WORK`, through the wasm module) is the one `kea serve` holds to.
+    #[test]
+    fn serve_holds_to_the_cores_default_work_limit() {
+        use clap::Parser;
+        let cli = crate::Cli::try_parse_from(["kea", "serve"]).expect("kea serve parses");
+        let Some(crate::Command::Serve(args)) = cli.command else {
+            panic!("not the serve command: {cli:?}");
+        };
+        assert_eq!(args.max_work, kea_core::cost::DEFAULT_MAX_WORK);
+    }
 
     #[test]
     fn work_limit_parses_positive_numbers_only() {

@@ -40,20 +40,10 @@ pub fn work(model: &Model, set: &Overrides) -> Result<Work, Error> {
     Ok(work_of(&compiled, Some(model)))
 }
 
-/// The work of analysing a compiled model (`model`: its expressions' texts, see
-/// [`cost::Expressions::of`]): D (for `"auto"` the cap) × the step's cost.
+/// The work of analysing a compiled model (`model`: its expressions' texts): the
+/// core's estimate, [`cost::analysis_work`].
 pub fn work_of(compiled: &CompiledModel, model: Option<&Model>) -> Work {
-    let step = cost::AnalysisStep::of(compiled, model);
-    let steps = compiled.max_steps();
-    Work {
-        units: steps as f64 * step.units(),
-        explain: format!(
-            "D = {steps} steps × {:.0} ({})",
-            step.units(),
-            step.explain()
-        ),
-        path: "model.time.steps".into(),
-    }
+    cost::analysis_work(compiled, model)
 }
 
 struct Prepared {

@@ -39,15 +39,7 @@ pub trait PreparedJob: Send {
 }
 
 /// A work estimate, in units of about a nanosecond of one core ([`cost`]).
-#[derive(Clone, Debug)]
-pub struct Work {
-    pub units: f64,
-    /// How it was computed, for messages (e.g. "D = 1000 steps × 272 (N³ + 16N² + 200 =
-    /// 272 (N = 2))"); [`cost`] has the model.
-    pub explain: String,
-    /// The request field that drives it (for the error path).
-    pub path: String,
-}
+pub use kea_core::cost::Work;
 
 /// What a finished job produced.
 pub struct JobOutput {

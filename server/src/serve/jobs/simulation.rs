@@ -136,24 +136,9 @@ impl JobKind for Simulation {
 }
 
 /// The work of `sim` on a compiled model (`model`: its expressions' texts): the
-/// analysis it starts with, then per step the plan (the inputs and a dense Riccati
-/// step, [`cost::simulation_plan_step`]) and every run's step
-/// ([`cost::simulation_run_step`]).
+/// core's estimate, [`cost::simulation_work`].
 pub fn work_of(compiled: &CompiledModel, model: Option<&Model>, sim: &SimulationRequest) -> Work {
-    let analysis = super::analysis::work_of(compiled, model);
-    let steps = compiled.max_steps();
-    let plan = cost::simulation_plan_step(compiled, model);
-    let run = cost::simulation_run_step(compiled, sim.model_error);
-    let per_run_once = cost::simulation_run_start(compiled, sim.model_error);
-    let runs = sim.runs as f64;
-    Work {
-        units: analysis.units + steps as f64 * (plan + runs * run) + runs * per_run_once,
-        explain: format!(
-            "the analysis {:.3e} + D = {steps} steps × (the plan {plan:.0} + runs R = {} × {run:.0} per run)",
-            analysis.units, sim.runs
-        ),
-        path: "runs".into(),
-    }
+    cost::simulation_work(compiled, model, sim)
 }
 
 struct Prepared {

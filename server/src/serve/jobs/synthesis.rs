@@ -111,16 +111,10 @@ fn mode_errors(mode: Option<&Value>) -> Vec<FieldError> {
     }
 }
 
-/// The work of a synthesis: at most its planned analyses, each the analysis' estimate.
+/// The work of a synthesis: at most its planned analyses, each the analysis'
+/// estimate (the core's, [`kea_core::cost::synthesis_work`]).
 pub fn work(request: &SynthesisRequest) -> Result<Work, Error> {
-    let analyses = synthesis::planned_analyses(request);
-    let compiled = kea_core::validate::compile(&request.model, &request.set)?;
-    let one = super::analysis::work_of(&compiled, Some(&request.model));
-    Ok(Work {
-        units: one.units * analyses as f64,
-        explain: format!("at most {analyses} analyses × {}", one.explain),
-        path: "mode".into(),
-    })
+    kea_core::cost::synthesis_work(request)
 }
 
 struct Prepared {

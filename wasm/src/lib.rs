@@ -60,6 +60,72 @@ pub fn check(model_json: &str, set_json: &str) -> String {
     serde_json::to_string(&errors).expect("errors serialise")
 }
 
+/// Check JSON text (its bytes, as read from a file or a link) as every way into kea
+/// reads it ([`kea_core::parse_json`]: a key given twice, a number beyond f64, text
+/// that is not UTF-8 are errors; a byte-order mark is skipped): nothing when it reads,
+/// else a thrown `invalid` error whose title says what is wrong and where (`the key
+/// "steps" appears twice in one object at line 6 column 59`). Text that passes reads
+/// the same with JavaScript's JSON.parse, which keeps the objects' key order (the
+/// core's map sorts it: a model's params would come back alphabetical).
+#[wasm_bindgen]
+pub fn check_json(text: &[u8]) -> Result<(), JsValue> {
+    kea_core::parse_json(text).map_err(|e| to_js(&Error::invalid("", e.to_string())))?;
+    Ok(())
+}
+
+/// A work estimate with the limit it is held to by default, as JSON.
+#[derive(Serialize)]
+struct WorkOut {
+    #[serde(flatten)]
+    work: kea_core::cost::Work,
+    /// [`kea_core::cost::DEFAULT_MAX_WORK`]: what `kea serve` refuses by default.
+    limit: f64,
+}
+
+fn work_json(work: kea_core::cost::Work) -> String {
+    let out = WorkOut {
+        work,
+        limit: kea_core::cost::DEFAULT_MAX_WORK,
+    };
+    serde_json::to_string(&out).expect("work serialises")
+}
+
+/// The estimated work of [`analyze`] on the same input, the server's estimate
+/// (`{units, explain, path, limit}`, `limit` being the server's default `--max-work`),
+/// so the page can say so before it runs for hours. Throws the model's errors.
+#[wasm_bindgen]
+pub fn analysis_work(model_json: &str, set_json: &str) -> Result<String, JsValue> {
+    let model = kea_core::model_from_json(model_json).map_err(|e| to_js(&e))?;
+    let set = overrides(set_json).map_err(|e| to_js(&e))?;
+    let compiled = kea_core::validate::compile(&model, &set).map_err(|e| to_js(&e))?;
+    Ok(work_json(kea_core::cost::analysis_work(
+        &compiled,
+        Some(&model),
+    )))
+}
+
+/// The estimated work of [`synthesize`] on the same request, as [`analysis_work`] gives it.
+#[wasm_bindgen]
+pub fn synthesis_work(request_json: &str) -> Result<String, JsValue> {
+    let request = kea_core::synthesis::request_from_json(request_json).map_err(|e| to_js(&e))?;
+    let work = kea_core::cost::synthesis_work(&request).map_err(|e| to_js(&e))?;
+    Ok(work_json(work))
+}
+
+/// The estimated work of [`simulate`] on the same request, as [`analysis_work`] gives it.
+#[wasm_bindgen]
+pub fn simulation_work(request_json: &str) -> Result<String, JsValue> {
+    let (model, set, request) = simulation_input(request_json).map_err(|e| to_js(&e))?;
+    let compiled =
+        kea_core::validate::compile(&model, &set).map_err(|e| to_js(&model_located(e)))?;
+    kea_core::simulation::check_request(&request, &compiled).map_err(|e| to_js(&e))?;
+    Ok(work_json(kea_core::cost::simulation_work(
+        &compiled,
+        Some(&model),
+        &request,
+    )))
+}
+
 /// Run the analysis. `progress(fraction)` is called after about every millisecond of
 /// work (every few thousand steps of a small model, every step of a large one); if it
 /// returns `false` the run stops and this throws a `cancelled` error. Returns the
@@ -122,22 +188,15 @@ struct SimulateIn {
 #[wasm_bindgen]
 pub fn simulate(request_json: &str, progress: &js_sys::Function) -> Result<String, JsValue> {
     let start = js_sys::Date::now();
-    let value = kea_core::parse_json(request_json.as_bytes())
-        .map_err(|e| to_js(&Error::invalid("", format!("not valid JSON: {e}"))))?;
-    let input: SimulateIn = kea_core::from_value_at(value, &[]).map_err(|e| to_js(&e))?;
-    let model =
-        kea_core::model_from_value(input.model).map_err(|e| to_js(&e.with_prefix("model")))?;
-    let request: kea_core::simulation::SimulationRequest =
-        kea_core::from_value_at(serde_json::Value::Object(input.request), &[])
-            .map_err(|e| to_js(&e))?;
+    let (model, set, request) = simulation_input(request_json).map_err(|e| to_js(&e))?;
     // Locate the errors as the server does: the model's under `model.`, then the run's own.
     let compiled =
-        kea_core::validate::compile(&model, &input.set).map_err(|e| to_js(&model_located(e)))?;
+        kea_core::validate::compile(&model, &set).map_err(|e| to_js(&model_located(e)))?;
     kea_core::simulation::check_request(&request, &compiled).map_err(|e| to_js(&e))?;
     let mut report = js_progress(progress);
     let mut result = kea_core::simulation::simulate(
         &model,
-        &input.set,
+        &set,
         &request,
         &kea_core::exec::Sequential,
         &mut report,
@@ -145,6 +204,26 @@ pub fn simulate(request_json: &str, progress: &js_sys::Function) -> Result<Strin
     .map_err(|e| to_js(&model_located(e)))?;
     result.timing.wall_ms = js_sys::Date::now() - start;
     serde_json::to_string(&result).map_err(|e| JsValue::from_str(&e.to_string()))
+}
+
+/// A Monte Carlo request's parts: the model (its errors under `model.`), its
+/// overrides and the simulation's own members.
+fn simulation_input(
+    request_json: &str,
+) -> Result<
+    (
+        kea_core::Model,
+        Overrides,
+        kea_core::simulation::SimulationRequest,
+    ),
+    Error,
+> {
+    let value = kea_core::parse_json(request_json.as_bytes())
+        .map_err(|e| Error::invalid("", format!("not valid JSON: {e}")))?;
+    let input: SimulateIn = kea_core::from_value_at(value, &[])?;
+    let model = kea_core::model_from_value(input.model).map_err(|e| e.with_prefix("model"))?;
+    let request = kea_core::from_value_at(serde_json::Value::Object(input.request), &[])?;
+    Ok((model, input.set, request))
 }
 
 /// Prefix a model's error paths with `model.` (those under `set` stay).
@@ -237,6 +316,31 @@ mod tests {
         assert_eq!(errors.len(), 1);
         let bad: Vec<serde_json::Value> = serde_json::from_str(&check(seed, "[1]")).unwrap();
         assert_eq!(bad[0]["path"], "set");
+    }
+
+    #[test]
+    fn check_json_is_the_cores_strict_reader() {
+        assert!(check_json(b"\xEF\xBB\xBF{\"a\": [1, 2.5e-3]}").is_ok());
+        // The errors (thrown as JsValue) need a JS host; the core's reader is the one used.
+        assert!(kea_core::parse_json(br#"{"a": 1, "a": 2}"#).is_err());
+    }
+
+    #[test]
+    fn work_is_the_servers_estimate_with_its_default_limit() {
+        let model = kea_core::presets::get_json("cv-tracker").unwrap();
+        let out: serde_json::Value =
+            serde_json::from_str(&analysis_work(model, "").unwrap()).unwrap();
+        let parsed = kea_core::model_from_json(model).unwrap();
+        let compiled = kea_core::validate::compile(&parsed, &Overrides::new()).unwrap();
+        let expected = kea_core::cost::analysis_work(&compiled, Some(&parsed));
+        assert_eq!(out["units"], expected.units);
+        assert_eq!(out["explain"], expected.explain);
+        assert_eq!(out["limit"], kea_core::cost::DEFAULT_MAX_WORK);
+        let request = format!(r#"{{"model": {model}, "runs": 10}}"#);
+        let sim: serde_json::Value =
+            serde_json::from_str(&simulation_work(&request).unwrap()).unwrap();
+        assert!(sim["units"].as_f64().unwrap() > expected.units);
+        assert_eq!(sim["path"], "runs");
     }
 
     #[test]

@@ -60,15 +60,25 @@ async function decodeModel(text) {
   let json;
   try {
     const stream = new Blob([bytes]).stream().pipeThrough(new DecompressionStream('deflate-raw'));
-    json = await new Response(stream).text();
+    json = new Uint8Array(await new Response(stream).arrayBuffer());
   } catch {
     throw new DamagedLink('the compressed data does not inflate');
   }
   try {
-    return JSON.parse(json);
+    return await parseJson(json);
   } catch (e) {
-    throw new DamagedLink(`the inflated text is not JSON: ${e.message}`);
+    throw new DamagedLink(`the inflated text is not JSON: ${e.title ?? e.message ?? e}`);
   }
+}
+
+/**
+ * JSON bytes (a file, a link's data) read as the core reads every way in (the wasm
+ * module's `check_json`): a key given twice, a number beyond a double (1e400), text that
+ * is not UTF-8 are errors, thrown as {title} saying what and where — not, as JSON.parse
+ * would, the last key kept and 1e400 read as Infinity.
+ */
+function parseJson(bytes) {
+  return service.call('parse', { bytes });
 }
 
 /** The run pane's tab for a link: `&tab=NAME`, nothing for Analysis. */
@@ -407,19 +417,17 @@ async function main() {
   $('import-model').addEventListener('change', async (e) => {
     const file = e.target.files[0];
     if (!file) return;
+    e.target.value = '';
     let model;
     try {
-      model = JSON.parse(await file.text());
+      model = await parseJson(new Uint8Array(await file.arrayBuffer()));
     } catch (err) {
-      setPageStatus(`${file.name} is not JSON (${err.message}); the model is unchanged.`, true);
+      return setPageStatus(`${file.name} is not JSON (${err.title ?? err.message ?? err}); the model is unchanged.`, true);
     }
-    const problem = model === undefined ? null : modelProblem(model);
-    if (problem) setPageStatus(`${file.name} is not a kea model: ${problem}; the model is unchanged.`, true);
-    else if (model !== undefined) {
-      await loadModel(model);
-      setPageStatus(`Imported ${file.name}.`);
-    }
-    e.target.value = '';
+    const problem = modelProblem(model);
+    if (problem) return setPageStatus(`${file.name} is not a kea model: ${problem}; the model is unchanged.`, true);
+    await loadModel(model);
+    setPageStatus(`Imported ${file.name}.`);
   });
   $('copy-link').addEventListener('click', async () => {
     const link = `${location.origin}${location.pathname}#model=${await encodeModel(modelJson())}${tabParam()}`;

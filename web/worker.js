@@ -1,7 +1,8 @@
 // The wasm build of kea-core, in a Web Worker so the page never freezes.
 //
 // Messages in:  {id, op: 'presets' | 'preset' | 'presetSynthesis' | 'check' | 'analyze' | 'traces_csv', ...args}
-//               or {id, op: 'synthesize' | 'simulate', request} | {id, op: 'simulation_csv', result}
+//               or {id, op: 'synthesize' | 'simulate', request}
+//               or {id, op: 'simulation_csv', result} | {id, op: 'parse', bytes}
 // Messages out: {id, progress} while analysing (at most every 50 ms), then
 //               {id, ok: <value>} or {id, error: {kind, title, errors:[{path, message}]}}.
 // Cancelling a run: the page terminates this worker and starts a new one (instant).
@@ -45,6 +46,10 @@ self.onmessage = async (event) => {
         break;
       case 'presetSynthesis': // the preset's synthesis example: {target, mode}, or null
         value = JSON.parse(kea.preset_synthesis(event.data.name) ?? 'null');
+        break;
+      case 'parse': // JSON from a file or a link, read as the core reads it (duplicate keys, 1e400: errors)
+        kea.check_json(event.data.bytes); // then JSON.parse, which keeps the keys' order, reads it alike
+        value = JSON.parse(new TextDecoder().decode(event.data.bytes)); // (a byte-order mark dropped)
         break;
       case 'check':
         value = JSON.parse(kea.check(event.data.model, event.data.set ?? ''));

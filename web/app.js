@@ -7,7 +7,7 @@
 import { ModelEditor, modelProblem } from './editor.js';
 import { api } from './api.js';
 import { BrowserRunner, ServerRunner, WasmWorker } from './runner.js';
-import { TraceChart, criteriaTable, finalTable, fmt, took } from './results.js';
+import { TraceChart, criteriaTable, duration, finalTable, fmt } from './results.js';
 import { mountTabs } from './tabs.js';
 import { modelErrorsText } from './views.js';
 
@@ -331,7 +331,7 @@ async function follow(where, runner, start, edits, resumed = null) {
     setStatus(
       resumed
         ? `Done (server job ${job}, followed after the reload).`
-        : `Done in ${took(elapsed / 1000)} s (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`,
+        : `Done in ${duration(elapsed)} (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`,
     );
   } catch (e) {
     if (e.kind === 'cancelled') {
@@ -365,7 +365,7 @@ function showResult(r, where, elapsed, current) {
     `D = ${r.steps.toLocaleString('en')} steps, Δt = ${fmt(r.dt)}`,
     `t ∈ [${fmt(r.t0)}, ${fmt(r.t_end)}]`,
     r.steady_state ? `steady state from step ${r.steady_state.reached_at_step.toLocaleString('en')}${r.steady_state.shortcut_used ? ' (shortcut used)' : ''}` : null,
-    `computed in ${took(r.timing.wall_ms)} ms on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`,
+    `computed in ${duration(r.timing.wall_ms)} on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`,
   ].filter(Boolean);
   $('summary').textContent = parts.join(' · ');
   $('summary').dataset.where = where;

@@ -42,13 +42,29 @@ export function fmt(x) {
 }
 
 /**
- * A time taken, for reading: 3 significant digits, whole numbers from 100 up (13 ms,
- * 1.77 ms, 0.25 s, 1234 ms). One rule for every “computed in” and “done in”, in the
- * browser and on the server alike (the server's clock is finer: 1.768 ms beside 13 ms).
+ * A number of a time taken, for reading: 3 significant digits, whole numbers from 100
+ * up (13, 1.77, 0.25, 1234).
  */
 export function took(x) {
   if (!Number.isFinite(x)) return '—';
   return x >= 100 ? String(Math.round(x)) : String(Number(x.toPrecision(3)));
+}
+
+/**
+ * A time taken (`ms`), for reading: milliseconds below a second, seconds below a
+ * minute (3 significant digits, as `took`), then minutes and seconds, hours and
+ * minutes (7.12 ms, 345 ms, 1.77 s, 2 min 5 s, 1 h 52 min). One rule for every “computed
+ * in” and “Done in”, in the browser and on the server alike (the server's clock is
+ * finer: 1.77 ms beside 13 ms).
+ */
+export function duration(ms) {
+  if (!Number.isFinite(ms) || ms < 0) return '—';
+  if (Number(took(ms)) < 1000) return `${took(ms)} ms`;
+  if (Number(took(ms / 1000)) < 60) return `${took(ms / 1000)} s`;
+  const s = Math.round(ms / 1000);
+  if (s < 3600) return `${Math.floor(s / 60)} min ${s % 60} s`;
+  const min = Math.round(s / 60);
+  return `${Math.floor(min / 60)} h${min % 60 ? ` ${min % 60} min` : ''}`;
 }
 
 /** One criterion cell: the full-precision value in data-value, highlighted when > 1. */

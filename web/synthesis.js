@@ -4,7 +4,7 @@
 // `synthesis`; the result as grid tables or as the answer with its verification.
 
 import { numberProblem, toNumber } from './numbers.js';
-import { KeptFields, RunBar, RunView, checkModel, checkOverrides, el, field, fmt, input, markControls, recheckControl, requestErrors, select, took, uiWords } from './views.js';
+import { KeptFields, RunBar, RunView, checkModel, checkOverrides, duration, el, field, fmt, input, markControls, recheckControl, requestErrors, select, uiWords } from './views.js';
 
 const CRITERIA = [
   ['yz', 'F_YZ (measured vs a-priori)'],
@@ -479,7 +479,7 @@ export class SynthesisView extends RunView {
     const what = `${LABEL[t.criterion]} (${t.set}${t.state ? `, state ${t.state}` : ', weighted'}) ≥ ${fmt(t.threshold)}`;
     const parts = [
       el('p', { class: `syn-status status-${r.status}`, id: 'syn-message' }, el('strong', { text: `${r.status.replaceAll('_', ' ')}: ` }), uiWords(r.message)),
-      el('p', { class: 'syn-summary', id: 'syn-summary' }, `Target ${what} · `, el('span', { id: 'syn-analyses', 'data-value': String(r.analyses), text: `${r.analyses} analyses` }), ` of D = ${r.steps.toLocaleString('en')} steps · ${took(r.timing.wall_ms)} ms on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`),
+      el('p', { class: 'syn-summary', id: 'syn-summary' }, `Target ${what} · `, el('span', { id: 'syn-analyses', 'data-value': String(r.analyses), text: `${r.analyses} analyses` }), ` of D = ${r.steps.toLocaleString('en')} steps · ${duration(r.timing.wall_ms)} on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`),
       el('p', { class: 'stale-note', text: 'The model has changed since this run: run again to update.' }),
       this.pointWarnings(r),
     ];

@@ -4,10 +4,10 @@
 // the run bar (where, Run, Cancel, progress, status) and the fields kept over a reload.
 
 import { ServerRunner, WasmWorker } from './runner.js';
-import { fmt, took } from './results.js';
+import { duration, fmt } from './results.js';
 import { modelPlace } from './editor.js';
 
-export { fmt, took };
+export { duration, fmt };
 
 export function el(tag, attrs = {}, ...children) {
   const e = document.createElement(tag);
@@ -168,8 +168,8 @@ export class RunBar {
     try {
       const job = await start(onProgress);
       this.progress.value = 1;
-      const s = (performance.now() - started) / 1000;
-      this.setStatus(resumed ? `Done (server job ${job}, followed after the reload).` : `Done in ${took(s)} s (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`);
+      const ms = performance.now() - started;
+      this.setStatus(resumed ? `Done (server job ${job}, followed after the reload).` : `Done in ${duration(ms)} (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`);
     } catch (e) {
       this.progress.value = 0;
       if (e?.kind === 'cancelled') this.setStatus('Cancelled.');

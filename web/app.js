@@ -9,7 +9,7 @@ import { api } from './api.js';
 import { BrowserRunner, ServerRunner, WasmWorker } from './runner.js';
 import { TraceChart, criteriaTable, duration, finalTable, fmt } from './results.js';
 import { mountTabs } from './tabs.js';
-import { modelErrorsText } from './views.js';
+import { ProgressText, modelErrorsText, runAnyway } from './views.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -233,7 +233,10 @@ function fileStem() {
 function setStatus(text, error = false) {
   $('status').textContent = text;
   $('status').classList.toggle('error', error);
+  anyway.hide();
 }
+
+const anyway = runAnyway($('run-anyway'), () => run());
 
 /** Messages about the page and the model (import, link), shown on every tab. */
 function setPageStatus(text, error = false) {
@@ -315,9 +318,10 @@ async function follow(where, runner, start, edits, resumed = null) {
   const label = resumed ? `Following server job ${resumed} (started before the reload)…` : where === 'browser' ? 'Running in this browser…' : 'Running on the server…';
   setStatus(label);
   const started = performance.now();
+  const shown = new ProgressText(label);
   const onProgress = (p) => {
     $('progress').value = p;
-    if (state.running === runner) setStatus(`${label} ${Math.floor(p * 100)} %`);
+    if (state.running === runner) setStatus(shown.text(p));
   };
   try {
     const { result, job } = await start(onProgress);
@@ -338,6 +342,9 @@ async function follow(where, runner, start, edits, resumed = null) {
       setStatus('Cancelled.');
     } else if (e.kind === 'gone' && resumed) {
       setStatus('');
+    } else if (e.kind === 'too-much-work') {
+      setStatus(e.title, true);
+      anyway.offer(e);
     } else {
       // The errors at their cells, and the first here, named as the editor names its
       // place (the core's title says `system.phi[0]`: the grids count from 1).

@@ -3,6 +3,7 @@
 // {kind, title, errors:[{path, message}]} with paths relative to the model.
 
 import { api, events } from './api.js';
+import { duration } from './results.js';
 
 /** A worker speaking worker.js's protocol: call(op, args, onProgress) → Promise. */
 export class WasmWorker {
@@ -52,14 +53,55 @@ export class WasmWorker {
   }
 }
 
+/**
+ * The check before a run in this browser: the run's estimated work (the wasm module's
+ * `*_work`, the server's estimate) against the limit a kea server holds a run to by
+ * default (`kea serve --max-work`), which the browser has no reason to exceed unasked.
+ * Above it the run is refused with {kind: 'too-much-work', title (the estimate and what
+ * it means), work, allow()}: `allow()` lets the same request through on the next try
+ * (“Run anyway”); a request changed since asks again.
+ */
+export class WorkGate {
+  constructor(op) {
+    this.op = op; // analysis_work, synthesis_work or simulation_work
+    this.allowed = null;
+  }
+
+  /** Throw if `args` (the worker op's, `key` their text) is above the limit and not allowed. */
+  async check(worker, args, key) {
+    if (this.allowed === key) return;
+    let work;
+    try {
+      work = await worker.call(this.op, args);
+    } catch (e) {
+      if (e?.kind === 'cancelled') throw e;
+      return; // an invalid request: the run itself says what is wrong, at its fields
+    }
+    if (!(work.units > work.limit)) return;
+    const sci = (x) => x.toExponential(3).replace('e+', 'e'); // as the server writes it: 4.160e12
+    throw {
+      kind: 'too-much-work',
+      title:
+        `This run's estimated work is ${sci(work.units)} (${work.explain}), above ${sci(work.limit)}, ` +
+        `where a kea server refuses a run (--max-work). A unit is about a nanosecond of one core: ` +
+        `this may take ${duration(work.units / 1e6)} or more in this browser. Make it smaller, or run it anyway.`,
+      work,
+      errors: [],
+      allow: () => (this.allowed = key),
+    };
+  }
+}
+
 /** Runs in the browser: analyze on its own worker, so cancel can terminate it. */
 export class BrowserRunner {
   constructor() {
     this.worker = null;
+    this.gate = new WorkGate('analysis_work');
   }
 
   async run(modelJson, onProgress) {
     this.worker ??= new WasmWorker();
+    await this.gate.check(this.worker, { model: modelJson, set: '' }, modelJson);
     const result = await this.worker.call('analyze', { model: modelJson, set: '' }, onProgress);
     return { result };
   }

@@ -3,7 +3,7 @@
 // browser (the wasm worker) or as a server job of the same kind (progress over SSE) —
 // the run bar (where, Run, Cancel, progress, status) and the fields kept over a reload.
 
-import { ServerRunner, WasmWorker } from './runner.js';
+import { ServerRunner, WasmWorker, WorkGate } from './runner.js';
 import { duration, fmt } from './results.js';
 import { modelPlace } from './editor.js';
 
@@ -62,21 +62,81 @@ class JobRunner extends ServerRunner {
   }
 }
 
-/** The browser's side: the wasm op on a worker of its own (cancel terminates it). */
+/**
+ * The browser's side: the wasm op on a worker of its own (cancel terminates it), after
+ * the check of its estimated work (WorkGate: the kind's `KIND_work`).
+ */
 class WasmRunner {
-  constructor(op) {
+  constructor(op, kind) {
     this.op = op;
     this.worker = null;
+    this.gate = new WorkGate(`${kind}_work`);
   }
 
   async run(request, onProgress) {
     this.worker ??= new WasmWorker();
-    return { result: await this.worker.call(this.op, { request: JSON.stringify(request) }, onProgress) };
+    const text = JSON.stringify(request);
+    await this.gate.check(this.worker, { request: text }, text);
+    return { result: await this.worker.call(this.op, { request: text }, onProgress) };
   }
 
   cancel() {
     this.worker?.cancel();
   }
+}
+
+/**
+ * A run's progress as its status line says it: the percentage to 0.01 % below 10 % (a
+ * run of hours moves by that), then to 0.1 %; and, from 2 s after the first report on,
+ * the time left at the pace so far.
+ */
+export class ProgressText {
+  constructor(label) {
+    this.label = label;
+    this.first = null;
+  }
+
+  text(p) {
+    const now = performance.now();
+    this.first ??= { p, at: now };
+    const [done, spent] = [p - this.first.p, now - this.first.at];
+    const shown = p < 0.1 ? (Math.floor(p * 1e4) / 100).toFixed(2) : (Math.floor(p * 1e3) / 10).toFixed(1);
+    const left = spent >= 2000 && done > 0 && p < 1 ? ` — about ${roughly((spent / done) * (1 - p))} left` : '';
+    return `${this.label} ${shown} %${left}`;
+  }
+}
+
+/** A time to come, as it is worth saying: 5 s steps below a minute, then minutes, hours and minutes. */
+function roughly(ms) {
+  const s = ms / 1000;
+  if (s < 60) return `${Math.max(5, Math.ceil(s / 5) * 5)} s`;
+  const min = Math.ceil(s / 60);
+  return min < 60 ? `${min} min` : `${Math.floor(min / 60)} h${min % 60 ? ` ${min % 60} min` : ''}`;
+}
+
+/**
+ * The “Run anyway” button beside a run bar's status: shown with a run refused for its
+ * estimated work in this browser (runner.js, WorkGate); a click allows that request and
+ * runs it (`run()`). Hidden again by the next status.
+ */
+export function runAnyway(button, run) {
+  let error = null;
+  button.hidden = true;
+  button.addEventListener('click', () => {
+    error?.allow();
+    button.hidden = true;
+    run();
+  });
+  return {
+    offer(e) {
+      error = e;
+      button.hidden = false;
+    },
+    hide() {
+      error = null;
+      button.hidden = true;
+    },
+  };
 }
 
 /**
@@ -88,7 +148,7 @@ class WasmRunner {
 export class RunBar {
   constructor({ prefix, label, op, kind, onRun, onResume }) {
     this.prefix = prefix;
-    this.runners = { browser: new WasmRunner(op), server: new JobRunner(kind) };
+    this.runners = { browser: new WasmRunner(op, kind), server: new JobRunner(kind) };
     this.running = null;
     this.onRun = onRun;
     this.onResume = onResume;
@@ -99,6 +159,8 @@ export class RunBar {
     this.cancelButton = el('button', { type: 'button', id: `${prefix}-cancel`, title: 'Esc', text: 'Cancel', disabled: true });
     this.progress = el('progress', { id: `${prefix}-progress`, max: 1, value: 0, 'aria-label': `${label}: progress` });
     this.status = el('span', { id: `${prefix}-status`, class: 'view-status', role: 'status', 'aria-live': 'polite' });
+    const anyway = el('button', { type: 'button', id: `${prefix}-run-anyway`, text: 'Run anyway' });
+    this.anyway = runAnyway(anyway, () => this.run());
     this.root = el(
       'div',
       { class: 'run-controls' },
@@ -107,6 +169,7 @@ export class RunBar {
       this.cancelButton,
       this.progress,
       this.status,
+      anyway,
     );
     this.runButton.addEventListener('click', () => this.run());
     this.cancelButton.addEventListener('click', () => this.cancel());
@@ -126,6 +189,7 @@ export class RunBar {
   setStatus(text, error = false) {
     this.status.textContent = text;
     this.status.classList.toggle('error', error);
+    this.anyway.hide();
   }
 
   run() {
@@ -160,9 +224,10 @@ export class RunBar {
     this.progress.value = 0;
     const label = resumed ? `Following server job ${resumed} (started before the reload)…` : where === 'browser' ? 'Running in this browser…' : 'Running on the server…';
     this.setStatus(label);
+    const shown = new ProgressText(label);
     const onProgress = (p) => {
       this.progress.value = p;
-      if (this.running === runner) this.setStatus(`${label} ${Math.floor(p * 100)} %`);
+      if (this.running === runner) this.setStatus(shown.text(p));
     };
     const started = performance.now();
     try {
@@ -174,7 +239,10 @@ export class RunBar {
       this.progress.value = 0;
       if (e?.kind === 'cancelled') this.setStatus('Cancelled.');
       else if (e?.kind === 'gone' && resumed) this.setStatus('');
-      else this.setStatus(e?.message ?? e?.title ?? String(e), true);
+      else if (e?.kind === 'too-much-work') {
+        this.setStatus(e.title, true);
+        this.anyway.offer(e);
+      } else this.setStatus(e?.message ?? e?.title ?? String(e), true);
     } finally {
       this.running = null;
       this.runButton.disabled = false;
@@ -325,7 +393,7 @@ export function routeErrors(errors, showModelErrors) {
  * their paths).
  */
 export function runError(e, ownErrors, modelErrors, unplaced = []) {
-  if (e?.kind === 'cancelled' || e?.kind === 'gone') return e;
+  if (['cancelled', 'gone', 'too-much-work'].includes(e?.kind)) return e;
   const parts = [];
   if (ownErrors.length) {
     parts.push(

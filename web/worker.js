@@ -1,7 +1,7 @@
 // The wasm build of kea-core, in a Web Worker so the page never freezes.
 //
-// Messages in:  {id, op: 'presets' | 'preset' | 'presetSynthesis' | 'check' | 'analyze' | 'traces_csv', ...args}
-//               or {id, op: 'synthesize' | 'simulate', request}
+// Messages in:  {id, op: 'presets' | 'preset' | 'presetSynthesis' | 'check' | 'analyze' | 'analysis_work' | 'traces_csv', ...args}
+//               or {id, op: 'synthesize' | 'simulate' | 'synthesis_work' | 'simulation_work', request}
 //               or {id, op: 'simulation_csv', result} | {id, op: 'parse', bytes}
 // Messages out: {id, progress} while analysing (at most every 50 ms), then
 //               {id, ok: <value>} or {id, error: {kind, title, errors:[{path, message}]}}.
@@ -50,6 +50,13 @@ self.onmessage = async (event) => {
       case 'parse': // JSON from a file or a link, read as the core reads it (duplicate keys, 1e400: errors)
         kea.check_json(event.data.bytes); // then JSON.parse, which keeps the keys' order, reads it alike
         value = JSON.parse(new TextDecoder().decode(event.data.bytes)); // (a byte-order mark dropped)
+        break;
+      case 'analysis_work': // the estimated work of a run, with the server's default limit
+        value = JSON.parse(kea.analysis_work(event.data.model, event.data.set ?? ''));
+        break;
+      case 'synthesis_work':
+      case 'simulation_work':
+        value = JSON.parse(kea[op](event.data.request));
         break;
       case 'check':
         value = JSON.parse(kea.check(event.data.model, event.data.set ?? ''));

@@ -145,6 +145,24 @@ async function problemOf(response) {
 
 const CANCELLED = { kind: 'cancelled', title: 'cancelled', errors: [] };
 
+/**
+ * A request to the kea server (api()); a request that gets no answer at all (the server
+ * stopped, the network down: fetch's bare “Failed to fetch”) throws {kind:
+ * 'unreachable'} saying so and what to do instead.
+ */
+async function ask(path, init) {
+  try {
+    return await api(path, init);
+  } catch (e) {
+    if (e?.name === 'AbortError') throw e;
+    throw {
+      kind: 'unreachable',
+      title: `The kea server does not answer (${e?.message ?? e}); run in this browser, or try again.`,
+      errors: [],
+    };
+  }
+}
+
 // Set while the page is being left (a reload, a close): the requests it cuts short
 // fail, but the job runs on, so its id stays kept for the next page to re-attach to.
 let leaving = false;
@@ -182,7 +200,7 @@ export class ServerRunner {
   async runJob(body, onProgress) {
     this.cancelRequested = false;
     try {
-      const response = await api(`${this.base}/v1/jobs`, {
+      const response = await ask(`${this.base}/v1/jobs`, {
         method: 'POST',
         headers: { 'content-type': 'application/json' },
         body,
@@ -213,7 +231,7 @@ export class ServerRunner {
       if (final.status !== 'succeeded') {
         throw this.located({ title: final.error?.title ?? `job ${final.status}`, ...(final.error ?? {}) });
       }
-      const result = await api(`${this.base}/v1/jobs/${id}/result`);
+      const result = await ask(`${this.base}/v1/jobs/${id}/result`);
       if (!result.ok) throw this.located(await problemOf(result));
       return { result: await result.json(), job: id };
     } finally {
@@ -269,7 +287,7 @@ export class ServerRunner {
       } finally {
         stop.abort();
       }
-      const r = await api(`${this.base}/v1/jobs/${id}`);
+      const r = await ask(`${this.base}/v1/jobs/${id}`);
       if (!r.ok) throw await problemOf(r);
       const job = await r.json();
       if (!['queued', 'running'].includes(job.status)) return job;

@@ -2,7 +2,8 @@
 // wasm worker or server job) and the results. The model lives in the URL (#model=…,
 // deflated and base64url-encoded), with the tab, so they can be shared as a link; the
 // Synthesis and Monte Carlo tabs' fields (KeptFields), "Run in" and a running server
-// job's id are kept for the browser tab only (sessionStorage), over a reload.
+// job's id are kept for the browser tab only (sessionStorage), over a reload, and so is
+// a change the URL has not caught up with yet when the page is left (see saveToUrl).
 
 import { ModelEditor, modelProblem } from './editor.js';
 import { api } from './api.js';
@@ -93,14 +94,61 @@ async function linkHash() {
   return `#${model}${tabParam()}`;
 }
 
+// The address follows the page 300 ms after its last change (deflating a large model
+// on every key would be slow), so a reload or a closed tab within those 300 ms would
+// lose the change: the page keeps it for this browser tab (sessionStorage, DRAFT) as it
+// is left (pagehide; visibilitychange, which a phone may give instead), with the address
+// it was made on. A page opened on that same address (a reload, a reopened tab) takes
+// the kept change; another address (a link) is taken as it is, and the draft dropped.
+const DRAFT = 'kea-draft';
 let urlTimer = null;
+let urlChanges = 0; // changes of what the address shows…
+let urlWritten = 0; // …and how many of them it shows
+
 function saveToUrl() {
   clearTimeout(urlTimer);
-  if (state.keepUrl) return;
+  const change = ++urlChanges;
+  if (state.keepUrl) {
+    urlWritten = change; // the address is kept as it is, on purpose
+    return;
+  }
   urlTimer = setTimeout(async () => {
     const hash = await linkHash();
+    if (change !== urlChanges) return; // a later change writes its own
     if (location.hash !== hash) history.replaceState(null, '', hash);
+    urlWritten = change;
   }, 300);
+}
+
+/** The page is being left: keep what the address does not show yet (see DRAFT). */
+function keepDraft() {
+  try {
+    if (urlWritten === urlChanges) return sessionStorage.removeItem(DRAFT);
+    const draft = { address: location.hash, preset: state.preset, model: state.preset ? null : modelJson(), tab: $('results-pane').dataset.tab ?? 'analysis' };
+    sessionStorage.setItem(DRAFT, JSON.stringify(draft));
+  } catch {
+    // storage off or full: the address has what it has
+  }
+}
+
+/** The page lives on after all (shown again): it keeps its changes itself. */
+function dropDraft() {
+  try {
+    sessionStorage.removeItem(DRAFT);
+  } catch {
+    // storage off: nothing kept
+  }
+}
+
+/** The change kept as the page was left on this address, or null; taken once. */
+function takeDraft() {
+  try {
+    const draft = JSON.parse(sessionStorage.getItem(DRAFT) ?? 'null');
+    sessionStorage.removeItem(DRAFT);
+    return draft && typeof draft === 'object' && draft.address === location.hash ? draft : null;
+  } catch {
+    return null;
+  }
 }
 
 // ------------------------------------------------------------------ model
@@ -212,6 +260,18 @@ async function loadFromUrl() {
     true,
   );
   return errors;
+}
+
+/** The change kept as the page was left (keepDraft): its preset, or its model. */
+async function loadDraft(draft) {
+  try {
+    if (draft.preset) return await loadPreset(draft.preset);
+    const model = JSON.parse(draft.model);
+    if (!modelProblem(model)) return await loadModel(model);
+  } catch {
+    // unreadable: the address has the say
+  }
+  return loadFromUrl();
 }
 
 function download(name, type, text) {
@@ -458,6 +518,9 @@ async function main() {
   });
   $('trace-state').addEventListener('change', () => chart.draw());
   $('trace-log').addEventListener('change', () => chart.draw());
+  addEventListener('pagehide', keepDraft);
+  document.addEventListener('visibilitychange', () => (document.visibilityState === 'hidden' ? keepDraft() : dropDraft()));
+  addEventListener('pageshow', (e) => e.persisted && dropDraft()); // back from the cache: the page lives on
   // On one column the run bar of the tab shown sticks to the window's bottom (style.css):
   // a control the focus moves to behind it (Tab through the editor) is scrolled above it.
   document.addEventListener('focusin', (e) => {
@@ -487,9 +550,11 @@ async function main() {
     server: !document.querySelector('input[name=mode][value=server]').disabled,
   });
   shareRunIn();
-  await loadFromUrl();
+  const draft = leftDraft;
+  if (draft) await loadDraft(draft);
+  else await loadFromUrl();
   // The link's tab (`&tab=synthesis` / `simulation`), kept in the URL as it changes.
-  tabs.show(new URLSearchParams(location.hash.slice(1)).get('tab') ?? 'analysis');
+  tabs.show(draft?.tab ?? new URLSearchParams(location.hash.slice(1)).get('tab') ?? 'analysis');
   document.addEventListener('kea:tab-changed', saveToUrl);
   // Server jobs started before a reload, followed again (the other tabs' run bars listen).
   resume();
@@ -500,6 +565,7 @@ async function main() {
   window.addEventListener('hashchange', async () => {
     if (location.hash === (await linkHash())) return;
     clearTimeout(urlTimer); // a pending update would write the model shown before
+    urlWritten = urlChanges;
     const params = new URLSearchParams(location.hash.slice(1));
     if (params.has('model') || params.has('preset')) await loadFromUrl();
     tabs.show(params.get('tab') ?? 'analysis');
@@ -507,4 +573,6 @@ async function main() {
   document.body.dataset.ready = 'true';
 }
 
+// Taken before anything can drop it (a visibilitychange while the page starts).
+const leftDraft = takeDraft();
 main().catch((e) => setPageStatus(`Could not start: ${e.title ?? e.message ?? e}`, true));

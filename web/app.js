@@ -120,6 +120,15 @@ function saveToUrl() {
   }, 300);
 }
 
+/** Write the address now (`push`: as a new history entry); no update is left pending. */
+async function writeUrl(push = false) {
+  clearTimeout(urlTimer);
+  const change = ++urlChanges;
+  const hash = await linkHash();
+  history[push ? 'pushState' : 'replaceState'](null, '', hash);
+  urlWritten = change;
+}
+
 /** The page is being left: keep what the address does not show yet (see DRAFT). */
 function keepDraft() {
   try {
@@ -219,14 +228,21 @@ async function loadPreset(name, options) {
  * preset gets a history entry of its own.
  */
 async function choosePreset(name) {
+  if (await replaceModel(() => loadPreset(name))) setPageStatus('Loaded the preset; the browser’s Back brings your model back.');
+}
+
+/**
+ * Show another model (`load()`: a preset, an imported file). A model of one's own
+ * (edited, imported, from a link) stays in the history, one Back away: its link is
+ * written as it is now (not 300 ms ago) and the new model gets an entry of its own.
+ * Returns whether it did so.
+ */
+async function replaceModel(load) {
   const own = !state.preset;
-  if (own) {
-    clearTimeout(urlTimer);
-    history.replaceState(null, '', await linkHash()); // the model as it is now, not 300 ms ago
-    history.pushState(null, '', `#preset=${encodeURIComponent(name)}${tabParam()}`);
-  }
-  await loadPreset(name);
-  if (own) setPageStatus('Loaded the preset; the browser’s Back brings your model back.');
+  if (own) await writeUrl();
+  await load();
+  if (own) await writeUrl(true);
+  return own;
 }
 
 /**
@@ -481,6 +497,8 @@ async function main() {
     download(`${fileStem()}.json`, 'application/json', JSON.stringify(editor.model, null, 2) + '\n'),
   );
   $('import-button').addEventListener('click', () => $('import-model').click());
+  // A file imported is read as the core reads one (parseJson), and shown as a preset
+  // chosen is: a model of one's own stays one Back away (replaceModel).
   $('import-model').addEventListener('change', async (e) => {
     const file = e.target.files[0];
     if (!file) return;
@@ -493,8 +511,8 @@ async function main() {
     }
     const problem = modelProblem(model);
     if (problem) return setPageStatus(`${file.name} is not a kea model: ${problem}; the model is unchanged.`, true);
-    await loadModel(model);
-    setPageStatus(`Imported ${file.name}.`);
+    const own = await replaceModel(() => loadModel(model));
+    setPageStatus(`Imported ${file.name}${own ? '; the browser’s Back brings your model back' : ''}.`);
   });
   $('copy-link').addEventListener('click', async () => {
     const link = `${location.origin}${location.pathname}#model=${await encodeModel(modelJson())}${tabParam()}`;

@@ -8,7 +8,7 @@
 import { ModelEditor, modelProblem } from './editor.js';
 import { api } from './api.js';
 import { BrowserRunner, ServerRunner, WasmWorker } from './runner.js';
-import { TraceChart, criteriaTable, duration, finalTable, fmt } from './results.js';
+import { TraceChart, criteriaTable, duration, finalTable, fmt, scrollHint } from './results.js';
 import { mountTabs } from './tabs.js';
 import { ProgressText, modelErrorsText, runAnyway } from './views.js';
 
@@ -456,6 +456,7 @@ function showResult(r, where, elapsed, current) {
   $('warnings').replaceChildren(...r.warnings.map((w) => Object.assign(document.createElement('li'), { textContent: w })));
   $('criteria').replaceChildren(criteriaTable(r));
   $('final').replaceChildren(finalTable(r));
+  for (const box of [$('criteria'), $('final')]) scrollHint(box);
   const select = $('trace-state');
   const previous = select.value;
   select.replaceChildren(
@@ -536,6 +537,12 @@ async function main() {
   });
   $('trace-state').addEventListener('change', () => chart.draw());
   $('trace-log').addEventListener('change', () => chart.draw());
+  // The results' tables scroll sideways in a narrow window, and say so (as the editor's grids).
+  const boxes = new ResizeObserver((entries) => entries.forEach((e) => scrollHint(e.target)));
+  for (const box of [$('criteria'), $('final')]) {
+    box.addEventListener('scroll', () => scrollHint(box), { passive: true });
+    boxes.observe(box);
+  }
   addEventListener('pagehide', keepDraft);
   document.addEventListener('visibilitychange', () => (document.visibilityState === 'hidden' ? keepDraft() : dropDraft()));
   addEventListener('pageshow', (e) => e.persisted && dropDraft()); // back from the cache: the page lives on

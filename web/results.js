@@ -67,6 +67,23 @@ export function duration(ms) {
   return `${Math.floor(min / 60)} h${min % 60 ? ` ${min % 60} min` : ''}`;
 }
 
+/** The hint a table's caption shows when its box scrolls sideways (style.css, `.grid-wrap`). */
+export function scrollHintText() {
+  return el('span', { class: 'scroll-hint', text: ' — scroll sideways for more ↔' });
+}
+
+/**
+ * Mark a table's box that is wider than its room, as the model editor marks its grids
+ * (the same classes, style.css): the caption's hint, and a faded edge on each side
+ * with more columns.
+ */
+export function scrollHint(box) {
+  const more = box.scrollWidth - box.clientWidth;
+  box.classList.toggle('overflows', more > 1);
+  box.classList.toggle('more-left', box.scrollLeft > 1);
+  box.classList.toggle('more-right', more - box.scrollLeft > 1);
+}
+
 /** One criterion cell: the full-precision value in data-value, highlighted when > 1. */
 function criterionCell(set, criterion, row, stateName, value, why) {
   const td = el('td', {
@@ -85,7 +102,7 @@ function criterionCell(set, criterion, row, stateName, value, why) {
 export function criteriaTable(result) {
   const table = el('table', { class: 'criteria', id: 'criteria-table' });
   table.append(
-    el('caption', { text: 'Criteria (averaged over the steps; > 1 = an effect, highlighted)' }),
+    el('caption', { text: 'Criteria (averaged over the steps; > 1 = an effect, highlighted)' }, scrollHintText()),
   );
   const head1 = el('tr', {}, el('th', { rowspan: 2, scope: 'col', text: 'state' }));
   const head2 = el('tr');
@@ -123,7 +140,7 @@ export function criteriaTable(result) {
 export function finalTable(result) {
   const f = result.final;
   const table = el('table', { class: 'final' });
-  table.append(el('caption', { text: `Values at t_E = ${fmt(result.t_end)} (bound SKOs; ΔX = λχ, λ = ${fmt(result.lambda)} for P = ${result.confidence})` }));
+  table.append(el('caption', { text: `Values at t_E = ${fmt(result.t_end)} (bound SKOs; ΔX = λχ, λ = ${fmt(result.lambda)} for P = ${result.confidence})` }, scrollHintText()));
   const cols = [
     ['eta', 'η'],
     ['zeta', 'ζ (paired measurement)'],

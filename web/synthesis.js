@@ -4,7 +4,7 @@
 // `synthesis`; the result as grid tables or as the answer with its verification.
 
 import { numberProblem, toNumber } from './numbers.js';
-import { KeptFields, RunBar, RunView, checkModel, checkOverrides, duration, el, field, fmt, input, markControls, recheckControl, requestErrors, select, uiWords } from './views.js';
+import { KeptFields, RunBar, RunView, checkModel, checkOverrides, duration, el, field, fmt, input, markControls, recheckControl, requestErrors, scrollHint, scrollHintText, select, uiWords } from './views.js';
 
 const CRITERIA = [
   ['yz', 'F_YZ (measured vs a-priori)'],
@@ -540,7 +540,7 @@ export class SynthesisView extends RunView {
     pageValues.forEach((pv, k) => {
       const table = el('table', { class: 'criteria syn-table' });
       const title = pages ? `${pages.name} = ${fmt(pv)}` : `${rows.name}${cols ? ` × ${cols.name}` : ''}`;
-      table.append(el('caption', {}, title, el('span', { class: 'scroll-hint', text: ' — scroll sideways for more ↔' })));
+      table.append(el('caption', {}, title, scrollHintText()));
       const colValues = cols ? cols.values : [null];
       table.append(
         el('thead', {}, el('tr', {}, el('th', { scope: 'col', text: cols ? `${rows.name} \\ ${cols.name}` : rows.name }), ...colValues.map((cv) => el('th', { scope: 'col' }, ...(cols ? valueLabel(cols.name, cv) : [LABEL.yz + ' / ' + LABEL.zx + ' / ' + LABEL.yx]))))),
@@ -660,18 +660,6 @@ function errorParams(model) {
 /** `name = value` for a grid's heading: it may wrap after the “=”, not inside the number (`1e-6`). */
 function valueLabel(name, value) {
   return [`${name} = `, el('span', { class: 'value', text: fmt(value) })];
-}
-
-/**
- * Mark a table's box that is wider than the pane, as the model editor marks its grids
- * (the same classes, style.css): the caption's hint, and a faded edge on each side
- * with more columns.
- */
-function scrollHint(box) {
-  const more = box.scrollWidth - box.clientWidth;
-  box.classList.toggle('overflows', more > 1);
-  box.classList.toggle('more-left', box.scrollLeft > 1);
-  box.classList.toggle('more-right', more - box.scrollLeft > 1);
 }
 
 function paramsText(params) {

@@ -4,10 +4,10 @@
 // the run bar (where, Run, Cancel, progress, status) and the fields kept over a reload.
 
 import { ServerRunner, WasmWorker, WorkGate } from './runner.js';
-import { duration, fmt } from './results.js';
+import { duration, fmt, scrollHint, scrollHintText } from './results.js';
 import { modelPlace } from './editor.js';
 
-export { duration, fmt };
+export { duration, fmt, scrollHint, scrollHintText };
 
 export function el(tag, attrs = {}, ...children) {
   const e = document.createElement(tag);

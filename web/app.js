@@ -10,7 +10,7 @@ import { api } from './api.js';
 import { BrowserRunner, ServerRunner, WasmWorker } from './runner.js';
 import { TraceChart, criteriaTable, duration, finalTable, fmt, scrollHint } from './results.js';
 import { mountTabs } from './tabs.js';
-import { ProgressText, modelErrorsText, runAnyway } from './views.js';
+import { ProgressText, modelErrorsText, runAnyway, runPart } from './views.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -22,7 +22,9 @@ const runners = { browser: new BrowserRunner(), server: new ServerRunner({ keep:
 // edits: how many times the model has changed, so that a run's result can tell whether
 // it still belongs to the model shown.
 // example: the preset's synthesis example (presets/synthesis/NAME.json), for the Synthesis tab.
-const state = { preset: null, example: null, result: null, job: null, running: null, checkSeq: 0, keepUrl: false, edits: 0 };
+// computed: the model as a run reads it (runPart: no name, no description), to tell an
+// edit that changes the results from one that does not.
+const state = { preset: null, example: null, result: null, job: null, running: null, checkSeq: 0, keepUrl: false, edits: 0, computed: null };
 
 // ------------------------------------------------------------------ URL
 
@@ -171,11 +173,14 @@ const editor = new ModelEditor($('editor'), () => {
   setPageStatus('');
   saveToUrl();
   scheduleCheck();
-  markStale();
+  // The name or the description alone changes no result: the results stay current.
+  const computed = runPart(editor.model);
+  if (computed !== state.computed) markStale();
 });
 
 /** The shown results, and a run's error, belong to an earlier version of the model. */
 function markStale() {
+  state.computed = runPart(editor.model);
   state.edits++;
   if (!$('results').hidden) $('results').classList.add('stale');
   if ($('status').classList.contains('error')) setStatus('');
@@ -299,8 +304,10 @@ function download(name, type, text) {
   setTimeout(() => URL.revokeObjectURL(url), 1000);
 }
 
+/** The start of a download's file name: the preset's name, or the model's (“Tracker (v2)” → tracker-v2). */
 function fileStem() {
-  return (state.preset ?? editor.model.name ?? 'model').replace(/[^a-zA-Z0-9_-]+/g, '-').toLowerCase();
+  const stem = (state.preset ?? editor.model.name ?? '').replace(/[^a-zA-Z0-9_-]+/g, '-').replace(/^-+|-+$/g, '');
+  return stem.toLowerCase() || 'model';
 }
 
 // ------------------------------------------------------------------ running
@@ -377,7 +384,7 @@ function resume() {
   const kept = runner.kept();
   if (!kept || state.running) return;
   if (document.querySelector('input[name=mode][value=server]').disabled) return runner.store(null);
-  const edits = JSON.stringify(kept.model) === modelJson() ? state.edits : -1;
+  const edits = runPart(kept.model) === runPart(editor.model) ? state.edits : -1;
   return follow('server', runner, (onProgress) => runner.attach(kept.id, onProgress), edits, kept.id);
 }
 

@@ -303,6 +303,16 @@ export class KeptFields {
 
 let helper = null;
 
+/**
+ * A model as a run reads it: its JSON without the name and the description, which no
+ * result depends on. Two models alike in it give the same results (an edit of the
+ * description leaves them current).
+ */
+export function runPart(model) {
+  const { name, description, ...rest } = model ?? {};
+  return JSON.stringify(rest);
+}
+
 /** A quick op of worker.js (check, simulation_csv, …) on a worker of its own. */
 export function wasmCall(op, args) {
   helper ??= new WasmWorker();
@@ -491,7 +501,7 @@ export class RunView {
   async follow(where, exec, model) {
     const edits = this.edits;
     const { result, job } = await exec();
-    const current = this.edits === edits && JSON.stringify(model) === JSON.stringify(this.ctx.model());
+    const current = this.edits === edits && runPart(model) === runPart(this.ctx.model());
     if (current) this.ctx.showModelErrors([]); // else the check of the edited model has the say
     this.show(result, where, current);
     return job;

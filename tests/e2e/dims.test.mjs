@@ -9,7 +9,7 @@
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
-import { kea, openApp } from './lib.mjs';
+import { kea, openApp, refusedRun } from './lib.mjs';
 
 let page;
 const consoleErrors = [];
@@ -69,15 +69,6 @@ async function setDimension(key, text) {
   await page.waitForTimeout(300);
 }
 
-/** Run in the browser until the status says an error; returns it. */
-async function refusedRun() {
-  await page.check('input[name=mode][value=browser]');
-  await page.evaluate(() => document.getElementById('status').classList.remove('error'));
-  await page.click('#run');
-  await page.waitForFunction(() => document.querySelector('#status').classList.contains('error'), null, { timeout: 30000 });
-  return page.textContent('#status');
-}
-
 test('an empty or out-of-range dimension is marked at its field and not applied: the model keeps its size', async () => {
   await preset('helicopter-range');
   const original = await exported();
@@ -89,7 +80,7 @@ test('an empty or out-of-range dimension is marked at its field and not applied:
   assert.deepEqual(await states(), original.system.states, 'no state was removed');
   assert.deepEqual(await messagesAt('dimensions.N'), ['empty: enter a whole number from 1 to 200; N stays 6']);
   assert.equal(await page.getAttribute('#dim-N', 'aria-invalid'), 'true');
-  assert.match(await refusedRun(), /fields to fix first/, 'a run does not take the model for what the field shows');
+  assert.match(await refusedRun(page), /fields to fix first/, 'a run does not take the model for what the field shows');
   for (const [text, message] of [
     ['0', /^the model needs at least one state/],
     ['250', /^250 is more than kea's limit of 200/],
@@ -269,7 +260,7 @@ test('members without a grid are shown; an error at one is marked there, with a 
   const marked = await page.$$eval('.member:has([data-path="measurement.schedule"]) .cell-error', (es) => es.map((e) => e.textContent));
   assert.equal(marked.length, 1, `${marked}`);
   assert.match(marked[0], /^schedule \[2\]/);
-  assert.match(await refusedRun(), /^schedule \[2\].*\(see the marked fields\)/);
+  assert.match(await refusedRun(page), /^schedule \[2\].*\(see the marked fields\)/);
   await page.fill('textarea[data-path="measurement.schedule"]', '[null, {"every": ');
   await page.waitForTimeout(300);
   assert.match((await messagesAt('measurement.schedule'))[0], /^not JSON/);

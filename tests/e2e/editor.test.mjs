@@ -6,7 +6,7 @@
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
-import { openApp, relDiff } from './lib.mjs';
+import { openApp, refusedRun, relDiff } from './lib.mjs';
 
 let server;
 let browser;
@@ -81,28 +81,19 @@ test("a cell's full text is its tooltip, kept up to date as it is typed", async 
   await preset('seed-example');
 });
 
-/** Run the model in the browser until the status says an error; returns it. */
-async function refusedRun() {
-  await page.check('input[name=mode][value=browser]');
-  await page.evaluate(() => document.getElementById('status').classList.remove('error'));
-  await page.click('#run');
-  await page.waitForFunction(() => document.querySelector('#status').classList.contains('error'), null, { timeout: 30000 });
-  return page.textContent('#status');
-}
-
 test('messages name single fields by their labels and parameters by their names, not by JSON paths', async () => {
   await preset('seed-example');
   await page.fill(cell('time.t_end'), '-5');
-  assert.match(await refusedRun(), /^t_E: t_end \(-5\) must be greater than t0 \(0\)/);
+  assert.match(await refusedRun(page), /^t_E: t_end \(-5\) must be greater than t0 \(0\)/);
   await preset('seed-example');
   await page.fill(cell('criteria.confidence'), '1.5');
-  const confidence = await refusedRun();
+  const confidence = await refusedRun(page);
   assert.match(confidence, /^Confidence P: /);
   assert.doesNotMatch(confidence, /criteria\./);
   await preset('seed-example');
   await page.fill(cell('params.w.name'), '2x');
   await page.press(cell('params.w.name'), 'Tab');
-  assert.match(await refusedRun(), /^parameter “2x”: a parameter name must be an identifier/);
+  assert.match(await refusedRun(page), /^parameter “2x”: a parameter name must be an identifier/);
   // Every single field and a parameter's two cells, as the page's other views name them.
   const places = await page.evaluate(async () => {
     const { modelPlace } = await import('./editor.js');

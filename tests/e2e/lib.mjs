@@ -97,6 +97,15 @@ export async function newPage(browser, errors) {
   return page;
 }
 
+/** Run the page's model in the browser until the status says an error; returns it. */
+export async function refusedRun(page) {
+  await page.check('input[name=mode][value=browser]');
+  await page.evaluate(() => document.getElementById('status').classList.remove('error'));
+  await page.click('#run');
+  await page.waitForFunction(() => document.querySelector('#status').classList.contains('error'), null, { timeout: 30000 });
+  return page.textContent('#status');
+}
+
 /**
  * Hold back the page's creation of server jobs (POST /v1/jobs) until `release()`, so that
  * something can happen while a run is under way; `reached` resolves when one is held.

@@ -327,6 +327,9 @@ function setPageStatus(text, error = false) {
   $('page-status').classList.toggle('error', error);
 }
 
+// The editor's notes on what it did (a block pasted into a grid).
+$('editor').addEventListener('editor-note', (e) => setPageStatus(e.detail));
+
 function mode() {
   return document.querySelector('input[name=mode]:checked').value;
 }

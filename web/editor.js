@@ -988,6 +988,7 @@ export class ModelEditor {
           });
         }
         input.addEventListener('keydown', (e) => this.gridKey(e, table));
+        input.addEventListener('paste', (e) => this.gridPaste(e, table, title));
         const td = el('td', { 'data-path': cellPath }, input);
         this.register(cellPath, input, td);
         tr.append(td);
@@ -1035,6 +1036,41 @@ export class ModelEditor {
 
   updateScrollHints() {
     for (const wrap of this.root.querySelectorAll('.grid-wrap')) this.scrollHint(wrap);
+  }
+
+  /**
+   * A block pasted into a grid's cell — rows from a spreadsheet (tab-separated) or from
+   * MATLAB or numpy (separated by spaces, commas or semicolons, on several lines) —
+   * fills the grid from that cell on, as a spreadsheet does, each value checked as if
+   * typed. What falls beyond the grid's edge is left out, and a note on the page says
+   * how much. A single value (no tab, one line) pastes into the cell as usual.
+   */
+  gridPaste(e, table, title) {
+    const text = e.clipboardData?.getData('text/plain') ?? '';
+    const tabbed = text.includes('\t');
+    const lines = text.replace(/\r\n?/g, '\n').replace(/\n+$/, '').split('\n');
+    if (!tabbed && lines.length < 2) return;
+    e.preventDefault();
+    const input = e.target;
+    const r0 = Number(input.dataset.row);
+    const c0 = Number(input.dataset.col);
+    let pasted = 0;
+    let left = 0;
+    lines.forEach((line, dr) => {
+      const cells = tabbed ? line.split('\t') : line.trim().split(/[\s,;]+/);
+      cells.forEach((value, dc) => {
+        const cell = table.querySelector(`input[data-row="${r0 + dr}"][data-col="${c0 + dc}"]`);
+        if (!cell) {
+          left += 1;
+          return;
+        }
+        cell.value = value.trim();
+        cell.dispatchEvent(new Event('input', { bubbles: true }));
+        pasted += 1;
+      });
+    });
+    const note = `Pasted ${pasted} value${pasted === 1 ? '' : 's'} into ${title}` + (left > 0 ? `; ${left} beyond its edge left out.` : '.');
+    this.root.dispatchEvent(new CustomEvent('editor-note', { detail: note, bubbles: true }));
   }
 
   /** Arrow keys and Enter move between the cells of a grid. */

@@ -254,6 +254,38 @@ test("a parameter's rename reaches its uses in every expression, whole names onl
   assert.equal(await page.textContent('[data-note="params"]'), '', 'a loaded model starts with no note');
 });
 
+test('a block pasted into a grid cell fills the grid from there, as in a spreadsheet', async () => {
+  await preset('cv-tracker');
+  // Paste `text` into the cell at `path`, as the clipboard would.
+  const paste = (path, text) =>
+    page.$eval(cell(path), (input, text) => {
+      const data = new DataTransfer();
+      data.setData('text/plain', text);
+      input.dispatchEvent(new ClipboardEvent('paste', { clipboardData: data, bubbles: true, cancelable: true }));
+    }, text);
+  // From a spreadsheet: tab-separated rows; a third row falls beyond a's edge. (It was
+  // all put into the one cell, "0\t1 -0.5\t0", and marked as implicit multiplication.)
+  await paste('system.a[0][0]', '0\t1\r\n-0.5\t-0.1\r\n7\t7\r\n');
+  const model = await exported();
+  assert.deepEqual(model.system.a, [[0, 1], [-0.5, -0.1]]);
+  assert.equal(await page.textContent('#page-status'), 'Pasted 4 values into a (N×N); 2 beyond its edge left out.');
+  assert.deepEqual(await messagesAt('system.a[0][0]'), []);
+  // From MATLAB or numpy: spaces or commas, on several lines; each value checked as
+  // if typed.
+  await paste('system.a[0][1]', '2\n1e400, 3');
+  assert.equal(await page.inputValue(cell('system.a[0][1]')), '2');
+  assert.equal(await page.inputValue(cell('system.a[1][1]')), '1e400');
+  assert.equal(await page.textContent('#page-status'), 'Pasted 2 values into a (N×N); 1 beyond its edge left out.');
+  assert.ok((await messagesAt('system.a[1][1]')).length > 0, 'a bad pasted value is marked at its cell');
+  // One value pastes into the cell as usual (the page does not take it over).
+  const taken = await page.$eval(cell('system.a[1][1]'), (input) => {
+    const data = new DataTransfer();
+    data.setData('text/plain', '0.25');
+    return input.dispatchEvent(new ClipboardEvent('paste', { clipboardData: data, bubbles: true, cancelable: true }));
+  });
+  assert.equal(taken, true, 'a single value is left to the browser');
+});
+
 test('the page logged no console errors', () => {
   assert.deepEqual(consoleErrors, []);
 });

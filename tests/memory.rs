@@ -84,44 +84,42 @@ fn chain(steps: u64) -> Model {
     model(a, steps)
 }
 
-#[test]
-fn an_analysis_heap_does_not_grow_with_the_steps() {
-    let set = Overrides::new();
+/// The peak heap of `run` (which must run `steps` steps of [`chain`]) at `small` and
+/// at `large` steps: the larger may take no more than 4 KB beyond the smaller (a buffer
+/// of one f64 a step would add megabytes).
+fn peak_does_not_grow(what: &str, small: u64, large: u64, run: impl Fn(&Model) -> u64) {
     let peak = |steps: u64| {
         let m = chain(steps);
-        let (_, peak, r) = measured(|| kea_core::analyze(&m, &set, &mut NoProgress).unwrap());
-        assert_eq!(r.steps, steps);
+        let (_, peak, ran) = measured(|| run(&m));
+        assert_eq!(ran, steps);
         peak
     };
-    // 10⁴ steps already fill every one of the 1000 trace rows; 100 times the steps
-    // must not need more (a buffer of one f64 a step would add 8 MB).
-    let small = peak(10_000);
-    let large = peak(1_000_000);
-    println!("analysis peak heap: 10⁴ steps {small} B, 10⁶ steps {large} B");
+    let (at_small, at_large) = (peak(small), peak(large));
+    println!("{what} peak heap: {small} steps {at_small} B, {large} steps {at_large} B");
     assert!(
-        large <= small + 4096,
-        "10⁶ steps took {large} B of heap at the peak, 10⁴ steps {small} B"
+        at_large <= at_small + 4096,
+        "{what}: {large} steps took {at_large} B of heap at the peak, {small} steps {at_small} B"
     );
 }
 
 #[test]
+fn an_analysis_heap_does_not_grow_with_the_steps() {
+    // 10⁴ steps already fill every one of the 1000 trace rows.
+    peak_does_not_grow("analysis", 10_000, 1_000_000, |m| {
+        kea_core::analyze(m, &Overrides::new(), &mut NoProgress)
+            .unwrap()
+            .steps
+    });
+}
+
+#[test]
 fn a_monte_carlo_heap_does_not_grow_with_the_steps() {
-    let set = Overrides::new();
     let req = SimulationRequest::new(8, 7);
-    let peak = |steps: u64| {
-        let m = chain(steps);
-        let (_, peak, r) =
-            measured(|| simulate(&m, &set, &req, &Sequential, &mut NoProgress).unwrap());
-        assert_eq!(r.steps, steps);
-        peak
-    };
-    let small = peak(10_000);
-    let large = peak(200_000);
-    println!("Monte Carlo peak heap (8 runs): 10⁴ steps {small} B, 2·10⁵ steps {large} B");
-    assert!(
-        large <= small + 4096,
-        "2·10⁵ steps took {large} B of heap at the peak, 10⁴ steps {small} B"
-    );
+    peak_does_not_grow("Monte Carlo (8 runs)", 10_000, 200_000, |m| {
+        simulate(m, &Overrides::new(), &req, &Sequential, &mut NoProgress)
+            .unwrap()
+            .steps
+    });
 }
 
 /// A 45-state model whose `a` holds `count` distinct time-dependent texts of `chars`

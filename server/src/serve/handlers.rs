@@ -169,8 +169,7 @@ pub async fn resolve_model_id(
             ),
         )]));
     };
-    // As the path's ids: any case.
-    let id = uuid::Uuid::parse_str(&id).map_or(id, |u| u.hyphenated().to_string());
+    let id = request::canonical_id(id);
     let key = id.clone();
     let record = state.db(move |s| s.get_model(&key)).await?.ok_or_else(|| {
         Problem::invalid(vec![FieldError::new(

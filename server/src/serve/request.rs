@@ -216,7 +216,7 @@ macro_rules! path_param {
 /// An id (a UUID) as this server writes it, hyphenated and lower-case, whatever the
 /// case it was given in (RFC 9562 §4: UUID text is case-insensitive); any other text
 /// as it is (a 404 then).
-fn canonical_id(text: String) -> String {
+pub fn canonical_id(text: String) -> String {
     match uuid::Uuid::parse_str(&text) {
         Ok(u) => u.hyphenated().to_string(),
         Err(_) => text,

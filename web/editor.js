@@ -265,21 +265,6 @@ export function modelProblem(value) {
   return null;
 }
 
-/** Parse `system.a[1][2]` into ['system', 'a', 1, 2]. */
-export function splitPath(path) {
-  const out = [];
-  for (const part of path.split('.')) {
-    const m = part.match(/^([^[]*)((\[\d+\])*)$/);
-    if (!m) {
-      out.push(part);
-      continue;
-    }
-    if (m[1]) out.push(m[1]);
-    for (const idx of m[2].matchAll(/\[(\d+)\]/g)) out.push(Number(idx[1]));
-  }
-  return out;
-}
-
 /** The path one level up: `system.a[1][2]` → `system.a[1]` → `system.a` → `system`. */
 function parentPath(path) {
   if (path.endsWith(']')) return path.slice(0, path.lastIndexOf('['));

@@ -193,20 +193,17 @@ impl Prepared {
             for i in (0..nk).rev() {
                 let (before, from_i) = self.rows.split_at_mut(i * n);
                 let row = &mut from_i[..n];
-                // The size of the terms each entry sums, for the test below.
-                let mut scale = row.iter().fold(0.0, |m: f64, x| m.max(x.abs()));
-                for x in 0..n {
-                    let terms = row[x].abs()
-                        + (0..i)
-                            .map(|k| (linv[i * nk + k] * before[k * n + x]).abs())
-                            .sum::<f64>();
-                    scale = scale.max(terms);
-                }
-                for k in 0..i {
-                    let l = linv[i * nk + k];
-                    for (x, o) in row.iter_mut().zip(&before[k * n..k * n + n]) {
-                        *x += l * o;
+                // Each entry summed in k's order, with the size of the terms it sums
+                // (for the test below).
+                let mut scale = 0.0f64;
+                for (x, entry) in row.iter_mut().enumerate() {
+                    let mut terms = entry.abs();
+                    for k in 0..i {
+                        let t = linv[i * nk + k] * before[k * n + x];
+                        *entry += t;
+                        terms += t.abs();
                     }
+                    scale = scale.max(terms);
                 }
                 // A noise-free whitened measurement (zero pivot) whose row cancelled to
                 // rounding level is a measurement that repeats the others, noise and

@@ -427,3 +427,26 @@ fn chi2_band_quantiles_match_scipy() {
     }
     assert!(chi2_band(0.0, 1.0).iter().all(|x| x.is_nan()));
 }
+
+/// The normal samples are the same bits in every build: rand_distr's ziggurat takes
+/// `ln` and `exp` on its rare paths (the tail, the wedges) from num-traits' libm, as
+/// the wasm build does — unless `std` is somewhere in its crate graph (rand's `std`
+/// feature, enabled by any dependency, dev-dependencies included when tests are
+/// built), when they become the platform's `f64::ln`/`exp` and a few samples in 10⁵
+/// change in their last bit. The hash is of 10⁶ samples as the libm build (native
+/// and wasm) draws them.
+#[test]
+fn normal_samples_take_libm_bits_whatever_the_features() {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    // FNV-1a over the samples' bits: any one bit changed changes the hash.
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    for _ in 0..1_000_000 {
+        let x: f64 = StandardNormal.sample(&mut rng);
+        for b in x.to_bits().to_le_bytes() {
+            hash = (hash ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    assert_eq!(hash, 0xf055_9f71_ea9a_e9d6, "{hash:#018x}");
+}

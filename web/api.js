@@ -4,13 +4,13 @@
 // request. Job events are read from a fetch stream, because EventSource cannot send
 // an Authorization header.
 
-const KEY = 'kea-token';
+export const TOKEN_KEY = 'kea-token';
 
 /** fetch() with the token; on a 401, ask for the token and try once more. */
 export async function api(path, init = {}) {
   for (let attempt = 0; ; attempt++) {
     const headers = new Headers(init.headers);
-    const token = sessionStorage.getItem(KEY);
+    const token = sessionStorage.getItem(TOKEN_KEY);
     if (token) headers.set('authorization', `Bearer ${token}`);
     const response = await fetch(path, { ...init, headers });
     if (response.status !== 401 || attempt > 0) return response;
@@ -20,7 +20,7 @@ export async function api(path, init = {}) {
         : 'This kea server needs its access token (--token / KEA_TOKEN):',
     );
     if (!given?.trim()) return response;
-    sessionStorage.setItem(KEY, given.trim());
+    sessionStorage.setItem(TOKEN_KEY, given.trim());
   }
 }
 

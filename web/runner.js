@@ -2,7 +2,7 @@
 // (a job with progress over SSE). Both give the same result JSON, or throw
 // {kind, title, errors:[{path, message}]} with paths relative to the model.
 
-import { api, events } from './api.js';
+import { TOKEN_KEY, api, events } from './api.js';
 import { duration } from './results.js';
 
 /** A worker speaking worker.js's protocol: call(op, args, onProgress) → Promise. */
@@ -54,9 +54,29 @@ export class WasmWorker {
 }
 
 /**
+ * This server's `--max-work` (GET /v1/limits), asked once it answers; null where it
+ * does not (no server, or one with a token not given yet: no token prompt for a run
+ * in this browser), and the core's default is used then.
+ */
+let serverMaxWork = null;
+async function serverWorkLimit() {
+  if (serverMaxWork !== null) return serverMaxWork;
+  try {
+    const token = sessionStorage.getItem(TOKEN_KEY);
+    const response = await fetch('/v1/limits', token ? { headers: { authorization: `Bearer ${token}` } } : {});
+    const limit = response.ok ? (await response.json())?.server?.max_work : null;
+    if (typeof limit === 'number') serverMaxWork = limit;
+  } catch {
+    // no server: the default
+  }
+  return serverMaxWork;
+}
+
+/**
  * The check before a run in this browser: the run's estimated work (the wasm module's
- * `*_work`, the server's estimate) against the limit a kea server holds a run to by
- * default (`kea serve --max-work`), which the browser has no reason to exceed unasked.
+ * `*_work`, the server's estimate) against the limit this kea server holds a run to
+ * (`kea serve --max-work`, or its default where no server says), which the browser has
+ * no reason to exceed unasked.
  * Above it the run is refused with {kind: 'too-much-work', title (the estimate and what
  * it means), work, allow()}: `allow()` lets the same request through on the next try
  * (“Run anyway”); a request changed since asks again.
@@ -77,13 +97,15 @@ export class WorkGate {
       if (e?.kind === 'cancelled') throw e;
       return; // an invalid request: the run itself says what is wrong, at its fields
     }
-    if (!(work.units > work.limit)) return;
+    const served = await serverWorkLimit();
+    const limit = served ?? work.limit;
+    if (!(work.units > limit)) return;
     const sci = (x) => x.toExponential(3).replace('e+', 'e'); // as the server writes it: 4.160e12
     throw {
       kind: 'too-much-work',
       title:
-        `This run's estimated work is ${sci(work.units)} (${work.explain}), above ${sci(work.limit)}, ` +
-        `where a kea server refuses a run (--max-work). A unit is about a nanosecond of one core: ` +
+        `This run's estimated work is ${sci(work.units)} (${work.explain}), above ${sci(limit)}, ` +
+        `where ${served === null ? 'a kea server refuses a run by default' : 'this kea server refuses a run'} (--max-work). A unit is about a nanosecond of one core: ` +
         `this may take ${duration(work.units / 1e6)} or more in this browser. Make it smaller, or run it anyway.`,
       work,
       errors: [],

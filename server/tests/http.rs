@@ -731,6 +731,24 @@ fn limits_sync_work_and_absurd_work() {
     );
     assert_eq!(r.status, 422, "{}", r.text);
     assert_eq!(r.json()["type"], "urn:kea:problem:too-much-work");
+
+    // GET /v1/limits reports these limits as started, and the core's as enforced.
+    let limits = s.get("/v1/limits").json();
+    assert_eq!(limits["server"]["sync_work"], 1e5);
+    assert_eq!(limits["server"]["max_work"], 1e8);
+    assert_eq!(limits["server"]["max_body_bytes"], 2 * 1024 * 1024);
+    let max_steps = limits["model"]["max_steps"].as_u64().unwrap();
+    let r = s.post(
+        "/v1/jobs",
+        &json!({"kind": "analysis", "model": long_model(max_steps + 1)}),
+    );
+    assert_eq!(r.status, 422, "{}", r.text);
+    assert_eq!(r.error_paths(), vec!["model.time.steps"], "{}", r.text);
+    assert!(
+        r.text.contains(&format!("limit of {max_steps}")),
+        "{}",
+        r.text
+    );
 }
 
 /// A body that stops arriving (a Content-Length of 100, then 4 bytes) is answered 408

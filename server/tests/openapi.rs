@@ -514,6 +514,8 @@ fn responses_validate_against_the_spec() {
         }
     };
     expect("get", "/healthz", &s.get("/healthz"), 200);
+    expect("get", "/v1/limits", &s.get("/v1/limits"), 200);
+    expect("get", "/v1/limits", &s.get("/v1/limits?x=1"), 400);
     expect("get", "/v1/presets", &s.get("/v1/presets"), 200);
     expect("get", "/v1/presets", &s.get("/v1/presets?x=1"), 400);
     for name in kea_core::presets::names() {

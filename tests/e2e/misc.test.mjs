@@ -96,7 +96,7 @@ test('a browser run above the server’s work limit asks first; its progress say
   await page.click('#run');
   await page.waitForFunction(() => document.getElementById('status').textContent.includes('estimated work'), null, { timeout: 20000 });
   const said = await page.textContent('#status');
-  assert.match(said, /estimated work is 4\.\d{3}e12 \(D = 100000000 steps × .*\), above 1\.000e12, where a kea server refuses a run/);
+  assert.match(said, /estimated work is 4\.\d{3}e12 \(D = 100000000 steps × .*\), above 1\.000e12, where this kea server refuses a run/);
   assert.match(said, /may take \d+ h( \d+ min)? or more/, 'the time it may take');
   assert.equal(await page.isVisible('#run-anyway'), true);
   assert.equal(await page.isDisabled('#run'), false, 'nothing runs');
@@ -123,6 +123,26 @@ test('a browser run above the server’s work limit asks first; its progress say
   await page.waitForFunction(() => document.getElementById('syn-status').textContent === '');
   assert.equal(await page.isVisible('#syn-run-anyway'), false);
   await page.click('#tab-analysis');
+});
+
+test('a browser run asks at this server’s own --max-work (GET /v1/limits)', async () => {
+  const other = await startServer(['--max-work', '1e9']);
+  const errors = [];
+  const p = await newPage(browser, errors);
+  try {
+    await p.goto(`${other.url}/#preset=seed-example`);
+    await ready(p);
+    await p.fill('input[data-path="time.steps"]', '10000000');
+    await p.check('input[name=mode][value=browser]');
+    await p.click('#run');
+    await p.waitForFunction(() => document.getElementById('status').textContent.includes('estimated work'), null, { timeout: 20000 });
+    assert.match(await p.textContent('#status'), /estimated work is 2\.\d{3}e9 .*, above 1\.000e9, where this kea server refuses a run/);
+    assert.equal(await p.isVisible('#run-anyway'), true);
+    assert.deepEqual(errors, []);
+  } finally {
+    await p.close();
+    await other.stop();
+  }
 });
 
 test('a run on a server that does not answer says so, on each tab', async () => {

@@ -18,6 +18,46 @@ pub async fn health() -> Json<Value> {
     Json(json!({ "status": "ok", "version": env!("CARGO_PKG_VERSION") }))
 }
 
+/// `GET /v1/limits`: what this server and the core accept — the server's own limits
+/// (its `kea serve` options, as started) and the model's, the Monte Carlo's and the
+/// synthesis's fixed ones — so a script or the web UI can check a request first.
+pub async fn limits(State(state): State<AppState>) -> Json<Value> {
+    use kea_core::{expr, simulation, synthesis, validate};
+    let l = &state.config.limits;
+    Json(json!({
+        "server": {
+            "max_body_bytes": l.max_body_bytes,
+            "read_timeout_s": l.read_timeout.as_secs(),
+            "sync_work": l.sync_work,
+            "max_work": l.max_work,
+            "job_time_s": l.job_time.as_secs(),
+            "queue": l.queue,
+            "shutdown_grace_s": l.shutdown_grace.as_secs(),
+            "workers": state.config.workers,
+            "max_page": request::MAX_PAGE,
+        },
+        "model": {
+            "max_states": validate::MAX_STATES,
+            "max_sources": validate::MAX_SOURCES,
+            "max_steps": validate::MAX_STEPS,
+            "max_trace_points": validate::MAX_TRACE_POINTS,
+            "max_trace_values": validate::MAX_TRACE_VALUES,
+            "max_expression_chars": expr::MAX_EXPRESSION_CHARS,
+            "max_time_expressions": expr::MAX_TIME_EXPRESSIONS,
+            "max_time_expression_chars": expr::MAX_TIME_EXPRESSION_CHARS,
+            "max_reported_errors": validate::MAX_REPORTED_ERRORS,
+        },
+        "simulation": {
+            "max_runs": simulation::MAX_RUNS,
+            "max_work": simulation::MAX_WORK,
+        },
+        "synthesis": {
+            "max_points": synthesis::MAX_POINTS,
+            "max_grid_params": synthesis::MAX_GRID_PARAMS,
+        },
+    }))
+}
+
 /// `GET /v1/presets`: every preset (one page; no query parameters).
 pub async fn list_presets() -> Json<Value> {
     Json(json!({ "items": kea_core::presets::list() }))

@@ -80,6 +80,7 @@ pub fn table() -> Vec<Route> {
     const PAGE: Option<&[&str]> = Some(&["limit", "cursor"]);
     vec![
         route(M::GET, "/healthz", Public, None, handlers::health),
+        route(M::GET, "/v1/limits", Api, NONE, handlers::limits),
         route(M::GET, "/v1/presets", Api, NONE, handlers::list_presets),
         route(
             M::GET,

@@ -188,6 +188,11 @@ pub struct SynthesisResult {
     pub details: Details,
     /// Analyses run, verification included.
     pub analyses: u64,
+    /// Of `analyses`, those not run again but recalled from an earlier run of the same
+    /// request that was interrupted (a server's job re-queued by a shutdown or a crash,
+    /// [`Memo`]). Absent when 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub recalled_analyses: u64,
     /// Steps D of each analysis.
     pub steps: u64,
     /// Filled by the caller (the core has no clock).
@@ -750,8 +755,59 @@ fn bisect_iterations_max(b: &Bisect) -> u32 {
 
 // ---------------------------------------------------------------- evaluation
 
+/// Where a synthesis keeps the analyses it has done, so that a run of the same request
+/// after an interruption takes them instead of running them again: the search visits
+/// the same points in the same order (every answer is bit-identical whatever the
+/// executor), so an interrupted run is resumed by its own replay. Keys and values are
+/// text (the core has no storage): a key names a point's params exactly (their bits),
+/// a value is the analysis's outcome as JSON. A value that does not read back is
+/// ignored, and the analysis is run.
+pub trait Memo: Sync {
+    fn recall(&self, key: &str) -> Option<String>;
+    fn keep(&self, key: &str, value: &str);
+}
+
+/// No memory: every analysis runs (the CLI, the browser; a server job's first run
+/// keeps its analyses in its store).
+pub struct Forgetful;
+
+impl Memo for Forgetful {
+    fn recall(&self, _: &str) -> Option<String> {
+        None
+    }
+    fn keep(&self, _: &str, _: &str) {}
+}
+
+/// One analysis's outcome as a synthesis uses it, the form a [`Memo`] keeps.
+#[derive(Serialize, Deserialize)]
+struct Outcome {
+    point: Point,
+    steps: u64,
+    warnings: Vec<String>,
+}
+
+/// A point's memo key: each param's name and its value's bits (`q=3fb999999999999a`),
+/// in the order the search gives them.
+fn memo_key(params: &[(String, f64)]) -> String {
+    let parts: Vec<String> = params
+        .iter()
+        .map(|(k, v)| format!("{k}={:016x}", v.to_bits()))
+        .collect();
+    parts.join(",")
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
+}
+
 struct Ctx<'a> {
     model: &'a Model,
+    memo: &'a dyn Memo,
+    /// Analyses taken from `memo` (counted from every thread of a batch).
+    recalled: std::sync::atomic::AtomicU64,
+    /// The keys this run kept: a point it visits again (the verification's) runs again,
+    /// as without a memo, so that `recalled_analyses` counts only an earlier run's.
+    kept_here: std::sync::Mutex<std::collections::HashSet<String>>,
     set: &'a Overrides,
     target: &'a Target,
     state_index: Option<usize>,
@@ -785,6 +841,16 @@ impl Ctx<'_> {
         params: &[(String, f64)],
         progress: &mut dyn Progress,
     ) -> Result<(Point, u64, Vec<String>), Error> {
+        let key = memo_key(params);
+        let earlier = || !self.kept_here.lock().is_ok_and(|k| k.contains(&key));
+        if earlier()
+            && let Some(kept) = self.memo.recall(&key)
+            && let Ok(o) = serde_json::from_str::<Outcome>(&kept)
+        {
+            self.recalled
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            return Ok((o.point, o.steps, o.warnings));
+        }
         let mut set = self.set.clone();
         for (k, v) in params {
             set.insert(k.clone(), *v);
@@ -818,7 +884,18 @@ impl Ctx<'_> {
         if self.target.set == CriteriaSetName::Covariance {
             warnings.retain(|w| !crate::analysis::bound_set_only(w));
         }
-        Ok((point, r.steps, warnings))
+        let outcome = Outcome {
+            point,
+            steps: r.steps,
+            warnings,
+        };
+        if let Ok(json) = serde_json::to_string(&outcome) {
+            self.memo.keep(&key, &json);
+            if let Ok(mut k) = self.kept_here.lock() {
+                k.insert(key);
+            }
+        }
+        Ok((outcome.point, outcome.steps, outcome.warnings))
     }
 
     fn point(&self, params: &[(String, f64)], r: &AnalysisResult) -> Point {
@@ -1008,6 +1085,18 @@ pub fn synthesize<E: Executor>(
     exec: &E,
     progress: &mut dyn Progress,
 ) -> Result<SynthesisResult, Error> {
+    synthesize_resuming(req, exec, progress, &Forgetful)
+}
+
+/// [`synthesize`], keeping each analysis in `memo` and taking those it already holds
+/// (from an interrupted run of the same request) instead of running them again. The
+/// result is the uninterrupted run's, but for `recalled_analyses` and the timing.
+pub fn synthesize_resuming<E: Executor>(
+    req: &SynthesisRequest,
+    exec: &E,
+    progress: &mut dyn Progress,
+    memo: &dyn Memo,
+) -> Result<SynthesisResult, Error> {
     validate(req)?;
     let state_index = req
         .target
@@ -1016,6 +1105,9 @@ pub fn synthesize<E: Executor>(
         .and_then(|s| req.model.system.states.iter().position(|x| x == s));
     let mut ctx = Ctx {
         model: &req.model,
+        memo,
+        recalled: 0.into(),
+        kept_here: Default::default(),
         set: &req.set,
         target: &req.target,
         state_index,
@@ -1039,6 +1131,7 @@ pub fn synthesize<E: Executor>(
         verification,
         details,
         analyses: ctx.done,
+        recalled_analyses: ctx.recalled.into_inner(),
         steps: ctx.steps,
         timing: Timing::default(),
     })

@@ -745,3 +745,87 @@ fn a_covariance_targets_verification_leaves_out_the_bound_sets_warnings() {
     assert_eq!(v.warnings, rest);
     assert!(!synthesis::render_text(&r).contains("warning"));
 }
+
+/// A memo in memory, counting what is kept (each kept entry is an analysis run).
+#[derive(Default)]
+struct CountingMemo {
+    kept: std::sync::Mutex<std::collections::HashMap<String, String>>,
+    runs: std::sync::atomic::AtomicU64,
+}
+
+impl synthesis::Memo for CountingMemo {
+    fn recall(&self, key: &str) -> Option<String> {
+        self.kept.lock().unwrap().get(key).cloned()
+    }
+    fn keep(&self, key: &str, value: &str) {
+        self.runs.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.kept
+            .lock()
+            .unwrap()
+            .insert(key.to_string(), value.to_string());
+    }
+}
+
+/// A synthesis interrupted (a server's job stopped by a shutdown) and run again with
+/// what it kept gives the uninterrupted result — every mode, one thread and several —
+/// while running only the analyses the first run had not done; an entry that does not
+/// read back is run again rather than trusted.
+#[test]
+fn an_interrupted_synthesis_resumes_from_what_it_kept() {
+    use std::sync::atomic::Ordering::Relaxed;
+    let bisect = request(
+        &fixed_phi_model(),
+        json!({"criterion": "yx", "set": "bound", "threshold": 14}),
+        json!({"bisect": {"param": "psi", "low": 1e-6, "high": 1e-5, "rel_tol": 1e-3}}),
+    );
+    let search = request(
+        &fixed_phi_model(),
+        json!({"criterion": "yx", "threshold": 14}),
+        json!({"seed_search": {"params": [
+            {"name": "psi", "low": 2.5e-6, "high": 1e-5, "shrink": 0.5},
+            {"name": "c", "low": 0.125, "high": 0.5, "shrink": 0.5}
+        ], "batch": 3}}),
+    );
+    let grid = seed_grid_request(Some(json!([{"name": "f", "cheaper": "lower"}])));
+    for (name, req) in [("bisect", bisect), ("seed_search", search), ("grid", grid)] {
+        let whole = run(&req);
+        assert_eq!(whole.recalled_analyses, 0);
+        for threads in [1, 3] {
+            let memo = CountingMemo::default();
+            // Stopped at about half its progress.
+            let mut half = |f: f64| {
+                if f >= 0.5 {
+                    ControlFlow::Break(())
+                } else {
+                    ControlFlow::Continue(())
+                }
+            };
+            let stopped = synthesis::synthesize_resuming(&req, &Threads(threads), &mut half, &memo);
+            assert_eq!(stopped.unwrap_err(), Error::Cancelled, "{name}");
+            let first = memo.runs.swap(0, Relaxed);
+            assert!(first > 0 && first < whole.analyses, "{name}: {first}");
+            // One kept entry spoilt: run again, not read as an answer.
+            let spoilt = memo.kept.lock().unwrap().keys().next().cloned().unwrap();
+            memo.kept.lock().unwrap().insert(spoilt, "{".into());
+
+            let resumed =
+                synthesis::synthesize_resuming(&req, &Threads(threads), &mut NoProgress, &memo)
+                    .unwrap();
+            let again = memo.runs.load(Relaxed);
+            let at = format!(
+                "{name}, {threads} threads: {} recalled, {again} run",
+                resumed.recalled_analyses
+            );
+            // Each analysis either recalled or run; the spoilt one among those run.
+            assert_eq!(resumed.recalled_analyses + again, whole.analyses, "{at}");
+            assert!(
+                resumed.recalled_analyses > 0 && resumed.recalled_analyses < first,
+                "{at}"
+            );
+            assert!(again >= 1 && again < whole.analyses, "{at}");
+            let mut same = resumed.clone();
+            same.recalled_analyses = 0;
+            assert_eq!(same, whole, "{name}, {threads} threads");
+        }
+    }
+}

@@ -1170,7 +1170,7 @@ fn mean_overflowed(
 /// discretisation as the seed has it). The hint names the worst such mode and the
 /// steps that would make every one stable.
 fn euler_unstable(a: &[f64], n: usize, dt: f64, span: f64, steps: u64) -> Option<String> {
-    let mu = nalgebra::DMatrix::from_row_slice(n, n, a).complex_eigenvalues();
+    let mu = eigenvalues(a, n)?;
     let mut worst: Option<(f64, f64)> = None; // (Δt_max, Re λ)
     for m in mu.iter() {
         let (re, im) = ((m.re - 1.0) / dt, m.im / dt);
@@ -1283,10 +1283,51 @@ fn quoted_names(names: &[&str]) -> String {
     }
 }
 
-/// The spectral radius of A (dense n × n): the most a mode grows in one step.
+/// Most iterations of the eigenvalue algorithm per state. nalgebra's Schur
+/// decomposition does not converge on some matrices (dimforge/nalgebra#611: the
+/// 10 × 10 `a_ij = 10i + j + 1`, rank 2, looped for ever, and no cancel or time limit
+/// can stop it inside); it converges in a few iterations per eigenvalue where it does.
+const EIGEN_ITERATIONS_PER_STATE: usize = 100;
+
+/// The eigenvalues of A (dense n × n), or `None` where the algorithm does not converge
+/// within [`EIGEN_ITERATIONS_PER_STATE`]` · n` iterations.
+fn eigenvalues(a: &[f64], n: usize) -> Option<Vec<nalgebra::Complex<f64>>> {
+    let m = nalgebra::DMatrix::from_row_slice(n, n, a);
+    let schur =
+        nalgebra::linalg::Schur::try_new(m, f64::EPSILON, EIGEN_ITERATIONS_PER_STATE * n.max(1))?;
+    Some(schur.complex_eigenvalues().iter().copied().collect())
+}
+
+/// The spectral radius of A (dense n × n): the most a mode grows in one step; where
+/// the eigenvalues are not found, [`gelfand_radius`].
 fn growth_per_step(a: &[f64], n: usize) -> f64 {
-    let mu = nalgebra::DMatrix::from_row_slice(n, n, a).complex_eigenvalues();
-    mu.iter().map(|m| m.re.hypot(m.im)).fold(0.0, f64::max)
+    match eigenvalues(a, n) {
+        Some(mu) => mu.iter().map(|m| m.re.hypot(m.im)).fold(0.0, f64::max),
+        None => gelfand_radius(a, n),
+    }
+}
+
+/// The spectral radius of A (dense n × n) by Gelfand's formula ρ = lim ‖A^k‖^(1/k),
+/// with k = 2⁴⁰: A squared 40 times, each power scaled to norm 1 and the scales summed
+/// as logs, so that nothing overflows. ‖A^k‖^(1/k) exceeds ρ by a relative
+/// ≈ (ln κ + (m − 1) ln k) / k, κ the condition of A's eigenvector basis and m its
+/// largest Jordan block: below 1e-8 for any n ≤ 200 and κ f64 can hold.
+fn gelfand_radius(a: &[f64], n: usize) -> f64 {
+    let mut p = nalgebra::DMatrix::from_row_slice(n, n, a);
+    let mut log_norm = 0.0; // ln ‖A^(2^j)‖
+    let mut rate = 0.0;
+    for j in 0..=40 {
+        let s = p.norm();
+        if !(s > 0.0 && s.is_finite()) {
+            return if s == 0.0 { 0.0 } else { f64::INFINITY };
+        }
+        log_norm += s.ln();
+        rate = (log_norm / 2f64.powi(j)).exp();
+        p /= s;
+        p = &p * &p;
+        log_norm *= 2.0;
+    }
+    rate
 }
 
 /// Why the filter's covariance A R Aᵀ + B left f64's range, when A says so:
@@ -1821,6 +1862,62 @@ fn build_traces(
 
 #[cfg(test)]
 mod tests {
+    /// Gelfand's formula, the fallback where the eigenvalue algorithm does not
+    /// converge, against the eigenvalues on random matrices (growing, decaying,
+    /// rotating), a defective one (a Jordan block) and the zero matrix.
+    #[test]
+    fn gelfand_radius_agrees_with_the_eigenvalues() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        for n in [1, 2, 3, 5, 10, 30] {
+            for scale in [0.1, 1.0, 1e3] {
+                let a: Vec<f64> = (0..n * n)
+                    .map(|_| scale * rng.random_range(-1.0..1.0))
+                    .collect();
+                let rho = super::eigenvalues(&a, n).expect("converges here");
+                let rho = rho.iter().map(|m| m.re.hypot(m.im)).fold(0.0, f64::max);
+                let g = super::gelfand_radius(&a, n);
+                assert!((g / rho - 1.0).abs() < 1e-9, "n = {n}: {g} against {rho}");
+            }
+        }
+        // A 4 × 4 Jordan block of 0.9: ρ = 0.9, ‖A^k‖ grows like k³ 0.9^k first.
+        let mut j = vec![0.0; 16];
+        for i in 0..4 {
+            j[i * 4 + i] = 0.9;
+            if i < 3 {
+                j[i * 4 + i + 1] = 1.0;
+            }
+        }
+        assert!((super::gelfand_radius(&j, 4) / 0.9 - 1.0).abs() < 1e-9);
+        assert_eq!(super::gelfand_radius(&[0.0; 9], 3), 0.0);
+    }
+
+    /// nalgebra's Schur decomposition loops for ever on this matrix (a_ij = 10i + j + 1,
+    /// rank 2; dimforge/nalgebra#611) without a bound on its iterations; bounded, the
+    /// spectral radius still comes out, by one way or the other.
+    #[test]
+    fn the_spectral_radius_of_a_matrix_schur_loops_on_terminates() {
+        let n = 10;
+        let a: Vec<f64> = (0..n * n)
+            .map(|k| (10 * (k / n) + k % n + 1) as f64)
+            .collect();
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || tx.send(super::growth_per_step(&a, n)).unwrap());
+        let rho = rx
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .expect("an answer within a minute");
+        // Rank 2: the non-zero eigenvalues solve λ² − tr(A)λ + (the 2 × 2 minors' sum) = 0.
+        let tr: f64 = (0..n).map(|i| (11 * i + 1) as f64).sum();
+        let e2: f64 = (0..n)
+            .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+            .map(|(i, j)| {
+                let at = |r: usize, c: usize| (10 * r + c + 1) as f64;
+                at(i, i) * at(j, j) - at(i, j) * at(j, i)
+            })
+            .sum();
+        let want = (tr + (tr * tr - 4.0 * e2).sqrt()) / 2.0;
+        assert!((rho / want - 1.0).abs() < 1e-9, "{rho} against {want}");
+    }
     use super::quoted_names;
 
     #[test]

@@ -1040,25 +1040,56 @@ fn noise_cov(
                         }
                     }
                 }
-                let mat = nalgebra::DMatrix::from_row_slice(dim, dim, &cov);
-                let eig = nalgebra::SymmetricEigen::new(mat);
-                let min = eig
-                    .eigenvalues
-                    .iter()
-                    .cloned()
-                    .fold(f64::INFINITY, f64::min);
-                let max = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
-                if min < -1e-12 * max.max(f64::MIN_POSITIVE) {
-                    errs.at(
-                        cov_path,
-                        format!("a covariance must be positive semi-definite; its smallest eigenvalue is {min:e}"),
-                    );
+                if let Some(why) = not_semi_definite(&cov, dim) {
+                    errs.at(cov_path, why);
                 }
             }
             let s = (0..dim).map(|i| cov[i * dim + i].max(0.0).sqrt()).collect();
             (cov, s)
         }
     }
+}
+
+/// Why a symmetric `m` (dim × dim) is not positive semi-definite, or `None`: its
+/// smallest eigenvalue below −1e-12 of the largest. The eigenvalue algorithm's
+/// iterations are bounded (an unbounded one can loop for ever on some matrices,
+/// dimforge/nalgebra#611); should it not converge, a Cholesky factorisation of m
+/// scaled to a unit diagonal, plus 1e-12 on it, decides instead.
+fn not_semi_definite(m: &[f64], dim: usize) -> Option<String> {
+    let mat = nalgebra::DMatrix::from_row_slice(dim, dim, m);
+    match nalgebra::SymmetricEigen::try_new(mat.clone(), f64::EPSILON, 1000 * dim.max(1)) {
+        Some(eig) => {
+            let min = eig
+                .eigenvalues
+                .iter()
+                .cloned()
+                .fold(f64::INFINITY, f64::min);
+            let max = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
+            (min < -1e-12 * max.max(f64::MIN_POSITIVE)).then(|| {
+                format!("a covariance must be positive semi-definite; its smallest eigenvalue is {min:e}")
+            })
+        }
+        None => (!semi_definite_by_cholesky(m, dim)).then(|| {
+            "a covariance must be positive semi-definite; it is not (its Cholesky factorisation fails)".to_string()
+        }),
+    }
+}
+
+/// Whether a symmetric `m` (dim × dim) is positive semi-definite to 1e-12 relative, by a
+/// Cholesky factorisation of m scaled to a unit diagonal plus 1e-12 on it. A negative
+/// variance, or a zero one with a non-zero covariance in its row, is not.
+fn semi_definite_by_cholesky(m: &[f64], dim: usize) -> bool {
+    let row_nonzero = |i: usize| (0..dim).any(|j| m[i * dim + j] != 0.0);
+    if (0..dim).any(|i| m[i * dim + i] < 0.0 || (m[i * dim + i] == 0.0 && row_nonzero(i))) {
+        return false;
+    }
+    let d: Vec<f64> = (0..dim).map(|i| m[i * dim + i].sqrt()).collect();
+    let scaled = nalgebra::DMatrix::from_fn(dim, dim, |i, j| {
+        let s = d[i] * d[j];
+        let x = if s > 0.0 { m[i * dim + j] / s } else { 0.0 };
+        if i == j { x + 1e-12 } else { x }
+    });
+    scaled.cholesky().is_some()
 }
 
 /// A number for a message: plain in [1e-4, 1e15), else in exponent form (never 300
@@ -1130,5 +1161,50 @@ pub(crate) fn entries(n: usize) -> String {
         "1 entry".into()
     } else {
         format!("{n} entries")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// The fallback semi-definiteness check (where the eigenvalue algorithm does not
+    /// converge) against the eigenvalues, on random covariances G Gᵀ of full and low
+    /// rank, and on them less a multiple of the identity beyond the tolerance.
+    #[test]
+    fn the_cholesky_check_agrees_with_the_eigenvalues() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        for dim in [1, 2, 4, 9] {
+            for rank in [1, dim / 2 + 1, dim] {
+                let g: Vec<f64> = (0..dim * rank)
+                    .map(|_| rng.random_range(-1.0..1.0))
+                    .collect();
+                let mut m = vec![0.0; dim * dim];
+                for i in 0..dim {
+                    for j in 0..dim {
+                        m[i * dim + j] = (0..rank).map(|k| g[i * rank + k] * g[j * rank + k]).sum();
+                    }
+                }
+                assert!(
+                    super::semi_definite_by_cholesky(&m, dim),
+                    "G Gᵀ, {dim} × {dim}, rank {rank}"
+                );
+                assert_eq!(super::not_semi_definite(&m, dim), None);
+                let largest = (0..dim).map(|i| m[i * dim + i]).fold(0.0, f64::max);
+                for i in 0..dim {
+                    m[i * dim + i] -= 1e-6 * largest;
+                }
+                let by_eigen = super::not_semi_definite(&m, dim).is_none();
+                assert_eq!(
+                    super::semi_definite_by_cholesky(&m, dim),
+                    by_eigen,
+                    "less 1e-6, {dim} × {dim}, rank {rank}"
+                );
+                assert_eq!(by_eigen, rank == dim && by_eigen, "{dim}, {rank}");
+            }
+        }
+        // A zero variance with a covariance beside it, and a negative variance.
+        assert!(!super::semi_definite_by_cholesky(&[0.0, 1.0, 1.0, 1.0], 2));
+        assert!(!super::semi_definite_by_cholesky(&[-1.0, 0.0, 0.0, 1.0], 2));
+        assert!(super::semi_definite_by_cholesky(&[0.0, 0.0, 0.0, 1.0], 2));
     }
 }

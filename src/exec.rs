@@ -46,3 +46,26 @@ mod tests {
         assert_eq!(Sequential.threads(), 1);
     }
 }
+
+/// Where a computation keeps the parts it has finished, so that a run of the same
+/// request after an interruption takes them instead of computing them again: the
+/// computation visits the same parts in the same order (every answer is bit-identical
+/// whatever the executor), so an interrupted run is resumed by its own replay. Keys
+/// and values are text (the core has no storage). A synthesis keeps its analyses: a
+/// key names a point's params exactly (their bits), a value is the analysis's outcome
+/// as JSON; a value that does not read back is ignored, and the analysis is run.
+pub trait Memo: Sync {
+    fn recall(&self, key: &str) -> Option<String>;
+    fn keep(&self, key: &str, value: &str);
+}
+
+/// No memory: every part is computed (the CLI, the browser; a server job keeps its
+/// parts in its store).
+pub struct Forgetful;
+
+impl Memo for Forgetful {
+    fn recall(&self, _: &str) -> Option<String> {
+        None
+    }
+    fn keep(&self, _: &str, _: &str) {}
+}

@@ -15,7 +15,7 @@
 //! analyses) is independent of the number of threads. The core has no clock: it
 //! counts analyses, the adapters fill `timing.wall_ms`.
 
-use crate::exec::Executor;
+use crate::exec::{Executor, Forgetful, Memo};
 use crate::model::Model;
 use crate::result::{AnalysisResult, Timing};
 use crate::{Error, FieldError, Overrides, Progress};
@@ -190,7 +190,7 @@ pub struct SynthesisResult {
     pub analyses: u64,
     /// Of `analyses`, those not run again but recalled from an earlier run of the same
     /// request that was interrupted (a server's job re-queued by a shutdown or a crash,
-    /// [`Memo`]). Absent when 0.
+    /// [`crate::exec::Memo`]). Absent when 0.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub recalled_analyses: u64,
     /// Steps D of each analysis.
@@ -754,29 +754,6 @@ fn bisect_iterations_max(b: &Bisect) -> u32 {
 }
 
 // ---------------------------------------------------------------- evaluation
-
-/// Where a synthesis keeps the analyses it has done, so that a run of the same request
-/// after an interruption takes them instead of running them again: the search visits
-/// the same points in the same order (every answer is bit-identical whatever the
-/// executor), so an interrupted run is resumed by its own replay. Keys and values are
-/// text (the core has no storage): a key names a point's params exactly (their bits),
-/// a value is the analysis's outcome as JSON. A value that does not read back is
-/// ignored, and the analysis is run.
-pub trait Memo: Sync {
-    fn recall(&self, key: &str) -> Option<String>;
-    fn keep(&self, key: &str, value: &str);
-}
-
-/// No memory: every analysis runs (the CLI, the browser; a server job's first run
-/// keeps its analyses in its store).
-pub struct Forgetful;
-
-impl Memo for Forgetful {
-    fn recall(&self, _: &str) -> Option<String> {
-        None
-    }
-    fn keep(&self, _: &str, _: &str) {}
-}
 
 /// One analysis's outcome as a synthesis uses it, the form a [`Memo`] keeps.
 #[derive(Serialize, Deserialize)]

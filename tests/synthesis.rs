@@ -753,7 +753,7 @@ struct CountingMemo {
     runs: std::sync::atomic::AtomicU64,
 }
 
-impl synthesis::Memo for CountingMemo {
+impl kea_core::exec::Memo for CountingMemo {
     fn recall(&self, key: &str) -> Option<String> {
         self.kept.lock().unwrap().get(key).cloned()
     }

@@ -1612,3 +1612,60 @@ fn progress_never_goes_back_and_a_requested_cancel_shows() {
     let other = s.submit_analysis(preset("cv-tracker"));
     assert_eq!(s.wait_finished(&other, LONG)["cancel_requested"], false);
 }
+
+/// A synthesis stopped by a shutdown resumes after the restart from the analyses it
+/// had finished, kept in the store: its result is an uninterrupted run's, but for
+/// `recalled_analyses` (how many it did not run again) and the timing. (Before, a
+/// re-queued job started over.)
+#[test]
+fn a_synthesis_resumes_after_a_restart_from_the_analyses_it_kept() {
+    let dir = tmp();
+    let mut model = preset("seed-example");
+    model["time"]["steps"] = 20_000.into();
+    let values: Vec<f64> = (0..600).map(|i| 1.0 + 0.025 * i as f64).collect();
+    let request = json!({
+        "kind": "synthesis",
+        "model": model,
+        "target": {"criterion": "yx", "threshold": 14},
+        "mode": {"grid": {"params": [{"name": "f", "values": values}]}},
+    });
+    let mut s = Server::start(dir.path(), &["--shutdown-grace", "0"]);
+    let r = s.post("/v1/jobs", &request);
+    assert_eq!(r.status, 202, "{}", r.text);
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    s.wait_job(&id, LONG, |j| j["progress"].as_f64().unwrap() >= 0.3);
+    assert!(
+        s.terminate(Duration::from_secs(30)),
+        "kea serve exits on SIGTERM"
+    );
+
+    let s = Server::start(dir.path(), &[]);
+    let resumed = s.wait_finished(&id, LONG);
+    assert_eq!(resumed["status"], "succeeded", "{resumed}");
+    let mut resumed = s.get(&format!("/v1/jobs/{id}/result")).json();
+    // The same request again, uninterrupted.
+    let r = s.post("/v1/jobs", &request);
+    let again = r.json()["id"].as_str().unwrap().to_string();
+    assert_eq!(s.wait_finished(&again, LONG)["status"], "succeeded");
+    let mut whole = s.get(&format!("/v1/jobs/{again}/result")).json();
+
+    assert_eq!(
+        whole["recalled_analyses"],
+        Value::Null,
+        "{}",
+        whole["analyses"]
+    );
+    let recalled = resumed["recalled_analyses"].as_u64().unwrap_or(0);
+    let analyses = whole["analyses"].as_u64().unwrap();
+    // At least the analyses kept by 30 % (less the last half second's), not all.
+    assert!(
+        recalled >= analyses / 5 && recalled < analyses,
+        "{recalled} of {analyses} recalled"
+    );
+    for r in [&mut resumed, &mut whole] {
+        let o = r.as_object_mut().unwrap();
+        o.remove("timing");
+        o.remove("recalled_analyses");
+    }
+    assert_eq!(resumed, whole);
+}

@@ -330,10 +330,15 @@ pub async fn analyze(
         .acquire_owned()
         .await
         .map_err(Problem::internal)?;
-    let out =
-        tokio::task::spawn_blocking(move || prepared.run(&mut kea_core::NoProgress, &|| false))
-            .await
-            .map_err(Problem::internal)?
-            .map_err(|e| Problem::from_core(in_stored_model(e, stored.as_deref())))?;
+    let out = tokio::task::spawn_blocking(move || {
+        prepared.run(
+            &mut kea_core::NoProgress,
+            &|| false,
+            &kea_core::exec::Forgetful,
+        )
+    })
+    .await
+    .map_err(Problem::internal)?
+    .map_err(|e| Problem::from_core(in_stored_model(e, stored.as_deref())))?;
     Ok(raw_json(StatusCode::OK, out.result_json))
 }

@@ -10,6 +10,7 @@ use super::problem::{Problem, kind};
 use super::store::{Enqueued, JobRecord, JobStatus, Outcome, Store, now_rfc3339};
 use axum::http::StatusCode;
 use kea_core::Error;
+use kea_core::exec::Memo;
 use std::cell::Cell;
 use std::collections::HashMap;
 use std::ops::ControlFlow;
@@ -19,6 +20,73 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use tokio::sync::watch;
+
+/// A job's [`Memo`] in the store: what an earlier run of the job kept, read once at
+/// its start, and what this run finishes, written in batches at most every
+/// [`PERSIST_EVERY`] (one transaction each, not one per part: a synthesis may finish
+/// hundreds of analyses a second) and at a shutdown. A crash loses at most the last
+/// batch; a job's end drops them all ([`Store::finish_job`]).
+struct StoreMemo<'a> {
+    store: &'a dyn Store,
+    job: &'a str,
+    earlier: HashMap<String, String>,
+    pending: Mutex<(Vec<(String, String)>, Instant)>,
+}
+
+impl<'a> StoreMemo<'a> {
+    fn new(store: &'a dyn Store, job: &'a str) -> Self {
+        let earlier = store.checkpoints(job).unwrap_or_else(|e| {
+            tracing::warn!(error = %e, "cannot read the job's checkpoints: it starts over");
+            HashMap::new()
+        });
+        if !earlier.is_empty() {
+            tracing::info!(
+                kept = earlier.len(),
+                "resuming from an earlier run's checkpoints"
+            );
+        }
+        StoreMemo {
+            store,
+            job,
+            earlier,
+            pending: Mutex::new((Vec::new(), Instant::now())),
+        }
+    }
+
+    fn flush(&self) {
+        let batch = match self.pending.lock() {
+            Ok(mut p) => {
+                p.1 = Instant::now();
+                std::mem::take(&mut p.0)
+            }
+            Err(_) => return,
+        };
+        if !batch.is_empty()
+            && let Err(e) = self.store.keep_checkpoints(self.job, &batch)
+        {
+            tracing::warn!(error = %e, "cannot record the job's checkpoints");
+        }
+    }
+}
+
+impl Memo for StoreMemo<'_> {
+    fn recall(&self, key: &str) -> Option<String> {
+        self.earlier.get(key).cloned()
+    }
+
+    fn keep(&self, key: &str, value: &str) {
+        let due = match self.pending.lock() {
+            Ok(mut p) => {
+                p.0.push((key.to_string(), value.to_string()));
+                p.1.elapsed() >= PERSIST_EVERY
+            }
+            Err(_) => false,
+        };
+        if due {
+            self.flush();
+        }
+    }
+}
 
 /// A job's state as seen live (between store writes).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -297,6 +365,7 @@ impl Pool {
             let request: serde_json::Value = serde_json::from_str(&job.request_json)
                 .map_err(|e| Error::invalid("", format!("stored request unreadable: {e}")))?;
             let prepared = kind.prepare(&request)?;
+            let memo = StoreMemo::new(&*self.store, &job.id);
             let mut last_persist = Instant::now();
             let mut progress = |fraction: f64| {
                 // Never backwards, whatever order the core's parts report in.
@@ -334,7 +403,12 @@ impl Pool {
                     || self.state.load(Ordering::Relaxed) == STOPPING
                     || started.elapsed() > self.job_time_limit
             };
-            prepared.run(&mut progress, &stop_requested)
+            let out = prepared.run(&mut progress, &stop_requested, &memo);
+            if matches!(stop.get(), Some(Stop::Shutdown)) {
+                // Re-queued next: what this run finished is kept for the next one.
+                memo.flush();
+            }
+            out
         }));
         let outcome = match result {
             Ok(Ok(out)) => Outcome::Succeeded {

@@ -11,6 +11,7 @@ pub mod simulation;
 pub mod synthesis;
 
 pub use kea_core::cost;
+use kea_core::exec::Memo;
 use kea_core::{Error, Progress};
 use serde_json::Value;
 use std::sync::Arc;
@@ -30,11 +31,14 @@ pub trait PreparedJob: Send {
     fn work(&self) -> Work;
     /// Run to completion, reporting progress; `Error::Cancelled` when progress said stop.
     /// `stop` says the same as progress's answer, from any thread: for computations
-    /// running beside others, which do not report (a synthesis's analyses).
+    /// running beside others, which do not report (a synthesis's analyses). `memo`
+    /// keeps finished parts for a run of the same job after a restart, and holds those
+    /// of an earlier run (a synthesis keeps its analyses; the other kinds start over).
     fn run(
         self: Box<Self>,
         progress: &mut dyn Progress,
         stop: &(dyn Fn() -> bool + Sync),
+        memo: &dyn Memo,
     ) -> Result<JobOutput, Error>;
 }
 

@@ -157,6 +157,7 @@ impl PreparedJob for Prepared {
         self: Box<Self>,
         progress: &mut dyn Progress,
         _stop: &(dyn Fn() -> bool + Sync),
+        _memo: &dyn kea_core::exec::Memo,
     ) -> Result<JobOutput, Error> {
         let start = Instant::now();
         let exec = Rayon::new(None).map_err(|e| Error::invalid("", e))?;

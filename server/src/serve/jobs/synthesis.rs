@@ -131,12 +131,13 @@ impl PreparedJob for Prepared {
         self: Box<Self>,
         progress: &mut dyn Progress,
         stop: &(dyn Fn() -> bool + Sync),
+        memo: &dyn kea_core::exec::Memo,
     ) -> Result<JobOutput, Error> {
         let exec = Rayon::new(None)
             .map_err(|e| Error::invalid("", e))?
             .stopping_when(stop);
         let start = Instant::now();
-        let mut result = synthesis::synthesize(&self.request, &exec, progress)?;
+        let mut result = synthesis::synthesize_resuming(&self.request, &exec, progress, memo)?;
         result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         let result_json = serde_json::to_string(&result)
             .map_err(|e| Error::invalid("", format!("result not serialisable: {e}")))?;

@@ -173,6 +173,12 @@ pub trait Store: Send + Sync + 'static {
         progress: f64,
         finished_at: &str,
     ) -> Result<()>;
+    /// Keep what a running job has finished, under keys (one transaction); a run of
+    /// the job after a restart reads them back with [`Store::checkpoints`].
+    /// [`Store::finish_job`] drops them.
+    fn keep_checkpoints(&self, id: &str, entries: &[(String, String)]) -> Result<()>;
+    /// What [`Store::keep_checkpoints`] kept for a job.
+    fn checkpoints(&self, id: &str) -> Result<std::collections::HashMap<String, String>>;
     /// Record that a cancel was asked for while the job runs (kept with the job, so a
     /// process that stops first does not run it again); false if it is not running.
     fn request_cancel(&self, id: &str) -> Result<bool>;

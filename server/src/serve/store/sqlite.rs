@@ -6,6 +6,7 @@ use super::{
     StoreError,
 };
 use rusqlite::{Connection, OptionalExtension, Row, TransactionBehavior, params};
+use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Mutex;
 
@@ -40,6 +41,14 @@ const MIGRATIONS: &[&str] = &[
      );",
     // 2: a cancel asked for while the job runs, so that it is not lost with the process.
     "ALTER TABLE jobs ADD COLUMN cancel_requested INTEGER NOT NULL DEFAULT 0;",
+    // 3: what a running job has finished (a synthesis's analyses), so that a run after a
+    // restart resumes; dropped when the job ends.
+    "CREATE TABLE job_checkpoints (
+        job_id TEXT NOT NULL REFERENCES jobs (id) ON DELETE CASCADE,
+        key TEXT NOT NULL,
+        value TEXT NOT NULL,
+        PRIMARY KEY (job_id, key)
+     );",
 ];
 
 pub struct SqliteStore {
@@ -404,7 +413,31 @@ impl Store for SqliteStore {
                     )?;
                 }
             }
+            tx.execute("DELETE FROM job_checkpoints WHERE job_id = ?1", [id])?;
             tx.commit()
+        })
+    }
+
+    fn keep_checkpoints(&self, id: &str, entries: &[(String, String)]) -> Result<()> {
+        self.with(|c| {
+            let tx = c.transaction()?;
+            {
+                let mut insert = tx.prepare(
+                    "INSERT OR REPLACE INTO job_checkpoints (job_id, key, value) VALUES (?1, ?2, ?3)",
+                )?;
+                for (key, value) in entries {
+                    insert.execute(params![id, key, value])?;
+                }
+            }
+            tx.commit()
+        })
+    }
+
+    fn checkpoints(&self, id: &str) -> Result<HashMap<String, String>> {
+        self.with(|c| {
+            let mut q = c.prepare("SELECT key, value FROM job_checkpoints WHERE job_id = ?1")?;
+            let rows = q.query_map([id], |r| Ok((r.get(0)?, r.get(1)?)))?;
+            rows.collect()
         })
     }
 
@@ -583,6 +616,41 @@ mod tests {
         // A queued job cancelled at once records the request too.
         assert!(s.cancel_queued(&b, &now_rfc3339()).unwrap());
         assert!(s.get_job(&b).unwrap().unwrap().cancel_requested);
+    }
+
+    /// A job's checkpoints are kept in batches, read back whole, replaced by key, and
+    /// dropped when the job ends.
+    #[test]
+    fn checkpoints_are_kept_until_the_job_ends() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = SqliteStore::open(dir.path()).unwrap();
+        let id = new_id();
+        s.insert_job(&JobRecord {
+            id: id.clone(),
+            kind: "synthesis".into(),
+            status: JobStatus::Running,
+            progress: 0.0,
+            request_json: "{}".into(),
+            work: 1.0,
+            created_at: now_rfc3339(),
+            started_at: None,
+            finished_at: None,
+            error_json: None,
+            attempts: 1,
+            cancel_requested: false,
+        })
+        .unwrap();
+        let kv = |k: &str, v: &str| (k.to_string(), v.to_string());
+        s.keep_checkpoints(&id, &[kv("a", "1"), kv("b", "2")])
+            .unwrap();
+        s.keep_checkpoints(&id, &[kv("b", "3")]).unwrap();
+        let kept = s.checkpoints(&id).unwrap();
+        assert_eq!(kept.len(), 2);
+        assert_eq!((kept["a"].as_str(), kept["b"].as_str()), ("1", "3"));
+        assert!(s.checkpoints(&new_id()).unwrap().is_empty());
+        s.finish_job(&id, &Outcome::Cancelled, 0.5, &now_rfc3339())
+            .unwrap();
+        assert!(s.checkpoints(&id).unwrap().is_empty());
     }
 
     #[test]

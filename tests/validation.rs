@@ -531,6 +531,51 @@ fn work_estimates_count_every_step_not_only_n_cubed() {
     assert_eq!((w.steps, w.states, w.work), (50, 10, 50.0 * 2800.0));
 }
 
+/// Where A and the measurements are sparse, the engine's part of the estimate counts
+/// a's non-zeros and the measurements (2(N + nnz(a))N + nN²) in place of N³: an
+/// N = 200 chain measured once was estimated 33 times its time. Where N³ is the
+/// smaller (every state measured, or a dense a), it stays.
+#[test]
+fn work_estimates_count_a_sparse_a_and_few_measurements() {
+    use kea_core::cost::analysis_work;
+    let work = |m: &Value| {
+        let m = model_from_value(m.clone()).unwrap();
+        let compiled = kea_core::validate::compile(&m, &Overrides::new()).unwrap();
+        analysis_work(&compiled, Some(&m))
+    };
+    let n = 200;
+    let bidiagonal = |i: usize, j: usize| match j.wrapping_sub(i) {
+        0 => "-1".to_string(),
+        1 => "1".to_string(),
+        _ => "0".to_string(),
+    };
+    let mut one = chain(n, bidiagonal);
+    one["measurement"] = json!({
+        "names": ["m0"],
+        "c": [(0..n).map(|j| if j == 0 { 1.0 } else { 0.0 }).collect::<Vec<_>>()],
+        "gamma": [[1.0]],
+        "psi": [0.01]
+    });
+    one["options"] = json!({"trace_points": 0});
+    let w = work(&one);
+    let nnz = 2 * n - 1;
+    let engine = 2.0 * (n + nnz) as f64 * n as f64 + (n * n) as f64 + 16.0 * (n * n) as f64 + 200.0;
+    assert_eq!(w.units, 50.0 * engine, "{}", w.explain);
+    assert!(
+        w.explain.contains("399 non-zeros in a, n = 1: below N³"),
+        "{}",
+        w.explain
+    );
+    // Every state measured: N³.
+    let mut all = chain(n, bidiagonal);
+    all["options"] = json!({"trace_points": 0});
+    let all = work(&all);
+    assert_eq!(all.units, 50.0 * kea_core::step_cost(n), "{}", all.explain);
+    // A dense a, measured once: N³ too (2(N + N²)N + N² is larger).
+    one["system"]["a"] = json!(vec![vec![0.5; n]; n]);
+    assert_eq!(work(&one).units, 50.0 * kea_core::step_cost(n));
+}
+
 #[test]
 fn schedule_expressions_count_with_the_others() {
     // 100 measurements, each available `when` a distinct 600-character expression:

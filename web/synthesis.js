@@ -479,7 +479,7 @@ export class SynthesisView extends RunView {
     const what = `${LABEL[t.criterion]} (${t.set}${t.state ? `, state ${t.state}` : ', weighted'}) ≥ ${fmt(t.threshold)}`;
     const parts = [
       el('p', { class: `syn-status status-${r.status}`, id: 'syn-message' }, el('strong', { text: `${r.status.replaceAll('_', ' ')}: ` }), uiWords(r.message)),
-      el('p', { class: 'syn-summary', id: 'syn-summary' }, `Target ${what} · `, el('span', { id: 'syn-analyses', 'data-value': String(r.analyses), text: `${r.analyses} analyses` }), ` of D = ${r.steps.toLocaleString('en')} steps · ${duration(r.timing.wall_ms)} on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`),
+      el('p', { class: 'syn-summary', id: 'syn-summary' }, `Target ${what} · `, el('span', { id: 'syn-analyses', 'data-value': String(r.analyses), text: `${r.analyses} analyses` }), r.recalled_analyses ? ` (${r.recalled_analyses} of them kept from before a server restart)` : '', ` of D = ${r.steps.toLocaleString('en')} steps · ${duration(r.timing.wall_ms)} on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`),
       el('p', { class: 'stale-note', text: 'The model has changed since this run: run again to update.' }),
       this.pointWarnings(r),
     ];

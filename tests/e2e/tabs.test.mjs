@@ -195,6 +195,17 @@ test('a synthesis grid gives the same table in the browser, on the server and in
   // The answer is re-analysed: the verification row repeats it.
   const verified = await page.$eval('#syn-points tr[data-point=verified] td[data-criterion=yx]', (td) => Number(td.dataset.value));
   assertClose(verified, cli.answer.yx, 'verified F_YX');
+  assert.doesNotMatch(await page.textContent('#syn-summary'), /kept from before/);
+
+  // A server job resumed after a restart says how many of its analyses it kept (the
+  // result's recalled_analyses; server/tests/http.rs restarts a server for real).
+  await page.route('**/v1/jobs/*/result', async (route) => {
+    const response = await route.fetch();
+    await route.fulfill({ response, json: { ...(await response.json()), recalled_analyses: 3 } });
+  });
+  await runView('syn', 'server');
+  await page.unroute('**/v1/jobs/*/result');
+  assert.match(await page.textContent('#syn-summary'), /7 analyses \(3 of them kept from before a server restart\) of D/);
 });
 
 test('a bisection gives the same answer and verification in the browser and on the server', async () => {

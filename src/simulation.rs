@@ -1503,16 +1503,14 @@ pub fn traces_csv(r: &SimulationResult) -> String {
         .chain(
             tr.states
                 .iter()
-                .flat_map(|st| SERIES.iter().map(move |s| format!("{}.{s}", st.state))),
+                .flat_map(|st| SERIES.iter().map(move |s| format!("{s}:{}", st.state))),
         )
         .chain(["nees".to_string(), "nis".to_string()]);
-    let opt = |v: Option<f64>| {
-        v.filter(|x| x.is_finite())
-            .map(|x| format!("{x:e}"))
-            .unwrap_or_default()
-    };
+    // (As the analysis's CSV: plain, or in exponent form outside [1e-4, 1e15).)
+    let num = crate::validate::num;
+    let opt = |v: Option<f64>| v.filter(|x| x.is_finite()).map(num).unwrap_or_default();
     let rows = tr.t.iter().enumerate().map(|(row, t)| {
-        let mut fields = vec![format!("{t:e}")];
+        let mut fields = vec![num(*t)];
         for st in &tr.states {
             let meas = st.measured_sko.as_ref().and_then(|m| m[row]);
             fields.extend(

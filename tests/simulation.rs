@@ -450,3 +450,38 @@ fn normal_samples_take_libm_bits_whatever_the_features() {
     }
     assert_eq!(hash, 0xf055_9f71_ea9a_e9d6, "{hash:#018x}");
 }
+
+/// The traces CSV has the analysis CSV's form — `t`, then `series:state` columns,
+/// numbers that read back to the result's own (plain, in exponent form outside
+/// [1e-4, 1e15)), an empty cell where there is none — then `nees` and `nis`.
+#[test]
+fn the_traces_csv_reads_back_to_the_results_traces() {
+    let m = helicopter(400);
+    let r = sim(&m, &request(20, 3, Truth::Process));
+    let text = kea_core::simulation::traces_csv(&r);
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(header[0], "t");
+    assert_eq!(header[header.len() - 2..], ["nees", "nis"]);
+    let col = |name: String| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), r.traces.t.len());
+    let cell = |s: &str| (!s.is_empty()).then(|| s.parse::<f64>().unwrap());
+    for (k, row) in rows.iter().enumerate() {
+        assert_eq!(cell(row[0]), Some(r.traces.t[k]));
+        for st in &r.traces.states {
+            let at = |series: &str| cell(row[col(format!("{series}:{}", st.state))]);
+            assert_eq!(at("filtered_sko"), Some(st.filtered_sko[k]), "row {k}");
+            assert_eq!(at("potential_sko"), Some(st.potential_sko[k]));
+            assert_eq!(
+                at("measured_sko"),
+                st.measured_sko.as_ref().and_then(|m| m[k])
+            );
+            assert!(
+                !row[col(format!("chi:{}", st.state))].contains('e')
+                    || st.chi[k].abs() < 1e-4
+                    || st.chi[k].abs() >= 1e15
+            );
+        }
+    }
+}

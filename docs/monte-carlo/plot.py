@@ -17,11 +17,11 @@ src, out = sys.argv[1], sys.argv[2]
 with open(src) as f:
     rows = list(csv.DictReader(f))
 t = [float(r["t"]) for r in rows]
-states = [k[: -len(".potential_sko")] for k in rows[0] if k.endswith(".potential_sko")]
+states = [k[len("potential_sko:") :] for k in rows[0] if k.startswith("potential_sko:")]
 fig, axes = plt.subplots(3, 2, figsize=(11, 9), sharex=True)
 for ax, s in zip(axes.T.flat, states):
-    pot = [float(r[f"{s}.potential_sko"]) ** 2 for r in rows]
-    real = [float(r[f"{s}.filtered_sko"]) ** 2 for r in rows]
+    pot = [float(r[f"potential_sko:{s}"]) ** 2 for r in rows]
+    real = [float(r[f"filtered_sko:{s}"]) ** 2 for r in rows]
     ax.plot(t, pot, color="black", lw=1.6, label="potential (Riccati) R_ii")
     ax.plot(t, real, color="tab:red", lw=0.9, label="real (Monte Carlo) sample variance")
     ax.set_yscale("log")

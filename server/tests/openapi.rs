@@ -658,7 +658,7 @@ fn responses_validate_against_the_spec() {
 }
 
 /// A traces CSV's header is the one the spec describes for its kind: `series:state`
-/// columns for an analysis, `state.series` (then `nees`, `nis`) for a simulation,
+/// columns for both kinds (then `nees`, `nis` for a simulation),
 /// each series named in the description.
 fn check_csv_header(spec: &Value, kind: &str, header: &str) {
     let description =
@@ -677,8 +677,8 @@ fn check_csv_header(spec: &Value, kind: &str, header: &str) {
             }
             "simulation" if c == "nees" || c == "nis" => Some(c),
             "simulation" => {
-                assert!(description.contains("`state.series`"));
-                c.split_once('.').map(|(_, series)| series)
+                assert!(description.contains("`series:state`"));
+                c.split_once(':').map(|(series, _)| series)
             }
             other => panic!("{other} has no traces"),
         };

@@ -49,6 +49,9 @@ function focusSelector(control) {
 
 const byFocusKey = (key) => `[data-focus="${CSS.escape(key)}"]`;
 
+/** `text` as HTML text or an attribute's value (the grids are written as HTML). */
+const escapeHtml = (text) => String(text).replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`);
+
 const zeros = (n) => Array.from({ length: n }, () => 0);
 const resizeVec = (v, n, fill = () => 0) =>
   Array.from({ length: n }, (_, i) => (v && i < v.length ? v[i] : fill(i)));
@@ -904,92 +907,130 @@ export class ModelEditor {
    * are rows and entries a ragged matrix lacks. `rowNames`/`colNames` are the paths of
    * the name vectors that label the rows/columns (kept current as the names are typed).
    * `rowAction(i)`, if given, is a control at the end of row i (a name's ×).
+   *
+   * Built for N = 200 (a, C and Γ: up to 120 000 cells). The cells are written as one
+   * HTML text (a createElement and listeners per cell took seconds), and the grid
+   * listens for all of them (`cellEdited`, `gridKey`, `gridPaste`). An edit changes its
+   * cell, its marks and the model, never the grid (the DOM nodes stay).
    */
   grid({ title, path, obj, key, rows, cols, rowLabels, colLabels, rowNames, colNames, create, text = false, rowAction }) {
-    const table = el('table', { class: 'grid', 'data-grid': path });
-    const caption = el('caption', {}, title, el('span', { class: 'scroll-hint', text: ' — scroll sideways for more ↔' }));
-    table.append(caption);
     const vector = cols === 0;
-    if (colLabels) {
-      table.append(
-        el(
-          'thead',
-          {},
-          el('tr', {}, el('th'), ...colLabels.map((c, j) => el('th', { scope: 'col', 'data-label-of': colNames && `${colNames}[${j}]`, text: c }))),
-        ),
-      );
-    }
-    const body = el('tbody');
-    for (let i = 0; i < rows; i++) {
-      const tr = el('tr', {}, el('th', { scope: 'row', 'data-label-of': rowNames && `${rowNames}[${i}]`, text: rowLabels?.[i] ?? String(i + 1) }));
-      for (let j = 0; j < (vector ? 1 : cols); j++) {
-        const cellPath = vector ? `${path}[${i}]` : `${path}[${i}][${j}]`;
-        const current = vector ? obj[key]?.[i] : obj[key]?.[i]?.[j];
-        const label = `${title} ${vector ? `[${i + 1}]` : `[${i + 1}, ${j + 1}]`}`;
-        const input = el('input', {
-          value: showValue(current),
-          placeholder: current === undefined ? (text ? undefined : '0') : undefined,
-          'data-path': cellPath,
-          'data-row': i,
-          'data-col': j,
-          'aria-label': label,
-          spellcheck: 'false',
-          autocomplete: 'off',
-        });
-        showTitle(input);
-        if (!text) this.setLocal(cellPath, cellProblem(input.value), false);
-        input.addEventListener('input', () => {
-          showTitle(input);
-          // A number's own check (“1e400” is too large), marked only when it changes:
-          // a redrawn mark is announced again.
-          const problem = text ? null : cellProblem(input.value);
-          if ((this.local.get(cellPath) ?? null) !== problem) this.setLocal(cellPath, problem);
-          if (!Array.isArray(obj[key])) obj[key] = create();
-          const value = text ? input.value : parseCell(input.value);
-          const target = obj[key];
-          if (vector) {
-            while (target.length < i) target.push(text ? '' : 0);
-            target[i] = value;
-          } else {
-            // A ragged matrix (imported, linked) gets the rows and entries it lacks.
-            while (target.length <= i) target.push([]);
-            if (!Array.isArray(target[i])) target[i] = [];
-            while (target[i].length < cols) target[i].push(0);
-            target[i][j] = value;
-          }
-          if (text) {
-            for (const th of this.root.querySelectorAll(`[data-label-of="${CSS.escape(cellPath)}"]`)) {
-              th.textContent = input.value;
-            }
-            for (const button of this.root.querySelectorAll(`[data-remove-of="${CSS.escape(cellPath)}"]`)) {
-              button.setAttribute('aria-label', button.getAttribute('aria-label').replace(/^(remove \S+) .*$/s, `$1 ${input.value}`));
-            }
-          }
-          this.changed();
-        });
-        if (text) {
-          // A name's rename reaches the pairs that name it, when the edit is done.
-          let named = input.value;
-          input.addEventListener('focus', () => (named = input.value));
-          input.addEventListener('change', () => {
-            this.renameInPairs(path, named, input.value);
-            named = input.value;
-          });
-        }
-        input.addEventListener('keydown', (e) => this.gridKey(e, table));
-        input.addEventListener('paste', (e) => this.gridPaste(e, table, title));
-        const td = el('td', { 'data-path': cellPath }, input);
-        this.register(cellPath, input, td);
-        tr.append(td);
+    const width = vector ? 1 : cols;
+    const hint = '<span class="scroll-hint"> — scroll sideways for more ↔</span>';
+    const labelOf = (names, k) => (names ? ` data-label-of="${escapeHtml(`${names}[${k}]`)}"` : '');
+    const cellPath = (i, j) => (vector ? `${path}[${i}]` : `${path}[${i}][${j}]`);
+    const named = escapeHtml(title);
+    // The cell (i, j) as HTML, its own check recorded. Paths and numbers need no
+    // escaping; the indices are read from the path (`cellAt`).
+    const cell = (i, j) => {
+      const at = cellPath(i, j);
+      const current = vector ? obj[key]?.[i] : obj[key]?.[i]?.[j];
+      let shown = typeof current === 'number' ? String(current) : showValue(current);
+      if (typeof current !== 'number') {
+        if (!text) this.setLocal(at, cellProblem(shown), false);
+        shown = escapeHtml(shown);
       }
-      if (rowAction) tr.append(el('td', {}, rowAction(i)));
-      body.append(tr);
+      const input =
+        `<input value="${shown}"${shown ? ` title="${shown}"` : ''}${current === undefined && !text ? ' placeholder="0"' : ''} data-path="${at}"` +
+        ` aria-label="${named} ${vector ? `[${i + 1}]` : `[${i + 1}, ${j + 1}]`}"`;
+      return `<td data-path="${at}">${input} spellcheck="false" autocomplete="off"></td>`;
+    };
+    const html = [];
+    const table = el('table', { class: 'grid', 'data-grid': path });
+    if (colLabels) {
+      html.push('<thead><tr><th></th>');
+      colLabels.forEach((c, j) => html.push(`<th scope="col"${labelOf(colNames, j)}>${escapeHtml(c)}</th>`));
+      html.push('</tr></thead>');
     }
-    table.append(body);
+    html.push('<tbody>');
+    for (let i = 0; i < rows; i++) {
+      html.push(`<tr><th scope="row"${labelOf(rowNames, i)}>${escapeHtml(rowLabels?.[i] ?? String(i + 1))}</th>`);
+      for (let j = 0; j < width; j++) html.push(cell(i, j));
+      html.push(rowAction ? '<td></td></tr>' : '</tr>');
+    }
+    html.push('</tbody>');
+    table.innerHTML = html.join('');
+    const caption = el('caption', {}, title);
+    caption.insertAdjacentHTML('beforeend', hint);
+    table.prepend(caption);
+    if (rowAction) table.querySelectorAll('tbody > tr').forEach((tr, i) => tr.lastElementChild.append(rowAction(i)));
+    const inputs = table.getElementsByTagName('input');
+    for (let k = 0; k < inputs.length; k++) {
+      const input = inputs[k];
+      this.fields.set(cellPath(Math.floor(k / width), k % width), { input, holder: input.parentElement });
+    }
+    const grid = { path, obj, key, rows, cols, width, vector, text, create, title, inputs, table };
+    grid.at = (i, j) => (i >= 0 && i < rows && j >= 0 && j < width ? inputs[i * width + j] : undefined);
+    const isCell = (target) => target.tagName === 'INPUT' && target.dataset.path?.startsWith(`${path}[`);
+    table.addEventListener('input', (e) => isCell(e.target) && this.cellEdited(grid, e.target));
+    table.addEventListener('keydown', (e) => isCell(e.target) && this.gridKey(e, grid));
+    table.addEventListener('paste', (e) => isCell(e.target) && this.gridPaste(e, grid));
+    if (text) {
+      // A name's rename reaches the pairs that name it, when the edit is done.
+      const was = new WeakMap(); // input → its text when it took the focus
+      table.addEventListener('focusin', (e) => isCell(e.target) && was.set(e.target, e.target.value));
+      table.addEventListener('change', (e) => {
+        if (!isCell(e.target)) return;
+        this.renameInPairs(path, was.get(e.target) ?? e.target.defaultValue, e.target.value);
+        was.set(e.target, e.target.value);
+      });
+    }
     this.register(path, table, caption);
     const wrap = el('div', { class: 'grid-wrap' }, table);
     wrap.addEventListener('scroll', () => this.scrollHint(wrap), { passive: true });
     return wrap;
+  }
+
+  /** The row and column of `grid`'s cell `input` (from its path: `system.a[2][3]` → [2, 3]; a vector's column is 0). */
+  cellAt(grid, input) {
+    const [, i, j] = input.dataset.path.slice(grid.path.length).match(/^\[(\d+)\](?:\[(\d+)\])?$/);
+    return [Number(i), Number(j ?? 0)];
+  }
+
+  /**
+   * Put `input`'s text into the model as the entry of `grid` it shows (with the names
+   * that label rows and columns, for a text grid), and record its own check; the
+   * caller marks and reports the change. Returns whether the check's verdict changed.
+   */
+  putCell(grid, input) {
+    const { obj, key, cols, vector, text } = grid;
+    const [i, j] = this.cellAt(grid, input);
+    const at = input.dataset.path;
+    showTitle(input);
+    // A number's own check (“1e400” is too large), marked only when it changes: a
+    // redrawn mark is announced again.
+    const problem = text ? null : cellProblem(input.value);
+    const changed = (this.local.get(at) ?? null) !== problem;
+    if (changed) this.setLocal(at, problem, false);
+    if (!Array.isArray(obj[key])) obj[key] = grid.create();
+    const value = text ? input.value : parseCell(input.value);
+    const target = obj[key];
+    if (vector) {
+      while (target.length < i) target.push(text ? '' : 0);
+      target[i] = value;
+    } else {
+      // A ragged matrix (imported, linked) gets the rows and entries it lacks.
+      while (target.length <= i) target.push([]);
+      if (!Array.isArray(target[i])) target[i] = [];
+      while (target[i].length < cols) target[i].push(0);
+      target[i][j] = value;
+    }
+    if (text) {
+      for (const th of this.root.querySelectorAll(`[data-label-of="${CSS.escape(at)}"]`)) {
+        th.textContent = input.value;
+        if (th.title) th.title = input.value;
+      }
+      for (const button of this.root.querySelectorAll(`[data-remove-of="${CSS.escape(at)}"]`)) {
+        button.setAttribute('aria-label', button.getAttribute('aria-label').replace(/^(remove \S+) .*$/s, `$1 ${input.value}`));
+      }
+    }
+    return changed;
+  }
+
+  /** One cell of `grid` typed into: the model, the cell's marks, and one change. */
+  cellEdited(grid, input) {
+    if (this.putCell(grid, input)) this.mark();
+    this.changed();
   }
 
   /**
@@ -1032,41 +1073,43 @@ export class ModelEditor {
    * MATLAB or numpy (separated by spaces, commas or semicolons, on several lines) —
    * fills the grid from that cell on, as a spreadsheet does, each value checked as if
    * typed. What falls beyond the grid's edge is left out, and a note on the page says
-   * how much. A single value (no tab, one line) pastes into the cell as usual.
+   * how much. A single value (no tab, one line) pastes into the cell as usual. The
+   * block is one edit: the model takes every value, then the marks are updated and the
+   * change reported once (a 200×200 block was 40 000 edits, each checked and reported).
    */
-  gridPaste(e, table, title) {
+  gridPaste(e, grid) {
     const text = e.clipboardData?.getData('text/plain') ?? '';
     const tabbed = text.includes('\t');
     const lines = text.replace(/\r\n?/g, '\n').replace(/\n+$/, '').split('\n');
     if (!tabbed && lines.length < 2) return;
     e.preventDefault();
-    const input = e.target;
-    const r0 = Number(input.dataset.row);
-    const c0 = Number(input.dataset.col);
+    const [r0, c0] = this.cellAt(grid, e.target);
     let pasted = 0;
     let left = 0;
+    let remark = false;
     lines.forEach((line, dr) => {
       const cells = tabbed ? line.split('\t') : line.trim().split(/[\s,;]+/);
       cells.forEach((value, dc) => {
-        const cell = table.querySelector(`input[data-row="${r0 + dr}"][data-col="${c0 + dc}"]`);
+        const cell = grid.at(r0 + dr, c0 + dc);
         if (!cell) {
           left += 1;
           return;
         }
         cell.value = value.trim();
-        cell.dispatchEvent(new Event('input', { bubbles: true }));
+        if (this.putCell(grid, cell)) remark = true;
         pasted += 1;
       });
     });
-    const note = `Pasted ${pasted} value${pasted === 1 ? '' : 's'} into ${title}` + (left > 0 ? `; ${left} beyond its edge left out.` : '.');
+    if (remark) this.mark();
+    if (pasted) this.changed();
+    const note = `Pasted ${pasted} value${pasted === 1 ? '' : 's'} into ${grid.title}` + (left > 0 ? `; ${left} beyond its edge left out.` : '.');
     this.root.dispatchEvent(new CustomEvent('editor-note', { detail: note, bubbles: true }));
   }
 
   /** Arrow keys and Enter move between the cells of a grid. */
-  gridKey(e, table) {
+  gridKey(e, grid) {
     const input = e.target;
-    const r = Number(input.dataset.row);
-    const c = Number(input.dataset.col);
+    const [r, c] = this.cellAt(grid, input);
     let dr = 0;
     let dc = 0;
     if (e.key === 'ArrowUp') dr = -1;
@@ -1074,7 +1117,7 @@ export class ModelEditor {
     else if (e.key === 'ArrowLeft' && input.selectionStart === 0 && input.selectionEnd === 0) dc = -1;
     else if (e.key === 'ArrowRight' && input.selectionStart === input.value.length) dc = 1;
     else return;
-    const next = table.querySelector(`input[data-row="${r + dr}"][data-col="${c + dc}"]`);
+    const next = grid.at(r + dr, c + dc);
     if (next) {
       e.preventDefault();
       next.focus();

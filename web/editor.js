@@ -52,6 +52,14 @@ const byFocusKey = (key) => `[data-focus="${CSS.escape(key)}"]`;
 /** `text` as HTML text or an attribute's value (the grids are written as HTML). */
 const escapeHtml = (text) => String(text).replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`);
 
+/**
+ * A grid of more than this many cells is drawn as rows of blocks of SEGMENT cells that
+ * the browser skips while they are far from the window (see `grid`); a smaller one is a
+ * table. At 1000 cells a table's frame after a keystroke takes a few milliseconds.
+ */
+const LARGE_GRID = 1000;
+const SEGMENT = 10;
+
 const zeros = (n) => Array.from({ length: n }, () => 0);
 const resizeVec = (v, n, fill = () => 0) =>
   Array.from({ length: n }, (_, i) => (v && i < v.length ? v[i] : fill(i)));
@@ -910,18 +918,28 @@ export class ModelEditor {
    *
    * Built for N = 200 (a, C and Γ: up to 120 000 cells). The cells are written as one
    * HTML text (a createElement and listeners per cell took seconds), and the grid
-   * listens for all of them (`cellEdited`, `gridKey`, `gridPaste`). An edit changes its
-   * cell, its marks and the model, never the grid (the DOM nodes stay).
+   * listens for all of them (`cellEdited`, `gridKey`, `gridPaste`). A grid of more than
+   * LARGE_GRID cells is not a table: the browser lays a table out whole, and with
+   * 40 000 inputs every frame after a keystroke took 0.2–2 s of style, layout and paint.
+   * Its rows are flex rows of fixed-width cells in blocks of SEGMENT with
+   * `content-visibility: auto` (style.css), so that the browser lays out and paints
+   * only the blocks near the window; every cell stays in the page (Tab, find, the
+   * tests), unlike a virtualised grid. An edit changes its cell, its marks and the
+   * model, never the grid (the DOM nodes stay).
    */
   grid({ title, path, obj, key, rows, cols, rowLabels, colLabels, rowNames, colNames, create, text = false, rowAction }) {
     const vector = cols === 0;
     const width = vector ? 1 : cols;
+    const large = rows * width > LARGE_GRID;
     const hint = '<span class="scroll-hint"> — scroll sideways for more ↔</span>';
     const labelOf = (names, k) => (names ? ` data-label-of="${escapeHtml(`${names}[${k}]`)}"` : '');
     const cellPath = (i, j) => (vector ? `${path}[${i}]` : `${path}[${i}][${j}]`);
     const named = escapeHtml(title);
     // The cell (i, j) as HTML, its own check recorded. Paths and numbers need no
-    // escaping; the indices are read from the path (`cellAt`).
+    // escaping; a large grid's cells leave spellcheck to the grid, and their indices
+    // to their path (`cellAt`): 120 000 cells are 25 MB of HTML at 200 characters each.
+    // autocomplete="off" stays: without it Chromium's autofill looked at every input
+    // at each change of the address (history.replaceState), 0.5 s at 120 000.
     const cell = (i, j) => {
       const at = cellPath(i, j);
       const current = vector ? obj[key]?.[i] : obj[key]?.[i]?.[j];
@@ -933,27 +951,64 @@ export class ModelEditor {
       const input =
         `<input value="${shown}"${shown ? ` title="${shown}"` : ''}${current === undefined && !text ? ' placeholder="0"' : ''} data-path="${at}"` +
         ` aria-label="${named} ${vector ? `[${i + 1}]` : `[${i + 1}, ${j + 1}]`}"`;
-      return `<td data-path="${at}">${input} spellcheck="false" autocomplete="off"></td>`;
+      return large ? `<div>${input} autocomplete="off"></div>` : `<td data-path="${at}">${input} spellcheck="false" autocomplete="off"></td>`;
     };
     const html = [];
-    const table = el('table', { class: 'grid', 'data-grid': path });
-    if (colLabels) {
-      html.push('<thead><tr><th></th>');
-      colLabels.forEach((c, j) => html.push(`<th scope="col"${labelOf(colNames, j)}>${escapeHtml(c)}</th>`));
-      html.push('</tr></thead>');
+    let table;
+    let caption;
+    if (!large) {
+      table = el('table', { class: 'grid', 'data-grid': path });
+      if (colLabels) {
+        html.push('<thead><tr><th></th>');
+        colLabels.forEach((c, j) => html.push(`<th scope="col"${labelOf(colNames, j)}>${escapeHtml(c)}</th>`));
+        html.push('</tr></thead>');
+      }
+      html.push('<tbody>');
+      for (let i = 0; i < rows; i++) {
+        html.push(`<tr><th scope="row"${labelOf(rowNames, i)}>${escapeHtml(rowLabels?.[i] ?? String(i + 1))}</th>`);
+        for (let j = 0; j < width; j++) html.push(cell(i, j));
+        html.push(rowAction ? '<td></td></tr>' : '</tr>');
+      }
+      html.push('</tbody>');
+      table.innerHTML = html.join('');
+      caption = el('caption', {}, title);
+      caption.insertAdjacentHTML('beforeend', hint);
+      table.prepend(caption);
+      if (rowAction) table.querySelectorAll('tbody > tr').forEach((tr, i) => tr.lastElementChild.append(rowAction(i)));
+    } else {
+      // The row labels' column as wide as the longest label (up to 12 characters; a
+      // longer one is cut short, whole in its tooltip).
+      const labels = Array.from({ length: rows }, (_, i) => String(rowLabels?.[i] ?? i + 1));
+      const labelWidth = Math.min(12, Math.max(2, ...labels.map((s) => s.length)));
+      const id = `grid-${path.replace(/[^a-zA-Z0-9]/g, '-')}`;
+      table = el('div', {
+        class: 'grid large',
+        'data-grid': path,
+        role: 'group',
+        'aria-labelledby': id,
+        spellcheck: 'false',
+        style: `--label-width: ${labelWidth + 1}ch`,
+      });
+      html.push(`<div class="caption" id="${id}">${named}${hint}</div>`);
+      if (colLabels) {
+        html.push('<div class="grid-row"><div class="label"></div>');
+        colLabels.forEach((c, j) => html.push(`<div class="col-label"${labelOf(colNames, j)} title="${escapeHtml(c)}">${escapeHtml(c)}</div>`));
+        html.push('</div>');
+      }
+      const lastBlock = width % SEGMENT;
+      for (let i = 0; i < rows; i++) {
+        const label = escapeHtml(labels[i]);
+        html.push(`<div class="grid-row"><div class="label"${labelOf(rowNames, i)} title="${label}">${label}</div>`);
+        for (let j = 0; j < width; j++) {
+          if (j % SEGMENT === 0) html.push(j + SEGMENT > width ? `<div class="segment" style="--cells: ${lastBlock}">` : '<div class="segment">');
+          html.push(cell(i, j));
+          if (j % SEGMENT === SEGMENT - 1 || j === width - 1) html.push('</div>');
+        }
+        html.push('</div>');
+      }
+      table.innerHTML = html.join('');
+      caption = table.firstElementChild;
     }
-    html.push('<tbody>');
-    for (let i = 0; i < rows; i++) {
-      html.push(`<tr><th scope="row"${labelOf(rowNames, i)}>${escapeHtml(rowLabels?.[i] ?? String(i + 1))}</th>`);
-      for (let j = 0; j < width; j++) html.push(cell(i, j));
-      html.push(rowAction ? '<td></td></tr>' : '</tr>');
-    }
-    html.push('</tbody>');
-    table.innerHTML = html.join('');
-    const caption = el('caption', {}, title);
-    caption.insertAdjacentHTML('beforeend', hint);
-    table.prepend(caption);
-    if (rowAction) table.querySelectorAll('tbody > tr').forEach((tr, i) => tr.lastElementChild.append(rowAction(i)));
     const inputs = table.getElementsByTagName('input');
     for (let k = 0; k < inputs.length; k++) {
       const input = inputs[k];

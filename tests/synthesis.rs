@@ -169,6 +169,18 @@ fn grid_cheapest_cell_follows_cost_order_and_is_verified() {
     assert_eq!(a.params["f"], 8.0);
 }
 
+/// A seed search over ψ and c for F_YX ≥ 14, three points a batch.
+fn fixed_phi_seed_search() -> SynthesisRequest {
+    request(
+        &fixed_phi_model(),
+        json!({"criterion": "yx", "threshold": 14}),
+        json!({"seed_search": {"params": [
+            {"name": "psi", "low": 2.5e-6, "high": 1e-5, "shrink": 0.5},
+            {"name": "c", "low": 0.125, "high": 0.5, "shrink": 0.5}
+        ], "batch": 3}}),
+    )
+}
+
 #[test]
 fn results_do_not_depend_on_thread_count() {
     let req = seed_grid_request(Some(json!([{"name": "f", "cheaper": "lower"}])));
@@ -177,14 +189,7 @@ fn results_do_not_depend_on_thread_count() {
         let many = synthesis::synthesize(&req, &Threads(t), &mut NoProgress).unwrap();
         assert_eq!(many, one, "threads = {t}");
     }
-    let search = request(
-        &fixed_phi_model(),
-        json!({"criterion": "yx", "threshold": 14}),
-        json!({"seed_search": {"params": [
-            {"name": "psi", "low": 2.5e-6, "high": 1e-5, "shrink": 0.5},
-            {"name": "c", "low": 0.125, "high": 0.5, "shrink": 0.5}
-        ], "batch": 3}}),
-    );
+    let search = fixed_phi_seed_search();
     let one = run(&search);
     let many = synthesis::synthesize(&search, &Threads(2), &mut NoProgress).unwrap();
     assert_eq!(many, one);
@@ -778,14 +783,7 @@ fn an_interrupted_synthesis_resumes_from_what_it_kept() {
         json!({"criterion": "yx", "set": "bound", "threshold": 14}),
         json!({"bisect": {"param": "psi", "low": 1e-6, "high": 1e-5, "rel_tol": 1e-3}}),
     );
-    let search = request(
-        &fixed_phi_model(),
-        json!({"criterion": "yx", "threshold": 14}),
-        json!({"seed_search": {"params": [
-            {"name": "psi", "low": 2.5e-6, "high": 1e-5, "shrink": 0.5},
-            {"name": "c", "low": 0.125, "high": 0.5, "shrink": 0.5}
-        ], "batch": 3}}),
-    );
+    let search = fixed_phi_seed_search();
     let grid = seed_grid_request(Some(json!([{"name": "f", "cheaper": "lower"}])));
     for (name, req) in [("bisect", bisect), ("seed_search", search), ("grid", grid)] {
         let whole = run(&req);

@@ -11,7 +11,7 @@
 // Opt-in: `node bench-editor.mjs` (KEA_BIN, KEA_ROOT, KEA_CHROMIUM as for the tests;
 // KEA_BENCH_RUNS). Prints a Markdown table.
 
-import { launchBrowser, newPage, startServer } from './lib.mjs';
+import { chainModel, launchBrowser, newPage, startServer } from './lib.mjs';
 import os from 'node:os';
 
 const RUNS = Number(process.env.KEA_BENCH_RUNS ?? 3);
@@ -22,35 +22,9 @@ const median = (xs) => {
   return s.length % 2 ? s[m] : (s[m - 1] + s[m]) / 2;
 };
 
-/** An N-state chain, n measurements of the first n states, L = 1, M = n (Γ = I). */
-function chain(N, n) {
-  const eye = (r, c) => Array.from({ length: r }, (_, i) => Array.from({ length: c }, (_, j) => (i === j ? 1 : 0)));
-  return {
-    kea_model: 1,
-    name: `chain N=${N} n=${n}`,
-    params: { q: 0.1 },
-    time: { t0: 0, t_end: 1, steps: 100 },
-    system: {
-      states: Array.from({ length: N }, (_, i) => `y${i + 1}`),
-      a: Array.from({ length: N }, (_, i) => Array.from({ length: N }, (_, j) => (i === j ? -0.5 : j === i + 1 ? 1 : 0))),
-      b: Array.from({ length: N }, () => [1]),
-      y0: Array(N).fill(0),
-      eta0: Array(N).fill(1),
-      phi: ['q'],
-    },
-    measurement: {
-      names: Array.from({ length: n }, (_, j) => `z${j + 1}`),
-      c: eye(n, N),
-      gamma: eye(n, n),
-      psi: Array(n).fill(0.5),
-    },
-    criteria: { confidence: 0.95 },
-  };
-}
-
 const MODELS = [
-  { label: 'N = 200, n = 50', model: chain(200, 50) },
-  { label: 'N = 200, n = 200', model: chain(200, 200) },
+  { label: 'N = 200, n = 50', model: chainModel(200, 50) },
+  { label: 'N = 200, n = 200', model: chainModel(200, 200) },
 ];
 
 // In the page: a PerformanceObserver of long tasks, and "the next frame" (after layout and paint).

@@ -7,7 +7,7 @@
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
-import { openApp } from './lib.mjs';
+import { chainModel, openApp } from './lib.mjs';
 
 let page;
 const consoleErrors = [];
@@ -20,33 +20,6 @@ before(async () => {
 });
 
 after(() => app?.close());
-
-/** An N-state chain (a_ii = −0.5, a_i,i+1 = 1) measured in its first n states, L = 1, M = n. */
-function chain(N, n) {
-  const eye = (r, c) => Array.from({ length: r }, (_, i) => Array.from({ length: c }, (_, j) => (i === j ? 1 : 0)));
-  return {
-    kea_model: 1,
-    name: `chain of ${N}`,
-    params: { q: 0.1 },
-    time: { t0: 0, t_end: 1, steps: 100 },
-    system: {
-      states: Array.from({ length: N }, (_, i) => `y${i + 1}`),
-      a: Array.from({ length: N }, (_, i) => Array.from({ length: N }, (_, j) => (i === j ? -0.5 : j === i + 1 ? 1 : 0))),
-      b: Array.from({ length: N }, () => [1]),
-      y0: Array(N).fill(0),
-      eta0: Array(N).fill(1),
-      phi: ['q'],
-    },
-    measurement: {
-      names: Array.from({ length: n }, (_, j) => `z${j + 1}`),
-      c: eye(n, N),
-      gamma: eye(n, n),
-      psi: Array(n).fill(0.5),
-    },
-    criteria: { confidence: 0.95 },
-    options: { trace_points: 1000, steady_state_shortcut: true },
-  };
-}
 
 let imports = 0;
 
@@ -84,7 +57,7 @@ const countChanges = () =>
   });
 
 test('one cell edited at N = 200 changes that cell, its marks and the model: every other node stays', async () => {
-  const model = chain(200, 50);
+  const model = chainModel(200, 50);
   model.measurement.c[10][10] = 'k'; // an unknown name: the core's message at its cell
   await importModel(model);
   assert.match((await messagesAt('measurement.c[10][10]'))[0], /k/);
@@ -135,7 +108,7 @@ test('one cell edited at N = 200 changes that cell, its marks and the model: eve
   await checked();
   assert.deepEqual(await page.$$eval('#editor .cell-error, #editor .general-errors li', (es) => es.map((e) => e.textContent)), []);
   const saved = await exported();
-  const expected = chain(200, 50);
+  const expected = chainModel(200, 50);
   expected.system.a[100][57] = -2.5;
   assert.deepEqual(saved.system, expected.system);
   assert.deepEqual(saved.measurement, expected.measurement);
@@ -143,7 +116,7 @@ test('one cell edited at N = 200 changes that cell, its marks and the model: eve
 });
 
 test('a 200×200 block pasted into a is one edit of the model, its bad values marked at their cells', async () => {
-  await importModel(chain(200, 50));
+  await importModel(chainModel(200, 50));
   await countChanges();
   const rows = Array.from({ length: 200 }, (_, i) => Array.from({ length: 200 }, (_, j) => (i === j ? '-0.25' : j === i + 1 ? '2' : '0')));
   rows[3][4] = '1e400';
@@ -181,7 +154,7 @@ test('a 200×200 block pasted into a is one edit of the model, its bad values ma
 });
 
 test('a large grid keeps its labels over its columns and beside its rows, and moves with the arrow keys', async () => {
-  const model = chain(200, 50);
+  const model = chainModel(200, 50);
   model.system.states[7] = 'a rather long state name';
   await importModel(model);
   // The middles of these elements, across (x) and down (y), with `target` scrolled into view.
@@ -223,7 +196,7 @@ test('a large grid keeps its labels over its columns and beside its rows, and mo
 });
 
 test('at N = 200 a smaller N is undone, and the focus stays in the field', async () => {
-  const model = chain(200, 50);
+  const model = chainModel(200, 50);
   model.system.a[199][199] = 'q';
   await importModel(model);
   await page.fill('#dim-N', '150');

@@ -148,3 +148,30 @@ export function relDiff(a, b) {
   const scale = Math.max(Math.abs(a), Math.abs(b));
   return scale === 0 ? 0 : Math.abs(a - b) / scale;
 }
+
+/** An N-state chain (a_ii = −0.5, a_i,i+1 = 1) measured in its first n states, L = 1, M = n. */
+export function chainModel(N, n) {
+  const eye = (r, c) => Array.from({ length: r }, (_, i) => Array.from({ length: c }, (_, j) => (i === j ? 1 : 0)));
+  return {
+    kea_model: 1,
+    name: `chain of ${N}`,
+    params: { q: 0.1 },
+    time: { t0: 0, t_end: 1, steps: 100 },
+    system: {
+      states: Array.from({ length: N }, (_, i) => `y${i + 1}`),
+      a: Array.from({ length: N }, (_, i) => Array.from({ length: N }, (_, j) => (i === j ? -0.5 : j === i + 1 ? 1 : 0))),
+      b: Array.from({ length: N }, () => [1]),
+      y0: Array(N).fill(0),
+      eta0: Array(N).fill(1),
+      phi: ['q'],
+    },
+    measurement: {
+      names: Array.from({ length: n }, (_, j) => `z${j + 1}`),
+      c: eye(n, N),
+      gamma: eye(n, n),
+      psi: Array(n).fill(0.5),
+    },
+    criteria: { confidence: 0.95 },
+    options: { trace_points: 1000, steady_state_shortcut: true },
+  };
+}

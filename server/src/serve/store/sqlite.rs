@@ -626,18 +626,8 @@ mod tests {
         let s = SqliteStore::open(dir.path()).unwrap();
         let id = new_id();
         s.insert_job(&JobRecord {
-            id: id.clone(),
-            kind: "synthesis".into(),
             status: JobStatus::Running,
-            progress: 0.0,
-            request_json: "{}".into(),
-            work: 1.0,
-            created_at: now_rfc3339(),
-            started_at: None,
-            finished_at: None,
-            error_json: None,
-            attempts: 1,
-            cancel_requested: false,
+            ..job(&id)
         })
         .unwrap();
         let kv = |k: &str, v: &str| (k.to_string(), v.to_string());

@@ -89,6 +89,25 @@ export class Shelf {
   get(member) {
     return this.members.get(pathOf(member));
   }
+
+  /**
+   * A copy to change, this one left as it is: the editor's history keeps the shelf as
+   * it was before and after each change of dimension (a removal undone must find the
+   * shelf's entries where they were).
+   */
+  clone() {
+    const copy = new Shelf();
+    copy.members = structuredClone(this.members);
+    copy.pairs = structuredClone(this.pairs);
+    return copy;
+  }
+
+  /** About how many bytes the shelf holds (its entries as JSON text). */
+  bytes() {
+    let n = JSON.stringify(this.pairs).length;
+    for (const value of this.members.values()) n += JSON.stringify(value).length;
+    return n;
+  }
 }
 
 /** `value` laid over `kept` (arrays nested `depth` deep): value's entries where it has them, kept's beyond. */

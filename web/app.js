@@ -206,15 +206,16 @@ async function check() {
 
 /**
  * Load a model (or a preset's, with its synthesis `example`) into the editor; `keepUrl`
- * leaves the address as it is.
+ * leaves the address as it is. `label` names the load in the editor's history (the
+ * model shown before is one Undo away).
  */
-function loadModel(model, presetName = null, { keepUrl = false, example = null } = {}) {
+function loadModel(model, presetName = null, { keepUrl = false, example = null, label = null } = {}) {
   state.keepUrl = keepUrl;
   setPageStatus('');
   state.preset = presetName;
   state.example = example;
   $('preset').value = presetName ?? '';
-  editor.load(model);
+  editor.load(model, label);
   markStale();
   saveToUrl();
   return check();
@@ -233,7 +234,7 @@ async function loadPreset(name, options) {
  * preset gets a history entry of its own.
  */
 async function choosePreset(name) {
-  if (await replaceModel(() => loadPreset(name))) setPageStatus('Loaded the preset; the browser’s Back brings your model back.');
+  if (await replaceModel(() => loadPreset(name, { label: `choice of the preset ${name}` }))) setPageStatus('Loaded the preset; Undo or the browser’s Back brings your model back.');
 }
 
 /**
@@ -256,26 +257,27 @@ async function replaceModel(load) {
  */
 async function loadFromUrl() {
   const params = new URLSearchParams(location.hash.slice(1));
+  const label = 'the model of the address';
   let problem; // what the message says after “could not be read”: ` (why)` or `: …`
   if (params.has('model')) {
     try {
       const model = await decodeModel(params.get('model'));
       const wrong = modelProblem(model);
-      if (!wrong) return await loadModel(model);
+      if (!wrong) return await loadModel(model, null, { label });
       problem = ` (${wrong})`;
     } catch (e) {
       problem = e instanceof DamagedLink ? `: its data is damaged or truncated (${e.message})` : ` (${e.message || e})`;
     }
   } else if (params.has('preset')) {
     try {
-      return await loadPreset(params.get('preset'));
+      return await loadPreset(params.get('preset'), { label });
     } catch (e) {
       problem = ` (${e.message || e})`;
     }
   } else {
     return loadPreset('seed-example');
   }
-  const errors = await loadPreset('seed-example', { keepUrl: true });
+  const errors = await loadPreset('seed-example', { keepUrl: true, label });
   setPageStatus(
     `This link's model could not be read${problem}. Showing the seed example instead; the address is kept until you change the model.`,
     true,
@@ -504,6 +506,7 @@ async function main() {
   }
   picker.addEventListener('change', () => picker.value && choosePreset(picker.value));
 
+  editor.bindHistory({ undo: $('undo'), redo: $('redo'), keys: $('editor-pane') });
   $('export-model').addEventListener('click', () =>
     download(`${fileStem()}.json`, 'application/json', JSON.stringify(editor.model, null, 2) + '\n'),
   );
@@ -522,8 +525,8 @@ async function main() {
     }
     const problem = modelProblem(model);
     if (problem) return setPageStatus(`${file.name} is not a kea model: ${problem}; the model is unchanged.`, true);
-    const own = await replaceModel(() => loadModel(model));
-    setPageStatus(`Imported ${file.name}${own ? '; the browser’s Back brings your model back' : ''}.`);
+    const own = await replaceModel(() => loadModel(model, null, { label: `import of ${file.name}` }));
+    setPageStatus(`Imported ${file.name}; ${own ? 'Undo or the browser’s Back brings your model back' : 'Undo brings the preset back'}.`);
   });
   $('copy-link').addEventListener('click', async () => {
     const link = `${location.origin}${location.pathname}#model=${await encodeModel(modelJson())}${tabParam()}`;

@@ -9,6 +9,7 @@
 
 import { cellProblem, numberProblem, parseCell } from './numbers.js';
 import { MAX_DIMENSION, Shelf, dimensions, membersAlong, removeAt, removedOnlyDefaults, resize, restoreAt } from './dimensions.js';
+import { History, apply, diff, pathText } from './history.js';
 
 export { parseCell };
 
@@ -41,7 +42,7 @@ function showTitle(input) {
 /** A selector that finds `control` again in a redrawn editor: its path, id or focus key. */
 function focusSelector(control) {
   const d = control.dataset ?? {};
-  if (d.path) return `[data-path="${CSS.escape(d.path)}"]`;
+  if (d.path) return `${control.tagName.toLowerCase()}[data-path="${CSS.escape(d.path)}"]`; // not its cell's <td>, which has the path too
   if (control.id) return `#${CSS.escape(control.id)}`;
   if (d.focus) return `[data-focus="${CSS.escape(d.focus)}"]`;
   return null;
@@ -468,9 +469,33 @@ export class ModelEditor {
     this.focusNext = null; // a selector of the control to focus after the next render, if not the focused one's
     this.general = el('ul', { class: 'general-errors', 'aria-live': 'polite' });
     new ResizeObserver(() => this.updateScrollHints()).observe(root);
+    // Undo and Redo (history.js). `baseline` is the model as of the last committed edit
+    // (a JSON copy): a commit records the difference from it. Typing commits when its
+    // field changes (Enter, leaving the field), and before anything else is done.
+    this.history = new History();
+    this.baseline = null;
+    this.kept = null; // the editor's state besides the model at the last commit (keptState)
+    this.dirty = false; // typed into since the last commit
+    this.typedIn = null; // the field typed into
+    this.committedText = new WeakMap(); // a field → its text when it took the focus or its edit was committed
+    this.historyButtons = null;
+    root.addEventListener('input', (e) => {
+      this.dirty = true;
+      this.typedIn = e.target;
+    });
+    root.addEventListener('change', () => this.commitPending());
+    root.addEventListener('focusout', () => this.commitPending());
+    root.addEventListener('paste', () => this.commitPending(), true); // before a block's paste, one edit of its own
+    root.addEventListener('focusin', (e) => this.committedText.set(e.target, e.target.value));
   }
 
-  load(model) {
+  /**
+   * Show `model`. `label` (an import, a preset chosen, a link): the model shown before is
+   * one Undo away; without it (the page's first model) the history starts anew.
+   */
+  load(model, label = null) {
+    const recorded = Boolean(label && this.model);
+    if (recorded) this.commitPending();
     this.model = model;
     this.core = [];
     this.previous.clear();
@@ -479,10 +504,178 @@ export class ModelEditor {
     this.undo = null;
     this.pendingDims.clear();
     this.render();
+    if (recorded) this.commit(label, null);
+    else {
+      this.history.clear();
+      this.baseline = JSON.parse(JSON.stringify(this.model));
+      this.kept = this.keptState();
+      this.showHistory();
+    }
   }
 
-  changed() {
+  /**
+   * The model changed. `label` names an action that is one edit by itself (a dimension,
+   * a removal, a paste, a form switched: “N 6 → 4”), committed to the history at once;
+   * without it the change is typing, committed when its field changes (`commitPending`).
+   * `focus`: the selector of the control Undo and Redo move the focus to (or
+   * {before, after}, one for each).
+   */
+  changed(label = null, focus = null) {
     this.onChange?.();
+    if (label) this.commit(label, focus);
+  }
+
+  // ------------------------------------------------------------ undo and redo
+
+  /** What the editor keeps besides the model, as it is now (the shelf is never changed in place, see `ownShelf`). */
+  keptState() {
+    return {
+      shelf: this.shelf,
+      previous: new Map([...this.previous].map(([k, v]) => [k, { ...v }])),
+      notes: new Map(this.notes),
+      undo: this.undo,
+    };
+  }
+
+  restoreState(state) {
+    this.shelf = state.shelf;
+    this.previous = new Map([...state.previous].map(([k, v]) => [k, { ...v }]));
+    this.notes = new Map(state.notes);
+    this.undo = state.undo;
+    this.kept = this.keptState();
+  }
+
+  /** The shelf, to be changed: a copy, so that the one the history keeps stays as it was. */
+  ownShelf() {
+    this.shelf = this.shelf.clone();
+    return this.shelf;
+  }
+
+  /** Commit the typing since the last commit (one cell's or field's edit), if any. */
+  commitPending() {
+    if (!this.dirty || !this.model) return;
+    const field = this.typedIn;
+    const path = field?.dataset?.path;
+    this.commit(`edit of ${path ? placeName(path) : 'a field'}`, field ? focusSelector(field) : null);
+  }
+
+  /** Record the model's difference from the last commit as one edit named `label`. */
+  commit(label, focus) {
+    this.dirty = false;
+    const changes = diff(this.baseline, this.model);
+    const before = this.kept;
+    this.kept = this.keptState();
+    this.settle();
+    if (!changes.length) return;
+    this.baseline = apply(this.baseline, changes, 'after');
+    const shelfBytes = this.kept.shelf !== before.shelf ? this.kept.shelf.bytes() : 0;
+    this.history.push({ label, changes, focus, state: { before, after: this.kept }, extraBytes: shelfBytes });
+    this.showHistory();
+  }
+
+  undoEdit() {
+    this.step('undo');
+  }
+
+  redoEdit() {
+    this.step('redo');
+  }
+
+  /**
+   * Undo or redo one edit: the model as it was on that side of it (exactly: its JSON),
+   * the editor's state with it, and the focus at the field it changed. The cells of an
+   * edit inside grids are set in place; anything else redraws.
+   */
+  step(way) {
+    this.commitPending();
+    const entry = way === 'undo' ? this.history.undo() : this.history.redo();
+    if (!entry) return;
+    const side = way === 'undo' ? 'before' : 'after';
+    this.model = apply(this.model, entry.changes, side);
+    this.baseline = apply(this.baseline, entry.changes, side);
+    this.restoreState(entry.state[side]);
+    const focus = typeof entry.focus === 'string' ? entry.focus : entry.focus?.[side] ?? null;
+    if (!this.patchCells(entry.changes, side, focus)) {
+      this.pendingDims.clear();
+      this.focusNext = focus;
+      this.render();
+    }
+    this.onChange?.();
+    this.settle();
+    this.showHistory();
+    this.root.dispatchEvent(new CustomEvent('editor-note', { detail: `${way === 'undo' ? 'Undone' : 'Redone'}: ${entry.label}.`, bubbles: true }));
+  }
+
+  /**
+   * Set the cells an edit of numbers in grids changed (no redraw: at N = 200 a redraw
+   * takes a second); returns false, doing nothing, when the edit is anything else.
+   */
+  patchCells(changes, side, focus) {
+    const scalar = (text) => text !== undefined && text[0] !== '[' && text[0] !== '{';
+    if (!changes.every((c) => !c.order && c.path.length && scalar(c.before) && scalar(c.after))) return false;
+    const cells = changes.map((c) => this.fields.get(pathText(c.path))?.input);
+    const inGrid = (input) => {
+      const grid = input?.tagName === 'INPUT' ? input.closest('[data-grid]') : null;
+      return grid && !['system.states', 'measurement.names'].includes(grid.dataset.grid);
+    };
+    if (!cells.every(inGrid)) return false;
+    changes.forEach((c, k) => {
+      const input = cells[k];
+      input.value = showValue(JSON.parse(c[side]));
+      showTitle(input);
+      this.setLocal(input.dataset.path, cellProblem(input.value), false);
+    });
+    this.mark();
+    (focus ? this.root.querySelector(focus) : null)?.focus();
+    return true;
+  }
+
+  /** The focused field's text is committed: Ctrl+Z there is the editor's, until it is typed into. */
+  settle() {
+    const active = document.activeElement;
+    if (active && this.root.contains(active)) this.committedText.set(active, active.value);
+  }
+
+  /** Whether `target` is a text field with typing not committed yet (Ctrl+Z there is the browser's). */
+  typing(target) {
+    const text = target?.tagName === 'TEXTAREA' || (target?.tagName === 'INPUT' && !['checkbox', 'radio', 'button', 'file'].includes(target.type));
+    return Boolean(text && this.committedText.has(target) && this.committedText.get(target) !== target.value);
+  }
+
+  /**
+   * Undo and Redo: `undo` and `redo` are their buttons; Ctrl+Z, Ctrl+Shift+Z and Ctrl+Y
+   * (⌘ on a Mac) work while the focus is in `keys` (the editor's pane), except in a
+   * field with typing not committed yet, where they are the browser's (its text's own
+   * undo comes first; leaving the field or Enter commits it).
+   */
+  bindHistory({ undo, redo, keys }) {
+    this.historyButtons = { undo, redo };
+    undo.addEventListener('click', () => this.undoEdit());
+    redo.addEventListener('click', () => this.redoEdit());
+    keys.addEventListener('keydown', (e) => {
+      if (!(e.ctrlKey || e.metaKey) || e.altKey) return;
+      const key = e.key.toLowerCase();
+      const isRedo = (key === 'z' && e.shiftKey) || (key === 'y' && !e.shiftKey);
+      if (!isRedo && !(key === 'z' && !e.shiftKey)) return;
+      if (this.typing(e.target)) return;
+      e.preventDefault();
+      this.step(isRedo ? 'redo' : 'undo');
+    });
+    this.showHistory();
+  }
+
+  /** The buttons' state and names: what Undo and Redo would do. */
+  showHistory() {
+    if (!this.historyButtons) return;
+    const mac = /Mac|iPhone|iPad/.test(navigator.platform);
+    const show = (button, verb, entry, keys) => {
+      button.disabled = !entry;
+      const name = entry ? `${verb}: ${entry.label}` : `${verb} (nothing to ${verb.toLowerCase()})`;
+      button.setAttribute('aria-label', name);
+      button.title = `${name} — ${keys}`;
+    };
+    show(this.historyButtons.undo, 'Undo', this.history.nextUndo, mac ? '⌘Z' : 'Ctrl+Z');
+    show(this.historyButtons.redo, 'Redo', this.history.nextRedo, mac ? '⇧⌘Z' : 'Ctrl+Shift+Z or Ctrl+Y');
   }
 
   /** Messages of this editor's own checks (unreadable numbers, a refused rename). */
@@ -625,6 +818,7 @@ export class ModelEditor {
         this.setLocal(`params.${old}.name`, problem);
         return;
       }
+      this.commitPending();
       // Keep the order: rebuild the object with the new key in place.
       m.params = Object.fromEntries(Object.entries(m.params).map(([k, v]) => [k === old ? wanted : k, v]));
       const valueProblem = this.local.get(`params.${old}`);
@@ -638,7 +832,8 @@ export class ModelEditor {
       label();
       this.setLocal(`params.${name}`, valueProblem ?? null);
       this.renameUses(old, wanted);
-      this.changed();
+      const at = (p) => `[data-path="${CSS.escape(`params.${p}.name`)}"]`;
+      this.changed(`rename of parameter ${old} → ${wanted}`, { before: at(old), after: at(wanted) });
     });
     nameInput.addEventListener('keydown', (e) => {
       if (e.key !== 'Enter') return;
@@ -660,10 +855,11 @@ export class ModelEditor {
       const names = Object.keys(m.params);
       const at = names.indexOf(name);
       const next = names[at + 1] ?? names[at - 1];
-      this.focusNext = byFocusKey(next === undefined ? 'add-param' : `remove-param:${next}`);
+      this.commitPending();
+      const after = (this.focusNext = byFocusKey(next === undefined ? 'add-param' : `remove-param:${next}`));
       delete m.params[name];
       this.render();
-      this.changed();
+      this.changed(`removal of parameter ${name}`, { before: byFocusKey(`remove-param:${name}`), after });
     });
     return el('tr', {}, nameCell, valueCell, el('td', {}, remove));
   }
@@ -717,11 +913,12 @@ export class ModelEditor {
       text: 'Add parameter',
       'data-focus': 'add-param',
       onclick: () => {
+        this.commitPending();
         let i = 1;
         while (`p${i}` in m.params) i++;
         m.params[`p${i}`] = 0;
         this.render();
-        this.changed();
+        this.changed(`new parameter p${i}`, { before: byFocusKey('add-param'), after: `[data-path="params.p${i}.name"]` });
         // The name selected, so that typing replaces the placeholder p1 (not “windp1”).
         const input = this.root.querySelector(`[data-path="params.p${i}.name"]`);
         input?.focus();
@@ -827,8 +1024,9 @@ export class ModelEditor {
     const m = this.model;
     const before = dimensions(m);
     if (size === before[key]) return;
+    this.commitPending();
     const old = structuredClone(m);
-    resize(m, { ...before, [key]: size }, this.shelf);
+    resize(m, { ...before, [key]: size }, this.ownShelf());
     if (size < before[key] && !removedOnlyDefaults(old, m)) {
       const { one, many, names } = DIMENSIONS[key];
       const gone = names(old).slice(size);
@@ -840,11 +1038,12 @@ export class ModelEditor {
           `${key} ${before[key]} → ${size} removed the ${gone.length === 1 ? one : many} ${list} with ${gone.length === 1 ? 'its' : 'their'} entries in ` +
           `${memberList(old, key)}. Growing ${key} back restores ${gone.length === 1 ? 'it' : 'them'} (until another model is loaded).`,
         focus: `#dim-${key}`,
-        apply: () => resize(m, { ...dimensions(m), [key]: before[key] }, this.shelf),
+        label: `${key} ${size} → ${before[key]} (the note's Undo)`,
+        apply: () => resize(this.model, { ...dimensions(this.model), [key]: before[key] }, this.ownShelf()),
       };
     }
     this.render();
-    this.changed();
+    this.changed(`${key} ${before[key]} → ${size}`, `#dim-${key}`);
   }
 
   /**
@@ -853,12 +1052,13 @@ export class ModelEditor {
    * that takes its place (or of the row above, for the last row).
    */
   removeOne(axis, k) {
+    this.commitPending();
     const m = this.model;
     const before = structuredClone(m);
     const { one } = DIMENSIONS[axis];
     const name = DIMENSIONS[axis].names(m)[k];
     const members = memberList(m, axis);
-    const pairs = removeAt(m, axis, k, this.shelf);
+    const pairs = removeAt(m, axis, k, this.ownShelf());
     const where = axis === 'N' ? 'system' : 'measurement';
     const left = DIMENSIONS[axis].names(m).length;
     this.undo = {
@@ -866,11 +1066,12 @@ export class ModelEditor {
       dims: dimensions(m),
       text: `Removed the ${one} “${name}” with its entries in ${members}${pairs.length ? ' and its pair in pairs' : ''}.`,
       focus: byFocusKey(`remove-${one}:${k}`),
-      apply: () => restoreAt(m, axis, k, before, pairs, this.shelf),
+      label: `return of the ${one} “${name}” (the note's Undo)`,
+      apply: () => restoreAt(this.model, axis, k, before, pairs, this.ownShelf()),
     };
-    this.focusNext = left > 1 ? byFocusKey(`remove-${one}:${Math.min(k, left - 1)}`) : byFocusKey(`undo-${where}`);
+    const after = (this.focusNext = left > 1 ? byFocusKey(`remove-${one}:${Math.min(k, left - 1)}`) : byFocusKey(`undo-${where}`));
     this.render();
-    this.changed();
+    this.changed(`removal of the ${one} “${name}”`, { before: byFocusKey(`remove-${one}:${k}`), after });
   }
 
   /** The × that removes state or measurement `i` (`axis` 'N' or 'n'), beside its name. */
@@ -899,11 +1100,12 @@ export class ModelEditor {
       text: 'Undo',
       'data-focus': `undo-${where}`,
       onclick: () => {
+        this.commitPending();
         this.undo = null;
         undo.apply();
         this.focusNext = undo.focus;
         this.render();
-        this.changed();
+        this.changed(undo.label, undo.focus);
       },
     });
     return el('p', { class: 'help undo-note', role: 'status', 'data-note': `undo-${where}` }, `${undo.text} `, button);
@@ -1156,7 +1358,7 @@ export class ModelEditor {
       });
     });
     if (remark) this.mark();
-    if (pasted) this.changed();
+    if (pasted) this.changed(`paste of ${pasted} value${pasted === 1 ? '' : 's'} into ${placeName(grid.path)}`, focusSelector(e.target));
     const note = `Pasted ${pasted} value${pasted === 1 ? '' : 's'} into ${grid.title}` + (left > 0 ? `; ${left} beyond its edge left out.` : '.');
     this.root.dispatchEvent(new CustomEvent('editor-note', { detail: note, bubbles: true }));
   }
@@ -1188,9 +1390,10 @@ export class ModelEditor {
       select.append(el('option', { value, text, selected: value === current }));
     }
     select.addEventListener('change', () => {
+      this.commitPending();
       onPick(select.value);
       this.render();
-      this.changed();
+      this.changed(`${label}: ${options.find(([value]) => value === select.value)[1]}`, `#${id}`);
     });
     const note = this.notes.get(name);
     return el(
@@ -1428,14 +1631,15 @@ export class ModelEditor {
       this.changed();
     });
     remove.addEventListener('click', () => {
+      this.commitPending();
       delete holder[key];
       this.local.delete(path);
       // The core's marks at it are gone with it; the focus stays at its field (an
       // optional member's, now empty), else moves to the control before it.
       this.core = this.core.filter((e) => !(e.path === path || e.path?.startsWith(`${path}.`) || e.path?.startsWith(`${path}[`)));
-      this.focusNext = optional ? `#${CSS.escape(id)}` : this.controlBefore(area);
+      const after = (this.focusNext = optional ? `#${CSS.escape(id)}` : this.controlBefore(area));
       this.render();
-      this.changed();
+      this.changed(`removal of ${placeName(path)}`, { before: `#${CSS.escape(id)}`, after });
     });
     const wrap = el(
       'div',

@@ -201,7 +201,7 @@ test('importing a file over an edited model leaves it one Back away, as choosing
   await open('#preset=cv-tracker');
   await page.fill('input[data-path="params.q"]', '42');
   const said = await importText('seed.json', kea('preset', 'seed-example'));
-  assert.match(said, /^Imported seed\.json; the browser’s Back brings your model back\.$/);
+  assert.match(said, /^Imported seed\.json; Undo or the browser’s Back brings your model back\.$/);
   assert.equal(await page.$('input[data-path="params.q"]'), null);
   await page.goBack();
   await page.waitForFunction(() => document.querySelector('input[data-path="params.q"]')?.value === '42', null, { timeout: 10000 });

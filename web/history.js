@@ -89,8 +89,13 @@ export function pathText(path) {
   return path.map((k, i) => (typeof k === 'number' ? `[${k}]` : i ? `.${k}` : k)).join('');
 }
 
-/** The bytes a change's texts hold (one byte a character, as V8 stores ASCII strings; enough for a bound). */
-const changeBytes = (c) => (c.order ? (c.order.before.join('').length + c.order.after.join('').length) : (c.before?.length ?? 0) + (c.after?.length ?? 0)) + 16 * c.path.length;
+/**
+ * About the bytes of heap a change takes: its texts (one byte a character, as V8 keeps
+ * ASCII), and the objects around them (the change, its path, the strings' headers:
+ * measured at about 150 bytes for a cell's change).
+ */
+const changeBytes = (c) =>
+  (c.order ? c.order.before.join('').length + c.order.after.join('').length : (c.before?.length ?? 0) + (c.after?.length ?? 0)) + 100 + 16 * c.path.length;
 
 /** At most this many edits are kept… */
 export const MAX_ENTRIES = 100;

@@ -256,3 +256,42 @@ test('an undo marks the results stale and is kept over a reload', async () => {
   assert.equal(await json(), original);
   assert.deepEqual(consoleErrors, []);
 });
+
+test('at N = 200 a cell’s edit is undone in place (no node drawn anew), and a smaller N exactly', async () => {
+  const N = 200;
+  const model = {
+    kea_model: 1,
+    name: 'chain of 200',
+    params: { q: 0.1 },
+    time: { t0: 0, t_end: 1, steps: 100 },
+    system: {
+      states: Array.from({ length: N }, (_, i) => `y${i + 1}`),
+      a: Array.from({ length: N }, (_, i) => Array.from({ length: N }, (_, j) => (i === j ? -0.5 : j === i + 1 ? 1 : 0))),
+      b: Array.from({ length: N }, () => [1]),
+      y0: Array(N).fill(0),
+      eta0: Array(N).fill(1),
+      phi: ['q'],
+    },
+    measurement: {
+      names: Array.from({ length: 50 }, (_, j) => `z${j + 1}`),
+      c: Array.from({ length: 50 }, (_, i) => Array.from({ length: N }, (_, j) => (i === j ? 1 : 0))),
+      gamma: Array.from({ length: 50 }, (_, i) => Array.from({ length: 50 }, (_, j) => (i === j ? 1 : 0))),
+      psi: Array(50).fill(0.5),
+    },
+  };
+  await importModel(model);
+  const original = await json();
+  await page.fill(cell('system.a[150][20]'), '7');
+  await page.press(cell('system.a[150][20]'), 'Tab');
+  await page.evaluate(() => document.querySelectorAll('#editor input').forEach((n) => (n.tagged = true)));
+  await undo();
+  assert.equal(await page.$$eval('#editor input', (ns) => ns.filter((n) => !n.tagged).length), 0, 'nothing drawn anew');
+  assert.equal(await page.inputValue(cell('system.a[150][20]')), '0');
+  assert.equal(await json(), original);
+  await page.fill('#dim-N', '150');
+  await page.press('#dim-N', 'Tab');
+  await page.waitForTimeout(500);
+  await undo();
+  await page.waitForTimeout(500);
+  assert.equal(await json(), original, 'the 50 states and their rows and columns back');
+});

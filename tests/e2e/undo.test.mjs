@@ -7,7 +7,7 @@
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
-import { openApp } from './lib.mjs';
+import { chainModel, openApp } from './lib.mjs';
 
 let page;
 const consoleErrors = [];
@@ -258,27 +258,7 @@ test('an undo marks the results stale and is kept over a reload', async () => {
 });
 
 test('at N = 200 a cell’s edit is undone in place (no node drawn anew), and a smaller N exactly', async () => {
-  const N = 200;
-  const model = {
-    kea_model: 1,
-    name: 'chain of 200',
-    params: { q: 0.1 },
-    time: { t0: 0, t_end: 1, steps: 100 },
-    system: {
-      states: Array.from({ length: N }, (_, i) => `y${i + 1}`),
-      a: Array.from({ length: N }, (_, i) => Array.from({ length: N }, (_, j) => (i === j ? -0.5 : j === i + 1 ? 1 : 0))),
-      b: Array.from({ length: N }, () => [1]),
-      y0: Array(N).fill(0),
-      eta0: Array(N).fill(1),
-      phi: ['q'],
-    },
-    measurement: {
-      names: Array.from({ length: 50 }, (_, j) => `z${j + 1}`),
-      c: Array.from({ length: 50 }, (_, i) => Array.from({ length: N }, (_, j) => (i === j ? 1 : 0))),
-      gamma: Array.from({ length: 50 }, (_, i) => Array.from({ length: 50 }, (_, j) => (i === j ? 1 : 0))),
-      psi: Array(50).fill(0.5),
-    },
-  };
+  const model = chainModel(200, 50);
   await importModel(model);
   const original = await json();
   await page.fill(cell('system.a[150][20]'), '7');
@@ -290,8 +270,8 @@ test('at N = 200 a cell’s edit is undone in place (no node drawn anew), and a 
   assert.equal(await json(), original);
   await page.fill('#dim-N', '150');
   await page.press('#dim-N', 'Tab');
-  await page.waitForTimeout(500);
+  await page.waitForFunction(() => document.getElementById('undo').getAttribute('aria-label') === 'Undo: N 200 → 150', null, { timeout: 30000 });
   await undo();
-  await page.waitForTimeout(500);
+  await page.waitForFunction(() => document.querySelectorAll('[data-path^="system.states["]').length >= 200, null, { timeout: 30000 });
   assert.equal(await json(), original, 'the 50 states and their rows and columns back');
 });

@@ -386,9 +386,13 @@ pub fn validate(req: &SynthesisRequest) -> Result<(), Error> {
             }
             continue;
         }
-        // (A value the mode's own rule refuses — seed_search's and bisect's bounds are
-        // > 0 — is reported there, once.)
-        let mode_refuses = !matches!(req.mode, Mode::Grid(_)) && value <= 0.0;
+        // (A value the mode's own rule refuses — seed_search's bounds are > 0,
+        // bisect's normal doubles — is reported there, once.)
+        let mode_refuses = match req.mode {
+            Mode::Grid(_) => false,
+            Mode::SeedSearch(_) => value <= 0.0,
+            Mode::Bisect(_) => value < f64::MIN_POSITIVE,
+        };
         if compiled.is_err()
             || !req.model.params.contains_key(name)
             || !value.is_finite()
@@ -512,18 +516,21 @@ pub fn validate(req: &SynthesisRequest) -> Result<(), Error> {
         Mode::Bisect(b) => {
             let base = "mode.bisect";
             param_check(&b.param, format!("{base}.param"), &mut errs);
-            let low_ok = b.low.is_finite() && b.low > 0.0;
+            // Bisection is on a log scale, among normal doubles: below f64::MIN_POSITIVE
+            // (the subnormals) neighbouring doubles are further apart than any rel_tol,
+            // and the bracket could not narrow to it.
+            let expected = || {
+                format!(
+                    "expected a finite number ≥ {} (bisection is on a log scale, among normal doubles)",
+                    crate::validate::num(f64::MIN_POSITIVE)
+                )
+            };
+            let low_ok = b.low.is_finite() && b.low >= f64::MIN_POSITIVE;
             if !low_ok {
-                errs.push(FieldError::new(
-                    format!("{base}.low"),
-                    "expected a finite number > 0 (bisection is on a log scale)",
-                ));
+                errs.push(FieldError::new(format!("{base}.low"), expected()));
             }
-            if !(b.high.is_finite() && b.high > 0.0) {
-                errs.push(FieldError::new(
-                    format!("{base}.high"),
-                    "expected a finite number > 0 (bisection is on a log scale)",
-                ));
+            if !(b.high.is_finite() && b.high >= f64::MIN_POSITIVE) {
+                errs.push(FieldError::new(format!("{base}.high"), expected()));
             } else if low_ok && b.high <= b.low {
                 errs.push(FieldError::new(
                     format!("{base}.high"),
@@ -1383,6 +1390,11 @@ fn bisect<E: Executor>(
             m if m.is_finite() && m > 0.0 => m,
             _ => good.sqrt() * bad.sqrt(),
         };
+        // Never reached with normal bounds and rel_tol ≥ 1e-12 (validation), but a
+        // bracket with no double inside must end the loop, not repeat it forever.
+        if !(mid > good.min(bad) && mid < good.max(bad)) || iterations >= bisect_iterations_max(b) {
+            break;
+        }
         let p = ctx.batch(exec, vec![at(mid)], progress)?.remove(0);
         iterations += 1;
         let pos = evals.partition_point(|(x, _)| *x < mid);

@@ -504,6 +504,20 @@ fn invalid_requests_name_the_field() {
             "mode": {"bisect": {"param": "psi", "low": -1, "high": 1e-5}}})),
         ["mode.bisect.low"]
     );
+    // Subnormal bounds: neighbouring doubles there are further apart than any rel_tol,
+    // so the bracket could never narrow (it looped forever before).
+    let subnormal = json!({"model": model, "target": target,
+        "mode": {"bisect": {"param": "psi", "low": 1e-322, "high": 1e-321, "rel_tol": 1e-3}}});
+    assert_eq!(
+        paths(subnormal.clone()),
+        ["mode.bisect.low", "mode.bisect.high"]
+    );
+    let req = synthesis::request_from_value(subnormal).expect("readable");
+    let said = synthesis::validate(&req).expect_err("invalid").to_string();
+    assert!(
+        said.contains("mode.bisect.low: expected a finite number ≥ 2.2250738585072014e-308"),
+        "{said}"
+    );
     // probes: its range in both messages (a non-whole number said "a whole number ≥ 0").
     let message = |probes: Value| {
         let v = json!({"model": model, "target": target,

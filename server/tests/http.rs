@@ -1669,3 +1669,70 @@ fn a_synthesis_resumes_after_a_restart_from_the_analyses_it_kept() {
     }
     assert_eq!(resumed, whole);
 }
+
+/// The server process's CPU time so far (user + system, /proc's clock ticks).
+fn cpu_ticks(pid: u32) -> u64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    // The fields after the command's closing parenthesis: utime and stime are 12th and 13th.
+    let rest = &stat[stat.rfind(')').unwrap() + 2..];
+    let fields: Vec<&str> = rest.split(' ').collect();
+    fields[11].parse::<u64>().unwrap() + fields[12].parse::<u64>().unwrap()
+}
+
+/// A synchronous analysis its estimate lets through but that runs longer than the
+/// synchronous time limit is stopped there (422, use a job), and one whose client
+/// goes away stops: the server falls idle instead of computing for nobody.
+#[test]
+fn a_synchronous_analysis_stops_at_its_time_limit_and_when_its_client_goes() {
+    use std::io::Write;
+    let dir = tmp();
+    let s = Server::start(
+        dir.path(),
+        &["--sync-work-limit", "inf", "--job-time-limit", "1"],
+    );
+    assert_eq!(s.get("/v1/limits").json()["server"]["sync_time_s"], 1);
+    let started = std::time::Instant::now();
+    let r = s.post("/v1/analyze", &json!({"model": long_model(100_000_000)}));
+    assert_eq!(r.status, 422, "{}", r.text);
+    let p = r.json();
+    assert_eq!(p["type"], "urn:kea:problem:use-a-job");
+    let detail = p["detail"].as_str().unwrap();
+    assert!(
+        detail.starts_with("stopped after 1 s, the limit of a synchronous analysis")
+            && detail.contains("POST /v1/jobs"),
+        "{detail}"
+    );
+    assert!(started.elapsed() < Duration::from_secs(20));
+
+    // The default limit (60 s); the client sends its request and goes after 0.5 s.
+    let dir = tmp();
+    let s = Server::start(dir.path(), &["--sync-work-limit", "inf"]);
+    assert_eq!(s.get("/v1/limits").json()["server"]["sync_time_s"], 60);
+    let host = s.base.trim_start_matches("http://").to_string();
+    let body = json!({"model": long_model(100_000_000)}).to_string();
+    let mut tcp = std::net::TcpStream::connect(&host).unwrap();
+    write!(
+        tcp,
+        "POST /v1/analyze HTTP/1.1\r\nHost: {host}\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+        body.len()
+    )
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    let busy = cpu_ticks(s.pid());
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(
+        cpu_ticks(s.pid()) > busy,
+        "the analysis runs while its client waits"
+    );
+    drop(tcp);
+    std::thread::sleep(Duration::from_millis(500));
+    let before = cpu_ticks(s.pid());
+    std::thread::sleep(Duration::from_secs(2));
+    let spent = cpu_ticks(s.pid()) - before;
+    // A tick is 10 ms: a run left going would have spent about 200.
+    assert!(
+        spent < 40,
+        "{spent} ticks of CPU in the 2 s after the client went"
+    );
+    assert_eq!(s.get("/healthz").status, 200);
+}

@@ -12,6 +12,10 @@ use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use kea_core::FieldError;
 use serde_json::{Map, Value, json};
+use std::ops::ControlFlow;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
 
 /// `GET /healthz`.
 pub async fn health() -> Json<Value> {
@@ -31,6 +35,7 @@ pub async fn limits(State(state): State<AppState>) -> Json<Value> {
             "sync_work": l.sync_work,
             "max_work": l.max_work,
             "job_time_s": l.job_time.as_secs(),
+            "sync_time_s": l.sync_time().as_secs(),
             "queue": l.queue,
             "shutdown_grace_s": l.shutdown_grace.as_secs(),
             "workers": state.config.workers,
@@ -330,15 +335,53 @@ pub async fn analyze(
         .acquire_owned()
         .await
         .map_err(Problem::internal)?;
-    let out = tokio::task::spawn_blocking(move || {
-        prepared.run(
-            &mut kea_core::NoProgress,
-            &|| false,
-            &kea_core::exec::Forgetful,
-        )
+    // The run stops when the client goes (axum drops this future, and with it the
+    // flag's guard) or at the synchronous time limit: never left running for nobody.
+    let gone = Arc::new(AtomicBool::new(false));
+    let _guard = SetOnDrop(gone.clone());
+    let limit = limits.sync_time();
+    let estimate = prepared.work();
+    let (out, timed_out) = tokio::task::spawn_blocking(move || {
+        let started = Instant::now();
+        let stop = || gone.load(Ordering::Relaxed) || started.elapsed() > limit;
+        let mut progress = |_: f64| {
+            if stop() {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        };
+        let out = prepared.run(&mut progress, &stop, &kea_core::exec::Forgetful);
+        (out, started.elapsed() > limit)
     })
     .await
-    .map_err(Problem::internal)?
-    .map_err(|e| Problem::from_core(in_stored_model(e, stored.as_deref())))?;
+    .map_err(Problem::internal)?;
+    let out = match out {
+        Err(kea_core::Error::Cancelled) if timed_out => {
+            let message = format!(
+                "stopped after {} s, the limit of a synchronous analysis: its estimated work {:.3e} ({}) undercounts this model; submit it as a job instead: POST /v1/jobs with {{\"kind\": \"analysis\", \"model\": …}}",
+                limit.as_secs(),
+                estimate.units,
+                estimate.explain
+            );
+            return Err(Problem::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                kind::USE_A_JOB,
+                "too much work for this request",
+            )
+            .detail(message.clone())
+            .error(estimate.path.clone(), message));
+        }
+        out => out.map_err(|e| Problem::from_core(in_stored_model(e, stored.as_deref())))?,
+    };
     Ok(raw_json(StatusCode::OK, out.result_json))
+}
+
+/// Sets its flag when dropped: the synchronous analysis's request is gone.
+struct SetOnDrop(Arc<AtomicBool>);
+
+impl Drop for SetOnDrop {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
 }

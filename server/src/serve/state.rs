@@ -30,6 +30,18 @@ pub struct Limits {
     pub shutdown_grace: Duration,
 }
 
+/// The longest a synchronous analysis runs however low its estimate (the estimate
+/// keeps it far below this; a model it undercounts is stopped here, not left running).
+pub const SYNC_TIME_LIMIT: Duration = Duration::from_secs(60);
+
+impl Limits {
+    /// A synchronous analysis's wall-clock limit: [`SYNC_TIME_LIMIT`], or the job time
+    /// limit where that is shorter.
+    pub fn sync_time(&self) -> Duration {
+        self.job_time.min(SYNC_TIME_LIMIT)
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct Config {
     pub token: Option<String>,

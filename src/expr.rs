@@ -31,6 +31,7 @@ use crate::expr_block::{Block, BlockEx, LANES, ScalarEx};
 use crate::model::Value;
 use exmex::prelude::*;
 use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
 
 /// The expression language's names, read off the operator table
 /// (`expr_block::ScalarOps`): its constants, its one-argument functions and its
@@ -93,18 +94,22 @@ impl Language {
 }
 
 /// A time-varying scalar: compiled expression plus its variable vector, and the
-/// same expression parsed over blocks of [`LANES`] time points (`expr_block`).
+/// same expression parsed over blocks of [`LANES`] time points (`expr_block`). A
+/// parsed exmex expression is ≈ 25 KB (its nodes are inline), so both parses are
+/// shared by every copy (an analysis's, a synthesis point's): a copy, or a push into a
+/// matrix's list, moves pointers, not kilobytes (2000 expressions took 60 ms of copies).
 #[derive(Clone, Debug)]
 pub struct TimeFn {
-    expr: ScalarEx,
+    expr: Arc<ScalarEx>,
     /// Values of the expression's variables in exmex's (alphabetical) order.
     vars: Vec<f64>,
     /// Index of `t` in `vars`.
     t_slot: usize,
-    /// The block form of `expr`'s text with its variables, parsed on the first
-    /// `eval_block`: a parsed exmex expression is ≈ 25 KB (its nodes are inline), so
-    /// only the copy an analysis steps with carries the second one.
-    block: Option<Box<(BlockEx, Vec<Block>)>>,
+    /// The block form, parsed with the scalar one (that parse is the check that it
+    /// parses, so evaluating it cannot fail to).
+    block: Arc<BlockEx>,
+    /// Its variables (each value in every lane); empty until the first `eval_block`.
+    block_vars: Vec<Block>,
 }
 
 impl TimeFn {
@@ -119,28 +124,13 @@ impl TimeFn {
     /// The values at LANES time points, each equal to `eval` at that point.
     #[inline]
     pub fn eval_block(&mut self, t: [f64; LANES]) -> [f64; LANES] {
-        if self.block.is_none() {
-            self.parse_block();
+        if self.block_vars.is_empty() {
+            self.block_vars = self.vars.iter().map(|&v| Block([v; LANES])).collect();
         }
-        let Some(block) = self.block.as_deref_mut() else {
-            return [f64::NAN; LANES];
-        };
-        let (ex, vars) = block;
-        vars[self.t_slot] = Block(t);
-        ex.eval(vars).map_or([f64::NAN; LANES], |b| b.0)
-    }
-
-    /// The block form's one-off parse, out of line: exmex builds the expression in
-    /// place (tens of KB of stack), and inlined here that frame would be set up, and
-    /// its pages probed, on every call.
-    #[cold]
-    #[inline(never)]
-    fn parse_block(&mut self) {
-        // `compile_entry` checked that the text parses over blocks.
-        if let Ok(ex) = BlockEx::parse(self.expr.unparse()) {
-            let vars = self.vars.iter().map(|&v| Block([v; LANES])).collect();
-            self.block = Some(Box::new((ex, vars)));
-        }
+        self.block_vars[self.t_slot] = Block(t);
+        self.block
+            .eval(&self.block_vars)
+            .map_or([f64::NAN; LANES], |b| b.0)
     }
 }
 
@@ -226,9 +216,8 @@ pub fn compile_entry(
         }
         Some(t_slot) => {
             // The same text over blocks parses whenever the f64 parse did (the
-            // operator sets are the same, `expr_block`'s test); checked here so that
-            // the lazy parse in `eval_block` cannot fail.
-            BlockEx::parse(&plain).map_err(|e| {
+            // operator sets are the same, `expr_block`'s test); checked all the same.
+            let block = BlockEx::parse(&plain).map_err(|e| {
                 FieldError::new(
                     path,
                     format!(
@@ -238,10 +227,11 @@ pub fn compile_entry(
                 )
             })?;
             Ok(Entry::Time(Box::new(TimeFn {
-                expr,
+                expr: Arc::new(expr),
                 vars,
                 t_slot,
-                block: None,
+                block: Arc::new(block),
+                block_vars: Vec::new(),
             })))
         }
     }
@@ -972,10 +962,9 @@ fn unknown(
 pub const MAX_EXPRESSION_CHARS: usize = 1000;
 
 /// The most distinct time-dependent expressions one model may have, and their total
-/// length. A parsed expression holds ≈ 25 KB plus ≈ 0.3 KB per character, and ≈ 65 KB
-/// plus ≈ 1 KB per character with the analysis's 16-lane form, so these bound a
-/// model's expressions to ≈ 40 MB compiled and ≈ 125 MB while an analysis runs
-/// (`tests/memory.rs` measures them). Entries of one matrix with the same text share one parse and count once;
+/// length. A parsed expression in both its forms (one value, blocks of values) holds
+/// ≈ 45 KB plus ≈ 0.7 KB per character, shared by the analyses' copies, so these bound
+/// a model's expressions to ≈ 85 MB (`tests/memory.rs` measures them). Entries of one matrix with the same text share one parse and count once;
 /// the measurement schedule's `when` expressions count too.
 pub const MAX_TIME_EXPRESSIONS: usize = 2000;
 pub const MAX_TIME_EXPRESSION_CHARS: usize = 50_000;
@@ -1004,7 +993,7 @@ impl ExprBudget {
         };
         let why = if self.count >= MAX_TIME_EXPRESSIONS {
             format!(
-                "more than {MAX_TIME_EXPRESSIONS} distinct time-dependent expressions in one model (the limit: each costs ≈ 65 KB while an analysis runs)"
+                "more than {MAX_TIME_EXPRESSIONS} distinct time-dependent expressions in one model (the limit: each costs ≈ 45 KB while the model is compiled)"
             )
         } else if self.chars + chars > MAX_TIME_EXPRESSION_CHARS {
             format!(

@@ -228,8 +228,9 @@ fn doubling_algorithm_matches_scipy_dare() {
             &flat(&matrix(&m["R"])),
             n,
             nm,
+            kea_core::riccati::MAX_DOUBLINGS,
         )
-        .unwrap_or_else(|| panic!("{name}: doubling failed"));
+        .unwrap_or_else(|e| panic!("{name}: doubling failed ({e:?})"));
         let rows: Vec<Vec<f64>> = r_inf.chunks(n).map(|r| r.to_vec()).collect();
         let e = max_rel(&rows, &matrix(&m["P_prior_dare"]));
         assert!(e < 1e-11, "{name}: {e:e}");

@@ -378,15 +378,113 @@ pub struct Work {
 pub fn analysis_work(compiled: &CompiledModel, model: Option<&Model>) -> Work {
     let step = AnalysisStep::of(compiled, model);
     let steps = compiled.max_steps();
+    let once = AnalysisOnce::of(compiled, model);
+    let mut explain = format!(
+        "D = {steps} steps × {:.0} ({})",
+        step.units(),
+        step.explain()
+    );
+    if once.units() > 0.0 {
+        explain += &format!(" + once {:.0} ({})", once.units(), once.explain());
+    }
     Work {
-        units: steps as f64 * step.units(),
-        explain: format!(
-            "D = {steps} steps × {:.0} ({})",
-            step.units(),
-            step.explain()
-        ),
+        units: steps as f64 * step.units() + once.units(),
+        explain,
         path: "model.time.steps".into(),
     }
+}
+
+/// Units of parsing one expression (a distinct text of a member), constant or in t:
+/// exmex builds a parsed expression of tens of KB, and one in t is parsed twice (for
+/// one value and for blocks of values). Measured (a 2-core Zen 4, `kea analyze` of one
+/// step): 40 000 distinct constant texts `p*k` 1.0 s, 2000 in t 42 ms a synthesis point.
+pub const PARSE_UNITS: f64 = 25_000.0;
+
+/// Units of one doubling of [`crate::riccati::dare_doubling`] (an LU, two solves and
+/// four products of N × N matrices), per N³: measured 1.5 at N = 200.
+pub const DOUBLING_UNITS_PER_CUBE: f64 = 2.0;
+
+/// What an analysis costs once, besides its steps: its expressions' parses (every
+/// analysis compiles the model: a synthesis point too) and, for a time-invariant
+/// model, the doublings of the stationary solution ([`crate::riccati::doublings_for`]).
+/// Without them a model of many expressions, or N = 200 with few steps, ran 100 to
+/// 1000 times its estimate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AnalysisOnce {
+    pub n: usize,
+    /// Distinct expression texts per member (0 where the model's texts are not known).
+    pub parses: usize,
+    /// The doublings at most (0 for a time-varying model).
+    pub doublings: u32,
+}
+
+impl AnalysisOnce {
+    pub fn of(compiled: &CompiledModel, model: Option<&Model>) -> AnalysisOnce {
+        AnalysisOnce {
+            n: compiled.n_states(),
+            parses: model.map_or(0, expression_texts),
+            doublings: if compiled.is_time_invariant() {
+                crate::riccati::doublings_for(compiled.max_steps())
+            } else {
+                0
+            },
+        }
+    }
+
+    pub fn units(&self) -> f64 {
+        let cube = (self.n as f64).powi(3);
+        self.parses as f64 * PARSE_UNITS
+            + f64::from(self.doublings) * (DOUBLING_UNITS_PER_CUBE * cube + 1000.0)
+    }
+
+    /// E.g. "40000 expressions parsed, 4 doublings of the stationary solution".
+    pub fn explain(&self) -> String {
+        let mut parts = Vec::new();
+        if self.parses > 0 {
+            parts.push(format!(
+                "{} expression{} parsed",
+                self.parses,
+                if self.parses == 1 { "" } else { "s" }
+            ));
+        }
+        if self.doublings > 0 {
+            parts.push(format!(
+                "{} doublings of the stationary solution",
+                self.doublings
+            ));
+        }
+        parts.join(", ")
+    }
+}
+
+/// The distinct expression texts of each of a model's members that take them (a
+/// matrix's entries with one text are parsed once).
+fn expression_texts(model: &Model) -> usize {
+    fn distinct<'a>(values: impl Iterator<Item = &'a Value>) -> usize {
+        let mut seen = HashSet::new();
+        values
+            .filter(|v| matches!(v, Value::Expr(s) if seen.insert(s.as_str())))
+            .count()
+    }
+    let (sys, meas) = (&model.system, &model.measurement);
+    let matrices = [
+        Some(&sys.a),
+        Some(&sys.b),
+        sys.w.as_ref(),
+        Some(&meas.c),
+        meas.gamma.as_ref(),
+        meas.g.as_ref(),
+        meas.v.as_ref(),
+    ];
+    let vectors = [&sys.u, &sys.y0, &sys.eta0, &sys.phi, &meas.psi];
+    let whens = meas.schedule.iter().flatten().flatten();
+    matrices
+        .into_iter()
+        .flatten()
+        .map(|m| distinct(m.iter().flatten()))
+        .chain(vectors.into_iter().flatten().map(|v| distinct(v.iter())))
+        .sum::<usize>()
+        + distinct(whens.filter_map(|s| s.when.as_ref()))
 }
 
 /// The work of a Monte Carlo simulation `sim` on a compiled model (`model`: its
@@ -532,5 +630,47 @@ mod tests {
             step.explain()
                 .contains("2 expressions in t (11 characters, calls 12)")
         );
+    }
+
+    /// Once per analysis: every distinct expression text of a member is parsed (the
+    /// constant `k` too, `sin(t)` once for its two entries of b, the schedule's
+    /// `when`), and a time-invariant model's stationary solution takes up to
+    /// ⌈log₂ D⌉ + 4 doublings; a time-varying one takes none.
+    #[test]
+    fn an_analysis_costs_its_parses_and_doublings_once() {
+        assert_eq!(
+            [1, 2, 3, 1000, 1024, 1025, 1_000_000, u64::MAX].map(crate::riccati::doublings_for),
+            [4, 5, 6, 14, 14, 15, 24, 68]
+        );
+        let (m, c) = model(two_states(
+            serde_json::json!([[0, "k"], [1, 0]]),
+            serde_json::json!([[1, 0.5]]),
+        ));
+        let once = AnalysisOnce::of(&c, Some(&m));
+        assert_eq!((once.parses, once.doublings), (1, 14));
+        let work = analysis_work(&c, Some(&m));
+        let doubling = 2.0 * 8.0 + 1000.0;
+        assert_eq!(
+            work.units,
+            1000.0 * crate::step_cost(2) + PARSE_UNITS + 14.0 * doubling
+        );
+        assert!(
+            work.explain.ends_with(&format!(
+                " + once {:.0} (1 expression parsed, 14 doublings of the stationary solution)",
+                PARSE_UNITS + 14.0 * doubling
+            )),
+            "{}",
+            work.explain
+        );
+
+        let mut json = two_states(
+            serde_json::json!([["sin(t)", "sin(t)"], ["k*t", 0]]),
+            serde_json::json!([[1, "k/2"]]),
+        );
+        json["measurement"]["schedule"] = serde_json::json!([{"when": "sin(t)"}]);
+        let (m, c) = model(json);
+        let once = AnalysisOnce::of(&c, Some(&m));
+        assert_eq!((once.parses, once.doublings), (4, 0));
+        assert_eq!(AnalysisOnce::of(&c, None).parses, 0);
     }
 }

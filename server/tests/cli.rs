@@ -150,12 +150,14 @@ fn work_above_the_limit_is_refused_up_front() {
     let seed = root.join("presets/seed-example.json");
     let seed = seed.to_str().unwrap();
     // The seed example: D = 10⁶ steps of N = 1, 240 units each (217 for the
-    // recursion, 23 for its inputs and its one expression in t).
+    // recursion, 23 for its inputs and its one expression in t), and once 7 parses of
+    // 25 000.
     let (code, out, err) = kea(&["analyze", seed, "--max-work", "1e8"]);
     assert_eq!(code, 2, "{err}");
     assert!(out.is_empty(), "{out}");
     assert!(
-        err.starts_with("time.steps: estimated work 2.403e8 (D = 1000000 steps"),
+        err.starts_with("time.steps: estimated work 2.405e8 (D = 1000000 steps")
+            && err.contains("+ once 175000 (7 expressions parsed)"),
         "{err}"
     );
     assert!(err.contains("above --max-work 1.000e8"), "{err}");

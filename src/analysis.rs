@@ -477,34 +477,12 @@ impl<'m, const N: usize> Engine<'m, N> {
         let invariant = m.is_time_invariant();
 
         // The stationary predicted covariance r∞ (doubling), for the shortcut.
-        let stationary = invariant.then(|| {
-            riccati::dare_doubling(
-                &inp.dense_a(),
-                &inp.c_nz,
-                &inp.big_b,
-                &inp.rv,
-                n,
-                nm,
-                riccati::doublings_for(self.steps),
-            )
-        });
         let mut warnings = Vec::new();
-        // Not settled within the doublings worth taking: the recursion reaches no steady
-        // state in D steps either (`doublings_for`), which the result says by itself.
-        if let Some(Err(riccati::NoStationary::Failed)) = stationary {
-            // The doubling needs Rv⁻¹: a noise-free measurement, or fewer noise
-            // sources than measurements, is no reason to suspect the model.
-            let rv = nalgebra::DMatrix::from_row_slice(nm, nm, &inp.rv);
-            let why = if nm > 0 && rv.cholesky().is_none() {
-                "is not computed where the measurement-noise covariance Γ V Γᵀ is singular (its doubling algorithm needs the inverse)"
-            } else {
-                "could not be computed (no stabilising solution?)"
-            };
-            warnings.push(format!(
-                "the stationary Riccati solution {why}: the full recursion was run and no steady state is reported"
-            ));
-        }
-        let r_inf = stationary.and_then(Result::ok);
+        let r_inf = if invariant {
+            stationary(&inp, n, nm, self.steps, &mut warnings)
+        } else {
+            None
+        };
 
         // --- state
         let mut y = m.y0.clone();
@@ -1171,6 +1149,44 @@ fn mean_overflowed(
             states[i]
         ),
     }
+}
+
+/// r∞ of a time-invariant model by doubling ([`riccati::dare_doubling`]), with the
+/// warning where it fails. Out of line: inlined into the step loop's function, its code
+/// changed how LLVM laid out the loop (+11 % a step of a constant P = 10 model).
+#[inline(never)]
+fn stationary(
+    inp: &Inputs,
+    n: usize,
+    nm: usize,
+    steps: u64,
+    warnings: &mut Vec<String>,
+) -> Option<Vec<f64>> {
+    let found = riccati::dare_doubling(
+        &inp.dense_a(),
+        &inp.c_nz,
+        &inp.big_b,
+        &inp.rv,
+        n,
+        nm,
+        riccati::doublings_for(steps),
+    );
+    // Not settled within the doublings worth taking: the recursion reaches no steady
+    // state in D steps either (`doublings_for`), which the result says by itself.
+    if let Err(riccati::NoStationary::Failed) = found {
+        // The doubling needs Rv⁻¹: a noise-free measurement, or fewer noise sources
+        // than measurements, is no reason to suspect the model.
+        let rv = nalgebra::DMatrix::from_row_slice(nm, nm, &inp.rv);
+        let why = if nm > 0 && rv.cholesky().is_none() {
+            "is not computed where the measurement-noise covariance Γ V Γᵀ is singular (its doubling algorithm needs the inverse)"
+        } else {
+            "could not be computed (no stabilising solution?)"
+        };
+        warnings.push(format!(
+            "the stationary Riccati solution {why}: the full recursion was run and no steady state is reported"
+        ));
+    }
+    found.ok()
 }
 
 /// The error where the mean overflows although the model is stable: Euler's step

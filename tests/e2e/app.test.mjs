@@ -6,7 +6,7 @@
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
 import { deflateRawSync } from 'node:zlib';
-import { kea, newPage, openApp } from './lib.mjs';
+import { choosePreset, kea, newPage, openApp } from './lib.mjs';
 
 let server;
 let browser;
@@ -26,12 +26,6 @@ function ready(p = page) {
   return p.waitForSelector('body[data-ready=true]', { timeout: 30000 });
 }
 
-/** Load a preset and wait for its link. */
-async function preset(name) {
-  await page.selectOption('#preset', name);
-  await page.waitForFunction((n) => location.hash.startsWith(`#preset=${n}`), name);
-}
-
 /** The job the server has under `id`. */
 async function job(id) {
   return (await fetch(`${server.url}/v1/jobs/${id}`)).json();
@@ -44,7 +38,7 @@ function keptJob(key) {
 
 /** Make the loaded model long: D = 10⁸ steps and no steady-state shortcut. */
 async function makeLong() {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   await page.fill('input[data-path="time.steps"]', '100000000');
   await page.uncheck('input[data-path="options.steady_state_shortcut"]');
   await page.waitForFunction(() => location.hash.startsWith('#model=')); // the edited model in the link
@@ -73,7 +67,7 @@ test('a reload during a server analysis follows its job again: progress, Cancel'
 });
 
 test("a job that ended while the page was away shows its result; one the server lacks is forgotten quietly", async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   const body = JSON.stringify({ kind: 'analysis', model: JSON.parse(kea('preset', 'seed-example')) });
   const posted = await (await fetch(`${server.url}/v1/jobs`, { method: 'POST', headers: { 'content-type': 'application/json' }, body })).json();
   for (let i = 0; (await job(posted.id)).status !== 'succeeded'; i++) {
@@ -105,7 +99,7 @@ test("a job that ended while the page was away shows its result; one the server 
 });
 
 test('a reload during a server Monte Carlo follows its job again, to its cancel', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   await page.fill('input[data-path="time.steps"]', '100000');
   await page.click('#tab-simulation');
   await page.fill('#mc-runs', '20000');
@@ -143,7 +137,7 @@ test('"Run in" is one setting for the three tabs, kept over a reload', async () 
 });
 
 test("a preset chosen over an edited model leaves that model one Back away", async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   await page.fill('input[data-path="params.c"]', '0.6');
   await page.waitForFunction(() => location.hash.startsWith('#model='));
   const edited = await page.evaluate(() => location.hash);
@@ -224,7 +218,7 @@ test('at 1366 × 800 a Synthesis grid fits its box: no number is cut off', async
 });
 
 test("a synthesis on the bound set shows the warnings of its answer's analysis", async () => {
-  await preset('helicopter-range');
+  await choosePreset(page, 'helicopter-range', 0);
   await page.click('#tab-synthesis');
   await page.selectOption('#syn-criterion', 'yx');
   await page.selectOption('#syn-set', 'bound');
@@ -261,7 +255,7 @@ function tookRule(text) {
 }
 
 test('times taken read alike: one format, 3 significant digits, in the browser and on the server', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   for (const where of ['browser', 'server']) {
     await page.evaluate(() => delete document.querySelector('#summary').dataset.where);
     await page.check(`input[name=mode][value=${where}]`);
@@ -297,7 +291,7 @@ function chiPixels() {
 }
 
 test('a Monte Carlo χ all beyond the top of the chart is not drawn; its legend says so', async () => {
-  await preset('helicopter-range');
+  await choosePreset(page, 'helicopter-range', 0);
   await page.click('#tab-simulation');
   await page.fill('#mc-runs', '50');
   await page.check('input[name=mc-where][value=browser]');
@@ -319,7 +313,7 @@ test('a Monte Carlo χ all beyond the top of the chart is not drawn; its legend 
 });
 
 test('a Synthesis grid value left empty (1,,2) is refused at its field', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   await page.click('#tab-synthesis');
   await page.selectOption('#syn-mode', 'grid');
   await page.check('input[name=syn-where][value=browser]');

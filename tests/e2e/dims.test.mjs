@@ -8,8 +8,7 @@
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
-import { readFileSync } from 'node:fs';
-import { kea, openApp, refusedRun } from './lib.mjs';
+import { choosePreset, exportedModel, importModel, kea, openApp, refusedRun } from './lib.mjs';
 
 let page;
 const consoleErrors = [];
@@ -22,25 +21,6 @@ before(async () => {
 });
 
 after(() => app?.close());
-
-async function preset(name) {
-  await page.selectOption('#preset', name);
-  await page.waitForFunction((n) => location.hash.startsWith(`#preset=${n}`), name);
-  await page.waitForTimeout(300); // the core's check of the loaded model has answered
-}
-
-/** Load `model` as a file import. */
-async function importModel(model, name = 'model.json') {
-  await page.setInputFiles('#import-model', { name, mimeType: 'application/json', buffer: Buffer.from(JSON.stringify(model)) });
-  await page.waitForFunction((n) => document.getElementById('page-status').textContent.includes(n), name);
-  await page.waitForTimeout(300);
-}
-
-/** The model as "Export JSON" saves it. */
-async function exported() {
-  const [download] = await Promise.all([page.waitForEvent('download'), page.click('#export-model')]);
-  return JSON.parse(readFileSync(await download.path(), 'utf8'));
-}
 
 /** The messages shown at the editor cell or field `path` names. */
 function messagesAt(path) {
@@ -70,8 +50,8 @@ async function setDimension(key, text) {
 }
 
 test('an empty or out-of-range dimension is marked at its field and not applied: the model keeps its size', async () => {
-  await preset('helicopter-range');
-  const original = await exported();
+  await choosePreset(page, 'helicopter-range');
+  const original = await exportedModel(page);
   // Cleared, then a click elsewhere before typing the new value.
   await page.click('#dim-N', { clickCount: 3 });
   await page.keyboard.press('Backspace');
@@ -103,19 +83,19 @@ test('an empty or out-of-range dimension is marked at its field and not applied:
   assert.equal((await measurements()).length, 4);
   await setDimension('n', '4');
   assert.deepEqual(await editorMessages(), []);
-  assert.deepEqual(await exported(), original, 'nothing changed');
+  assert.deepEqual(await exportedModel(page), original, 'nothing changed');
 });
 
 test('a smaller N removes states, and growing N back restores them; Undo does too', async () => {
-  await preset('helicopter-range');
-  const original = await exported();
+  await choosePreset(page, 'helicopter-range');
+  const original = await exportedModel(page);
   await setDimension('N', '4');
   assert.deepEqual(await states(), ['D_f', 'V_f', 'j_f', 'D_b']);
   const note = await page.textContent('[data-note="undo-dims"]');
   assert.match(note, /^N 6 → 4 removed the states “V_b”, “j_b” with their entries in a, b, y₀, η₀, C\. Growing N back restores them/);
   await setDimension('N', '5');
   await setDimension('N', '6');
-  assert.deepEqual(await exported(), original, 'grown back: the model as it was');
+  assert.deepEqual(await exportedModel(page), original, 'grown back: the model as it was');
   assert.equal(await page.$('[data-note="undo-dims"]'), null);
 
   // Undo, after an edit of a state that was kept (the edit stays).
@@ -124,21 +104,21 @@ test('a smaller N removes states, and growing N back restores them; Undo does to
   await page.click('[data-note="undo-dims"] button');
   await page.waitForTimeout(300);
   assert.equal(await focused(), 'dim-N', 'the focus goes to the field Undo changed');
-  const undone = await exported();
+  const undone = await exportedModel(page);
   assert.deepEqual(undone.system.y0, [7, ...original.system.y0.slice(1)]);
   await page.fill('input[data-path="system.y0[0]"]', String(original.system.y0[0]));
-  assert.deepEqual(await exported(), original);
+  assert.deepEqual(await exportedModel(page), original);
   assert.deepEqual(await editorMessages(), []);
 
   // Growing and shrinking over new, empty states says nothing: nothing of value went.
   await setDimension('N', '8');
   await setDimension('N', '6');
   assert.equal(await page.$('[data-note="undo-dims"]'), null);
-  assert.deepEqual(await exported(), original);
+  assert.deepEqual(await exportedModel(page), original);
 });
 
 test('arrow keys step a dimension and keep the focus in its field', async () => {
-  await preset('cv-tracker');
+  await choosePreset(page, 'cv-tracker');
   await page.focus('#dim-N');
   await page.keyboard.press('ArrowUp');
   await page.waitForTimeout(200);
@@ -166,12 +146,12 @@ test('arrow keys step a dimension and keep the focus in its field', async () => 
     await page.waitForTimeout(200);
     assert.equal(await focused(), `dim-${key}`, key);
   }
-  assert.deepEqual(await exported(), JSON.parse(kea('preset', 'cv-tracker')), 'stepped up and back: the preset');
+  assert.deepEqual(await exportedModel(page), JSON.parse(kea('preset', 'cv-tracker')), 'stepped up and back: the preset');
 });
 
 test("the × beside a state's name removes that state from every member; Undo puts it back in its place", async () => {
-  await preset('helicopter-range');
-  const original = await exported();
+  await choosePreset(page, 'helicopter-range');
+  const original = await exportedModel(page);
   await page.focus('button[aria-label="remove state V_f"]');
   await page.keyboard.press('Enter');
   await page.waitForTimeout(300);
@@ -179,7 +159,7 @@ test("the × beside a state's name removes that state from every member; Undo pu
   assert.equal(await focused(), 'remove-state:1', 'the focus goes to the × of the state in its place');
   assert.equal(await page.getAttribute('[data-focus="remove-state:1"]', 'aria-label'), 'remove state j_f');
   const without = (rows, k) => rows.filter((_, i) => i !== k);
-  const model = await exported();
+  const model = await exportedModel(page);
   assert.deepEqual(model.system.a, without(original.system.a, 1).map((row) => without(row, 1)));
   assert.deepEqual(model.system.b, without(original.system.b, 1));
   assert.deepEqual(model.system.eta0, without(original.system.eta0, 1));
@@ -189,45 +169,45 @@ test("the × beside a state's name removes that state from every member; Undo pu
   await page.waitForTimeout(300);
   assert.equal(await focused(), 'remove-state:1', 'the focus goes to the restored state’s ×');
   assert.equal(await page.getAttribute('[data-focus="remove-state:1"]', 'aria-label'), 'remove state V_f');
-  assert.deepEqual(await exported(), original);
+  assert.deepEqual(await exportedModel(page), original);
 
   // A measurement, by its own ×, with its schedule entry (helicopter-hover: V_f_meas has one).
-  await preset('helicopter-hover');
-  const hover = await exported();
+  await choosePreset(page, 'helicopter-hover');
+  const hover = await exportedModel(page);
   await page.click('button[aria-label="remove measurement V_f_meas"]');
   await page.waitForTimeout(300);
   assert.deepEqual(await measurements(), ['D_f_meas', 'D_b_meas', 'V_b_meas']);
-  const removed = await exported();
+  const removed = await exportedModel(page);
   assert.deepEqual(removed.measurement.schedule, [null, null, null]);
   assert.deepEqual(removed.measurement.c, without(hover.measurement.c, 1));
   assert.deepEqual(await editorMessages(), []);
   await page.click('[data-note="undo-measurement"] button');
   await page.waitForTimeout(300);
-  assert.deepEqual(await exported(), hover);
+  assert.deepEqual(await exportedModel(page), hover);
 
   // The only state cannot be removed.
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
   assert.equal(await page.isDisabled('button[aria-label="remove state Y"]'), true);
 });
 
 test('resizing keeps the schedule, pairs and weights consistent, and growing back restores them', async () => {
   // helicopter-hover's schedule has one entry per measurement.
-  await preset('helicopter-hover');
-  const hover = await exported();
+  await choosePreset(page, 'helicopter-hover');
+  const hover = await exportedModel(page);
   await setDimension('n', '3');
   assert.deepEqual(await editorMessages(), [], 'no “schedule has 4 entries” nobody could fix');
-  assert.equal((await exported()).measurement.schedule.length, 3);
+  assert.equal((await exportedModel(page)).measurement.schedule.length, 3);
   await setDimension('n', '4');
-  assert.deepEqual(await exported(), hover, 'the fourth measurement came back as it was');
+  assert.deepEqual(await exportedModel(page), hover, 'the fourth measurement came back as it was');
 
   const model = JSON.parse(kea('preset', 'helicopter-range'));
   model.measurement.pairs = ['D_f', 'V_f', 'D_b', 'V_b'].map((s) => ({ state: s, measurement: `${s}_meas` }));
   model.criteria.weights = { yz: [0.25, 0.25, 0, 0.25, 0.25, 0], yx: [0.5, 0.1, 0.1, 0.1, 0.1, 0.1] };
-  await importModel(model, 'weighted.json');
+  await importModel(page, model, 'weighted.json');
   assert.deepEqual(await editorMessages(), []);
-  const original = await exported();
+  const original = await exportedModel(page);
   await setDimension('N', '4');
-  const shrunk = await exported();
+  const shrunk = await exportedModel(page);
   assert.deepEqual(shrunk.criteria.weights, { yz: [0.25, 0.25, 0, 0.25], yx: [0.5, 0.1, 0.1, 0.1] });
   assert.deepEqual(shrunk.measurement.pairs.map((p) => p.state), ['D_f', 'V_f', 'D_b'], 'the pair of V_b went with it');
   // The weights no longer sum to 1: said at the weights' field, with their place.
@@ -236,20 +216,20 @@ test('resizing keeps the schedule, pairs and weights consistent, and growing bac
   );
   assert.ok(atWeights.some((m) => /weights must sum to 1/.test(m)), `${atWeights}`);
   await setDimension('N', '6');
-  assert.deepEqual(await exported(), original);
+  assert.deepEqual(await exportedModel(page), original);
   assert.deepEqual(await editorMessages(), []);
 
   // A state renamed: its pairs follow.
   await page.fill('input[data-path="system.states[0]"]', 'range');
   await page.press('input[data-path="system.states[0]"]', 'Tab');
   await page.waitForTimeout(300);
-  assert.equal((await exported()).measurement.pairs[0].state, 'range');
+  assert.equal((await exportedModel(page)).measurement.pairs[0].state, 'range');
   assert.match(await page.inputValue('textarea[data-path="measurement.pairs"]'), /"state":"range"/);
   assert.deepEqual(await editorMessages(), []);
 });
 
 test('members without a grid are shown; an error at one is marked there, with a way to remove it', async () => {
-  await preset('helicopter-hover');
+  await choosePreset(page, 'helicopter-hover');
   assert.match(await page.inputValue('textarea[data-path="measurement.schedule"]'), /"unavailable":\[\[8,14\]\]/);
   assert.equal(await page.textContent('[data-summary="measurement.schedule"]'), 'V_f_meas: unavailable in [8, 14]; the others at every step');
   assert.equal(await page.inputValue('textarea[data-path="measurement.pairs"]'), '', 'no pairs: the default pairing');
@@ -267,13 +247,13 @@ test('members without a grid are shown; an error at one is marked there, with a 
   await page.click('button[aria-label="remove measurement.schedule"]');
   await page.waitForTimeout(300);
   assert.equal(await focused(), 'f-measurement-schedule', 'the focus stays at the (now empty) field');
-  assert.equal((await exported()).measurement.schedule, undefined);
+  assert.equal((await exportedModel(page)).measurement.schedule, undefined);
   assert.deepEqual(await editorMessages(), []);
 
   // A misspelt member from a file: shown where it belongs, its error there, removable.
   const typo = JSON.parse(kea('preset', 'seed-example'));
   typo.time = { t0: 0, t_end: 10, stpes: 1000 };
-  await importModel(typo, 'typo.json');
+  await importModel(page, typo, 'typo.json');
   await page.fill('input[data-path="time.steps"]', '1000');
   await page.waitForTimeout(400);
   assert.deepEqual(await editorMessages(), ['unknown member; expected one of: t0, t_end, steps, auto']);
@@ -284,12 +264,12 @@ test('members without a grid are shown; an error at one is marked there, with a 
   await page.waitForTimeout(400);
   assert.equal(await page.$('[data-path="time.stpes"]'), null);
   assert.deepEqual(await editorMessages(), []);
-  assert.deepEqual((await exported()).time, { t0: 0, t_end: 10, steps: 1000 });
+  assert.deepEqual((await exportedModel(page)).time, { t0: 0, t_end: 10, steps: 1000 });
   assert.notEqual(await focused(), 'BODY', 'the focus stays in the editor');
 });
 
 test('the focus stays on the control after removing a parameter or switching a form with the keyboard', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
   await page.focus('button[aria-label="remove parameter c"]');
   await page.keyboard.press('Enter');
   await page.waitForTimeout(300);

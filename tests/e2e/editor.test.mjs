@@ -5,8 +5,7 @@
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
-import { readFileSync } from 'node:fs';
-import { openApp, refusedRun, relDiff } from './lib.mjs';
+import { choosePreset, exportedModel, openApp, refusedRun, relDiff } from './lib.mjs';
 
 let server;
 let browser;
@@ -22,12 +21,6 @@ before(async () => {
 
 after(() => app?.close());
 
-async function preset(name) {
-  await page.selectOption('#preset', name);
-  await page.waitForFunction((n) => location.hash.startsWith(`#preset=${n}`), name);
-  await page.waitForTimeout(300); // the core's check of the loaded model has answered
-}
-
 /** The messages shown at the editor cell or field `path` names (the input's holder). */
 function messagesAt(path) {
   return page.$$eval(`[data-error-path="${path}"]`, (es) => es.map((e) => e.textContent));
@@ -38,16 +31,10 @@ function editorMessages() {
   return page.$$eval('#editor .cell-error, #editor .general-errors li', (es) => es.map((e) => e.textContent));
 }
 
-/** The model as "Export JSON" saves it. */
-async function exported() {
-  const [download] = await Promise.all([page.waitForEvent('download'), page.click('#export-model')]);
-  return JSON.parse(readFileSync(await download.path(), 'utf8'));
-}
-
 const cell = (path) => `input[data-path="${path}"]`;
 
 test('a number too large for a double is refused at its cell, in words, before sending', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
   await page.fill(cell('system.y0[0]'), '1e400');
   await page.waitForTimeout(300);
   const shown = await messagesAt('system.y0[0]');
@@ -60,17 +47,17 @@ test('a number too large for a double is refused at its cell, in words, before s
 });
 
 test('"Add parameter" selects the placeholder name, so typing replaces it', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
   await page.click('text=Add parameter');
   await page.keyboard.type('wind');
   await page.keyboard.press('Enter');
   assert.ok(await page.$(cell('params.wind')), 'the parameter is called wind');
   assert.equal(await page.$(cell('params.windp1')), null);
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
 });
 
 test("a cell's full text is its tooltip, kept up to date as it is typed", async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
   const a = cell('system.a[0][0]');
   assert.equal(await page.getAttribute(a, 'title'), 's/m');
   const long = 'sqrt(2*alpha*beta*gamma_long_name)/m + s';
@@ -78,19 +65,19 @@ test("a cell's full text is its tooltip, kept up to date as it is typed", async 
   assert.equal(await page.getAttribute(a, 'title'), long);
   await page.fill(a, '');
   assert.equal(await page.getAttribute(a, 'title'), null, 'no tooltip for an empty cell');
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
 });
 
 test('messages name single fields by their labels and parameters by their names, not by JSON paths', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
   await page.fill(cell('time.t_end'), '-5');
   assert.match(await refusedRun(page), /^t_E: t_end \(-5\) must be greater than t0 \(0\)/);
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
   await page.fill(cell('criteria.confidence'), '1.5');
   const confidence = await refusedRun(page);
   assert.match(confidence, /^Confidence P: /);
   assert.doesNotMatch(confidence, /criteria\./);
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
   await page.fill(cell('params.w.name'), '2x');
   await page.press(cell('params.w.name'), 'Tab');
   assert.match(await refusedRun(page), /^parameter “2x”: a parameter name must be an identifier/);
@@ -100,7 +87,7 @@ test('messages name single fields by their labels and parameters by their names,
     return ['time.t0', 'time.t_end', 'time.steps', 'criteria.confidence', 'options.trace_points', 'params.2x', 'params.2x.name', 'system.phi[0]', 'measurement.g[1][0]'].map(modelPlace);
   });
   assert.deepEqual(places, ['t₀: ', 't_E: ', 'Steps D: ', 'Confidence P: ', 'Trace points: ', 'parameter “2x”: ', 'name of parameter “2x”: ', 'φ [1]: ', 'g [2, 1]: ']);
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
 });
 
 /** Every criterion cell of the results table: {`set.criterion.row`: value|null}. */
@@ -126,7 +113,7 @@ async function pickForm(id, value) {
 }
 
 test("the seed's g becomes Γ = C g (the same model: the same criteria), and switching back restores g's text", async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
   await page.fill(cell('time.steps'), '20000'); // quick runs
   const withG = await runCriteria();
   await pickForm('form-measurement-noise', 'gamma');
@@ -141,11 +128,11 @@ test("the seed's g becomes Γ = C g (the same model: the same criteria), and swi
   await pickForm('form-measurement-noise', 'g');
   assert.equal(await page.inputValue(cell('measurement.g[0][0]')), 'v*t/m_g', "g's own text, not a quotient");
   assert.equal(await page.$('.form-note'), null, 'nothing to say');
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
 });
 
 test('g ↔ Γ with numbers: Γ = C g computed; an edited Γ gives g = Γ / C; a C that fixes no g says so', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
   await page.fill(cell('measurement.c[0][0]'), '0.5');
   await page.fill(cell('measurement.g[0][0]'), '3');
   await pickForm('form-measurement-noise', 'gamma');
@@ -153,12 +140,12 @@ test('g ↔ Γ with numbers: Γ = C g computed; an edited Γ gives g = Γ / C; a
   await page.fill(cell('measurement.gamma[0][0]'), '2'); // edited: switching back converts
   await pickForm('form-measurement-noise', 'g');
   assert.equal(await page.inputValue(cell('measurement.g[0][0]')), '4');
-  const model = await exported();
+  const model = await exportedModel(page);
   assert.deepEqual(model.measurement.g, [[4]]);
   assert.equal(model.measurement.gamma, undefined);
 
   // cv-tracker: C = [1 0] measures one of two states, so Γ = C g has many g.
-  await preset('cv-tracker');
+  await choosePreset(page, 'cv-tracker');
   await pickForm('form-measurement-noise', 'g');
   const note = await page.textContent('[data-note="measurement-noise"]');
   assert.match(note, /g is 0: Γ = C g gives g only when C is diagonal/);
@@ -166,11 +153,11 @@ test('g ↔ Γ with numbers: Γ = C g computed; an edited Γ gives g = Γ / C; a
   await pickForm('form-measurement-noise', 'gamma');
   assert.equal(await page.inputValue(cell('measurement.gamma[0][0]')), '1', 'Γ as it was');
   assert.equal(await page.$('.form-note'), null);
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
 });
 
 test('switching φ ↔ W and ψ ↔ V and back restores the texts exactly; after an edit it converts', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
   await pickForm('form-system-errors', 'W');
   assert.equal(await page.inputValue(cell('system.W[0][0]')), '(f*psi)^2');
   await pickForm('form-system-errors', 'phi');
@@ -187,7 +174,7 @@ test('switching φ ↔ W and ψ ↔ V and back restores the texts exactly; after
   assert.deepEqual(await editorMessages(), []);
 
   // A covariance with what SKOs cannot say: its entries named, and a way back.
-  await preset('cv-tracker');
+  await choosePreset(page, 'cv-tracker');
   await page.fill('#dim-L', '2');
   await page.press('#dim-L', 'Tab');
   await pickForm('form-system-errors', 'W');
@@ -200,11 +187,11 @@ test('switching φ ↔ W and ψ ↔ V and back restores the texts exactly; after
   await pickForm('form-system-errors', 'W');
   assert.equal(await page.inputValue(cell('system.W[0][1]')), '0.1');
   assert.equal(await page.inputValue(cell('system.W[1][1]')), '-1');
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
 });
 
 test("a parameter's rename reaches its uses in every expression, whole names only, and says so", async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
   // The uses of m: a = s/m, b = v/m, and u below; not m_g (g = v*t/m_g).
   await page.fill(cell('system.u[0]'), '-w + 0*sin(s)*m_g/m');
   await page.fill(cell('params.m.name'), 'mass');
@@ -223,7 +210,7 @@ test("a parameter's rename reaches its uses in every expression, whole names onl
   assert.equal(await page.textContent('[data-note="params"]'), 'renamed s → spring in 2 cells');
   await page.waitForTimeout(300);
   assert.deepEqual(await editorMessages(), [], 'the model is still valid');
-  const model = await exported();
+  const model = await exportedModel(page);
   assert.deepEqual(model.system.a, [['spring/mass']]);
   assert.equal(model.params.mass, 100);
 
@@ -250,12 +237,12 @@ test("a parameter's rename reaches its uses in every expression, whole names onl
   await page.fill(cell('params.t.name'), 'v');
   await page.press(cell('params.t.name'), 'Tab');
   assert.equal(await page.inputValue(cell('measurement.g[0][0]')), 'v*t/m_g');
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example');
   assert.equal(await page.textContent('[data-note="params"]'), '', 'a loaded model starts with no note');
 });
 
 test('a block pasted into a grid cell fills the grid from there, as in a spreadsheet', async () => {
-  await preset('cv-tracker');
+  await choosePreset(page, 'cv-tracker');
   // Paste `text` into the cell at `path`, as the clipboard would.
   const paste = (path, text) =>
     page.$eval(cell(path), (input, text) => {
@@ -266,7 +253,7 @@ test('a block pasted into a grid cell fills the grid from there, as in a spreads
   // From a spreadsheet: tab-separated rows; a third row falls beyond a's edge. (It was
   // all put into the one cell, "0\t1 -0.5\t0", and marked as implicit multiplication.)
   await paste('system.a[0][0]', '0\t1\r\n-0.5\t-0.1\r\n7\t7\r\n');
-  const model = await exported();
+  const model = await exportedModel(page);
   assert.deepEqual(model.system.a, [[0, 1], [-0.5, -0.1]]);
   assert.equal(await page.textContent('#page-status'), 'Pasted 4 values into a (N×N); 2 beyond its edge left out.');
   assert.deepEqual(await messagesAt('system.a[0][0]'), []);

@@ -6,8 +6,7 @@
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
-import { readFileSync } from 'node:fs';
-import { chainModel, openApp } from './lib.mjs';
+import { chainModel, exportedModel, importModel, openApp } from './lib.mjs';
 
 let page;
 const consoleErrors = [];
@@ -24,10 +23,8 @@ after(() => app?.close());
 let imports = 0;
 
 /** Load `model` as a file import; resolves when the core's check has answered. */
-async function importModel(model) {
-  const name = `large-${++imports}.json`;
-  await page.setInputFiles('#import-model', { name, mimeType: 'application/json', buffer: Buffer.from(JSON.stringify(model)) });
-  await page.waitForFunction((n) => document.getElementById('page-status').textContent.includes(n), name, { timeout: 60000 });
+async function importFile(model) {
+  await importModel(page, model, `large-${++imports}.json`, 0);
   await checked();
 }
 
@@ -35,12 +32,6 @@ async function importModel(model) {
 async function checked() {
   await page.waitForTimeout(400);
   await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => setTimeout(r))));
-}
-
-/** The model as "Export JSON" saves it. */
-async function exported() {
-  const [download] = await Promise.all([page.waitForEvent('download'), page.click('#export-model')]);
-  return JSON.parse(readFileSync(await download.path(), 'utf8'));
 }
 
 function messagesAt(path) {
@@ -59,7 +50,7 @@ const countChanges = () =>
 test('one cell edited at N = 200 changes that cell, its marks and the model: every other node stays', async () => {
   const model = chainModel(200, 50);
   model.measurement.c[10][10] = 'k'; // an unknown name: the core's message at its cell
-  await importModel(model);
+  await importFile(model);
   assert.match((await messagesAt('measurement.c[10][10]'))[0], /k/);
   // Tag every input and message of the editor, to tell them from new ones.
   const tag = () =>
@@ -107,7 +98,7 @@ test('one cell edited at N = 200 changes that cell, its marks and the model: eve
   await page.fill(cell('measurement.c[10][10]'), '1');
   await checked();
   assert.deepEqual(await page.$$eval('#editor .cell-error, #editor .general-errors li', (es) => es.map((e) => e.textContent)), []);
-  const saved = await exported();
+  const saved = await exportedModel(page);
   const expected = chainModel(200, 50);
   expected.system.a[100][57] = -2.5;
   assert.deepEqual(saved.system, expected.system);
@@ -116,7 +107,7 @@ test('one cell edited at N = 200 changes that cell, its marks and the model: eve
 });
 
 test('a 200×200 block pasted into a is one edit of the model, its bad values marked at their cells', async () => {
-  await importModel(chainModel(200, 50));
+  await importFile(chainModel(200, 50));
   await countChanges();
   const rows = Array.from({ length: 200 }, (_, i) => Array.from({ length: 200 }, (_, j) => (i === j ? '-0.25' : j === i + 1 ? '2' : '0')));
   rows[3][4] = '1e400';
@@ -138,7 +129,7 @@ test('a 200×200 block pasted into a is one edit of the model, its bad values ma
   assert.equal(await page.getAttribute(cell('system.a[150][20]'), 'title'), 'q*2');
   assert.deepEqual(await page.$$eval('#editor .cell-error', (es) => es.map((e) => e.dataset.errorPath)), ['system.a[3][4]']);
   assert.equal(await page.evaluate(() => document.activeElement.dataset.path), 'system.a[0][0]', 'the focus stays where the paste went');
-  const saved = await exported();
+  const saved = await exportedModel(page);
   assert.deepEqual(saved.system.a[3].slice(2, 6), [0, -0.25, '1e400', 0]);
   assert.equal(saved.system.a[150][20], 'q*2');
   assert.equal(saved.system.a[199][199], -0.25);
@@ -156,7 +147,7 @@ test('a 200×200 block pasted into a is one edit of the model, its bad values ma
 test('a large grid keeps its labels over its columns and beside its rows, and moves with the arrow keys', async () => {
   const model = chainModel(200, 50);
   model.system.states[7] = 'a rather long state name';
-  await importModel(model);
+  await importFile(model);
   // The middles of these elements, across (x) and down (y), with `target` scrolled into view.
   const middles = (target, selectors) =>
     page.evaluate(
@@ -198,7 +189,7 @@ test('a large grid keeps its labels over its columns and beside its rows, and mo
 test('at N = 200 a smaller N is undone, and the focus stays in the field', async () => {
   const model = chainModel(200, 50);
   model.system.a[199][199] = 'q';
-  await importModel(model);
+  await importFile(model);
   await page.fill('#dim-N', '150');
   await page.press('#dim-N', 'Tab');
   await checked();
@@ -208,7 +199,7 @@ test('at N = 200 a smaller N is undone, and the focus stays in the field', async
   await checked();
   assert.equal(await page.evaluate(() => document.activeElement.id), 'dim-N');
   assert.equal(await page.inputValue(cell('system.a[199][199]')), 'q');
-  const saved = await exported();
+  const saved = await exportedModel(page);
   assert.deepEqual(saved.system, model.system);
   assert.deepEqual(saved.measurement, model.measurement);
 });

@@ -5,7 +5,7 @@
 // KEA_ROOT (the repository), KEA_CHROMIUM (the browser).
 
 import { spawn, execFileSync } from 'node:child_process';
-import { mkdtempSync, mkdirSync, rmSync } from 'node:fs';
+import { mkdtempSync, mkdirSync, readFileSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -174,4 +174,27 @@ export function chainModel(N, n) {
     criteria: { confidence: 0.95 },
     options: { trace_points: 1000, steady_state_shortcut: true },
   };
+}
+
+/**
+ * Choose the preset `name` in the page's picker: waits for the address to name it, and
+ * `settle` ms more (the core's check of the model shown answers within about that).
+ */
+export async function choosePreset(page, name, settle = 300) {
+  await page.selectOption('#preset', name);
+  await page.waitForFunction((n) => location.hash.startsWith(`#preset=${n}`), name);
+  if (settle) await page.waitForTimeout(settle);
+}
+
+/** Import `model` as the JSON file `name`: waits for the page to say so, and `settle` ms more. */
+export async function importModel(page, model, name, settle = 300) {
+  await page.setInputFiles('#import-model', { name, mimeType: 'application/json', buffer: Buffer.from(JSON.stringify(model)) });
+  await page.waitForFunction((n) => document.getElementById('page-status').textContent.includes(n), name, { timeout: 60000 });
+  if (settle) await page.waitForTimeout(settle);
+}
+
+/** The model as the page's "Export JSON" saves it (parsed). */
+export async function exportedModel(page) {
+  const [download] = await Promise.all([page.waitForEvent('download'), page.click('#export-model')]);
+  return JSON.parse(readFileSync(await download.path(), 'utf8'));
 }

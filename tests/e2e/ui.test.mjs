@@ -7,7 +7,7 @@ import assert from 'node:assert/strict';
 import { readFileSync, writeFileSync } from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
-import { ROOT, holdJobs, kea, newPage, openApp, relDiff, screenshot } from './lib.mjs';
+import { ROOT, choosePreset, holdJobs, kea, newPage, openApp, relDiff, screenshot } from './lib.mjs';
 
 let server;
 let browser;
@@ -109,7 +109,7 @@ test("the seed's worked example gives the same F_YX in the browser, on the serve
 test("the values at t_E put each measurement's ζ on the state it is paired with", async () => {
   // helicopter-range: 6 states, 4 measurements (of D_f, V_f, D_b, V_b), so the
   // measurements' positions are not the states'.
-  await preset('helicopter-range');
+  await choosePreset(page, 'helicopter-range', 0);
   await runIn('browser');
   const rows = await page.$$eval('table.final tbody tr', (trs) =>
     trs.map((tr) => [tr.querySelector('th').textContent, [...tr.querySelectorAll('td')].map((td) => td.textContent)]),
@@ -310,19 +310,13 @@ test('a long run is cancelled, in the browser and on the server', async () => {
   assert.ok((await criteria())['bound.yx.weighted'] > 1);
 });
 
-/** Load a preset and wait for its link. */
-async function preset(name) {
-  await page.selectOption('#preset', name);
-  await page.waitForFunction((n) => location.hash.startsWith(`#preset=${n}`), name);
-}
-
 /** The messages shown at the editor cell or field `path` names (the input's holder). */
 function messagesAt(path) {
   return page.$$eval(`[data-error-path="${path}"]`, (es) => es.map((e) => e.textContent));
 }
 
 test('a parameter rename to a taken name is refused at its name cell; a bad name is marked there too', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   await page.fill('input[data-path="params.w.name"]', 's');
   await page.press('input[data-path="params.w.name"]', 'Tab');
   const refused = await messagesAt('params.w.name');
@@ -339,11 +333,11 @@ test('a parameter rename to a taken name is refused at its name cell; a bad name
   assert.match((await messagesAt('params.t.name'))[0], /time variable/);
   assert.equal(await page.getAttribute('input[data-path="params.t"]', 'aria-invalid'), null, 'the value cell is not marked');
   await screenshot(page, '05-param-name-errors');
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
 });
 
 test('a rename keeps the marks, the click that follows it and the focus', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   await page.fill('input[data-path="system.a[0][0]"]', 's/m +* 1');
   await page.waitForSelector('td[data-path="system.a[0][0]"] .cell-error', { timeout: 10000 });
   const rows = () => page.$$eval('table.params tbody tr', (trs) => trs.length);
@@ -371,11 +365,11 @@ test('a rename keeps the marks, the click that follows it and the focus', async 
   await page.fill('input[data-path="params.q.name"]', 'q2');
   await remove.click();
   assert.equal(await rows(), before);
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
 });
 
 test('numbers typed into the form are checked at their field, in words', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   const cases = [
     ['params.w', 'abc', /“abc” is not a number/],
     ['time.t_end', '0,5', /use a decimal point: 0\.5/],
@@ -409,7 +403,7 @@ test('a ragged matrix from a file can be completed in the grid', async () => {
 });
 
 test('a new measurement measures the first unmeasured state, and the model runs', async () => {
-  await preset('cv-tracker'); // C = [1, 0]: position measured
+  await choosePreset(page, 'cv-tracker', 0); // C = [1, 0]: position measured
   await page.fill('#dim-n', '2');
   await page.press('#dim-n', 'Tab');
   assert.equal(await page.inputValue('input[data-path="measurement.c[1][0]"]'), '0');
@@ -420,7 +414,7 @@ test('a new measurement measures the first unmeasured state, and the model runs'
 });
 
 test('files that are not models are refused, and page messages show on every tab', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   await page.click('#tab-simulation');
   for (const [name, text] of [['empty.json', '{}'], ['list.json', '[1,2]'], ['text.json', 'not json']]) {
     await page.setInputFiles('#import-model', { name, mimeType: 'application/json', buffer: Buffer.from(text) });
@@ -454,7 +448,7 @@ test('a broken link says so, on its tab, and keeps the address', async () => {
 });
 
 test('chart axes are labelled for values near 1e50, on linear and log scales', async () => {
-  await preset('helicopter-range');
+  await choosePreset(page, 'helicopter-range', 0);
   await forgetResult();
   await runIn('browser');
   const ticks = async () => (await page.getAttribute('#chart', 'data-y-ticks')).split(' | ').filter((t) => t !== '');
@@ -473,7 +467,7 @@ test('chart axes are labelled for values near 1e50, on linear and log scales', a
 });
 
 test('no trace points: the chart says so', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   await page.fill('input[data-path="options.trace_points"]', '0');
   await forgetResult();
   await runIn('browser');
@@ -500,11 +494,11 @@ test('a server run cancelled before its job exists is cancelled on the server', 
   const jobs = await (await fetch(`${server.url}/v1/jobs`)).json();
   const items = jobs.items ?? jobs.jobs ?? jobs;
   assert.ok(!items.some((j) => ['queued', 'running'].includes(j.status)), JSON.stringify(items).slice(0, 500));
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
 });
 
 test('a result of a model edited during its run is shown as stale', async () => {
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   const jobs = await holdJobs(page);
   await forgetResult();
   const run = runIn('server');
@@ -527,7 +521,7 @@ test("a run's error goes when the model changes", async () => {
     await page.click('#run');
     await page.waitForFunction(() => document.querySelector('#status').classList.contains('error'), null, { timeout: 10000 });
   };
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   const original = await page.inputValue(cell);
   await page.fill(cell, 's/m +* 1');
   await refused();
@@ -538,7 +532,7 @@ test("a run's error goes when the model changes", async () => {
   await refused();
   await page.selectOption('#preset', 'cv-tracker'); // another model
   await cleared();
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
 });
 
 test("a run's error names the model's cell as the editor does, counting from 1, in the browser and on the server", async () => {
@@ -550,7 +544,7 @@ test("a run's error names the model's cell as the editor does, counting from 1, 
     await page.waitForFunction(() => document.querySelector('#status').classList.contains('error'), null, { timeout: 30000 });
     return page.textContent('#status');
   };
-  await preset('cv-tracker'); // t from 0 to 100
+  await choosePreset(page, 'cv-tracker', 0); // t from 0 to 100
   // Finite at t₀, so the check as it is typed lets it be; not finite past t = 50: the
   // run finds it, and the core's error is at system.a[1][0].
   await page.fill('input[data-path="system.a[1][0]"]', '0*sqrt(50 - t)');
@@ -562,21 +556,21 @@ test("a run's error names the model's cell as the editor does, counting from 1, 
   assert.equal(await refused('server'), inBrowser, 'a server run says the same');
   // A model the core refuses as a whole (two negative SKOs): the first error, at φ's
   // first cell (system.phi[0]), and how many more the editor marks.
-  await preset('cv-tracker');
+  await choosePreset(page, 'cv-tracker', 0);
   await page.fill('input[data-path="system.phi[0]"]', '-1');
   await page.fill('input[data-path="measurement.psi[0]"]', '-1');
   const invalid = await refused('browser');
   assert.match(invalid, /^φ \[1\]: an SKO must be ≥ 0.* \(and 1 more\) \(see the marked fields\)$/);
   assert.doesNotMatch(invalid, /system\.|\[0\]/);
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
 });
 
 test('a link opened in a tab where kea is open loads its model and its tab', async () => {
-  await preset('cv-tracker');
+  await choosePreset(page, 'cv-tracker', 0);
   await page.fill('input[data-path="params.r"]', '0.125');
   await page.waitForFunction(() => location.hash.startsWith('#model='));
   const edited = new URL(page.url()).hash;
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
   const open = (hash) => page.evaluate((h) => (location.hash = h), hash);
   await open('#preset=cv-tracker&tab=simulation');
   await page.waitForTimeout(600); // past the address's save delay: it is not written back over
@@ -587,13 +581,13 @@ test('a link opened in a tab where kea is open loads its model and its tab', asy
   await page.waitForFunction(() => document.querySelector('input[data-path="params.r"]')?.value === '0.125', null, { timeout: 5000 });
   assert.equal(await page.inputValue('#preset'), '');
   assert.equal(await page.getAttribute('#tab-analysis', 'aria-selected'), 'true');
-  await preset('seed-example');
+  await choosePreset(page, 'seed-example', 0);
 });
 
 test('at 390 px wide the page does not overflow sideways, on every tab', async () => {
   await page.setViewportSize({ width: 390, height: 800 });
   try {
-    await preset('helicopter-range');
+    await choosePreset(page, 'helicopter-range', 0);
     const overflow = () => page.evaluate(() => document.documentElement.scrollWidth - document.documentElement.clientWidth);
     for (const tab of ['analysis', 'synthesis', 'simulation']) {
       await page.click(`#tab-${tab}`);

@@ -6,8 +6,7 @@
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
-import { readFileSync } from 'node:fs';
-import { chainModel, openApp } from './lib.mjs';
+import { chainModel, choosePreset, exportedModel, importModel, openApp } from './lib.mjs';
 
 let page;
 const consoleErrors = [];
@@ -20,26 +19,16 @@ before(async () => {
 
 after(() => app?.close());
 
-async function preset(name) {
-  await page.selectOption('#preset', name);
-  await page.waitForFunction((n) => location.hash.startsWith(`#preset=${n}`), name);
-  await page.waitForTimeout(300);
-}
-
 let imports = 0;
-async function importModel(model) {
+/** Import `model` as a file of a new name; returns the name. */
+async function importFile(model) {
   const name = `undo-${++imports}.json`;
-  await page.setInputFiles('#import-model', { name, mimeType: 'application/json', buffer: Buffer.from(JSON.stringify(model)) });
-  await page.waitForFunction((n) => document.getElementById('page-status').textContent.includes(n), name, { timeout: 60000 });
-  await page.waitForTimeout(300);
+  await importModel(page, model, name);
   return name;
 }
 
 /** The model's JSON as "Export JSON" saves it (compact again, so that texts compare exactly). */
-async function json() {
-  const [download] = await Promise.all([page.waitForEvent('download'), page.click('#export-model')]);
-  return JSON.stringify(JSON.parse(readFileSync(await download.path(), 'utf8')));
-}
+const json = async () => JSON.stringify(await exportedModel(page));
 
 const cell = (path) => `:is(input, textarea)[data-path="${path}"]`;
 const label = (id) => page.getAttribute(`#${id}`, 'aria-label');
@@ -78,7 +67,7 @@ test('the buttons are disabled with nothing to undo or redo, and name what they 
   assert.equal(await disabled('redo'), true);
   assert.equal(await label('undo'), 'Undo (nothing to undo)');
   assert.equal(await label('redo'), 'Redo (nothing to redo)');
-  await preset('helicopter-range');
+  await choosePreset(page, 'helicopter-range');
   await page.fill(cell('system.a[1][2]'), '0.5');
   await page.press(cell('system.a[1][2]'), 'Tab');
   assert.equal(await disabled('undo'), false);
@@ -93,7 +82,7 @@ test('the buttons are disabled with nothing to undo or redo, and name what they 
 });
 
 test("a cell's typing is one edit: Ctrl+Z after it is committed reverts it whole, with the focus at the cell", async () => {
-  await preset('helicopter-range');
+  await choosePreset(page, 'helicopter-range');
   const original = await json();
   await page.click(cell('system.y0[0]'));
   await page.keyboard.press('Control+a');
@@ -119,7 +108,7 @@ test("a cell's typing is one edit: Ctrl+Z after it is committed reverts it whole
 });
 
 test('Ctrl+Z in a field with typing not committed is the browser’s: the editor’s history waits', async () => {
-  await preset('helicopter-range');
+  await choosePreset(page, 'helicopter-range');
   const original = await json();
   await page.fill(cell('system.a[0][0]'), '3');
   await page.press(cell('system.a[0][0]'), 'Tab');
@@ -142,7 +131,7 @@ test('Ctrl+Z in a field with typing not committed is the browser’s: the editor
 });
 
 test('a pasted block is one edit', async () => {
-  await preset('helicopter-range');
+  await choosePreset(page, 'helicopter-range');
   await undoable(async () => {
     await page.focus(cell('measurement.c[0][0]'));
     await page.evaluate((sel) => {
@@ -157,7 +146,7 @@ test('a pasted block is one edit', async () => {
 });
 
 test('a smaller N undone gives back the states removed, exactly; and the other dimension changes', async () => {
-  await preset('helicopter-range');
+  await choosePreset(page, 'helicopter-range');
   const states = () => page.$$eval('input[data-path^="system.states["]', (l) => l.map((x) => x.value));
   const six = await states();
   const dim = (key, value) => async () => {
@@ -180,7 +169,7 @@ test('a smaller N undone gives back the states removed, exactly; and the other d
 });
 
 test('params, forms, members, fields: each undone and redone', async () => {
-  await preset('helicopter-range');
+  await choosePreset(page, 'helicopter-range');
   const params = await page.$$eval('input[data-path^="params."][data-path$=".name"]', (l) => l.map((x) => x.value));
   const p = params[0];
   await undoable(async () => {
@@ -208,7 +197,7 @@ test('params, forms, members, fields: each undone and redone', async () => {
 });
 
 test('an import and a preset chosen are undone: the model before comes back', async () => {
-  await preset('helicopter-range');
+  await choosePreset(page, 'helicopter-range');
   await page.fill(cell('name'), 'my own');
   await page.press(cell('name'), 'Tab');
   const own = await json();
@@ -217,16 +206,16 @@ test('an import and a preset chosen are undone: the model before comes back', as
   model.system.y0[0] = 99;
   let file;
   await undoable(async () => {
-    file = await importModel(model);
+    file = await importFile(model);
   }, `import of undo-${imports + 1}.json`);
   assert.equal(file, `undo-${imports}.json`);
   assert.equal(await json(), own);
-  await undoable(() => preset('seed-example'), 'choice of the preset seed-example');
+  await undoable(() => choosePreset(page, 'seed-example'), 'choice of the preset seed-example');
   assert.equal(await json(), own);
 });
 
 test('a new edit clears Redo', async () => {
-  await preset('helicopter-range');
+  await choosePreset(page, 'helicopter-range');
   await page.fill(cell('system.u[0]'), '1');
   await page.press(cell('system.u[0]'), 'Tab');
   await undo();
@@ -238,7 +227,7 @@ test('a new edit clears Redo', async () => {
 });
 
 test('an undo marks the results stale and is kept over a reload', async () => {
-  await preset('helicopter-range');
+  await choosePreset(page, 'helicopter-range');
   await page.check('input[name=mode][value=browser]');
   await page.click('#run');
   await page.waitForFunction(() => /^Done/.test(document.getElementById('status').textContent), null, { timeout: 60000 });
@@ -259,7 +248,7 @@ test('an undo marks the results stale and is kept over a reload', async () => {
 
 test('at N = 200 a cell’s edit is undone in place (no node drawn anew), and a smaller N exactly', async () => {
   const model = chainModel(200, 50);
-  await importModel(model);
+  await importFile(model);
   const original = await json();
   await page.fill(cell('system.a[150][20]'), '7');
   await page.press(cell('system.a[150][20]'), 'Tab');

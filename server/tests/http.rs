@@ -490,6 +490,33 @@ fn a_job_survives_a_crash_and_finishes_after_restart() {
     assert_eq!(s.wait_finished(&queued, LONG)["status"], "succeeded");
 }
 
+/// A job the server dies running three times (as one that brings it down would)
+/// fails with a problem instead of running at every start; the next job runs.
+#[test]
+fn a_job_the_server_dies_running_three_times_is_not_run_again() {
+    let dir = tmp();
+    let mut s = Server::start(dir.path(), &["--workers", "1"]);
+    let (id, _) = start_long_job(&s);
+    let behind = s.submit_analysis(preset("cv-tracker"));
+    for _ in 0..2 {
+        s.kill();
+        s = Server::start(dir.path(), &["--workers", "1"]);
+        s.wait_job(&id, LONG, |j| j["status"] == "running");
+    }
+    s.kill();
+    let s = Server::start(dir.path(), &["--workers", "1"]);
+    let job = s.get(&format!("/v1/jobs/{id}")).json();
+    assert_eq!(job["status"], "failed", "{job}");
+    assert_eq!(job["error"]["type"], "urn:kea:problem:interrupted", "{job}");
+    assert!(
+        job["error"]["detail"].as_str().unwrap().contains("3 times"),
+        "{job}"
+    );
+    assert!(job["finished_at"].is_string(), "{job}");
+    assert_eq!(s.get(&format!("/v1/jobs/{id}/result")).status, 409);
+    assert_eq!(s.wait_finished(&behind, LONG)["status"], "succeeded");
+}
+
 #[test]
 fn a_cancel_is_not_lost_when_the_process_dies() {
     let dir = tmp();

@@ -24,6 +24,8 @@ pub mod kind {
     pub const MEDIA_TYPE: &str = "urn:kea:problem:unsupported-media-type";
     pub const QUEUE_FULL: &str = "urn:kea:problem:queue-full";
     pub const INTERNAL: &str = "urn:kea:problem:internal";
+    /// A job the server stopped while running too many times (`worker::MAX_INTERRUPTIONS`).
+    pub const INTERRUPTED: &str = "urn:kea:problem:interrupted";
 }
 
 #[derive(Clone, Debug, Serialize)]

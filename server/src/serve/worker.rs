@@ -7,7 +7,7 @@
 
 use super::jobs::Registry;
 use super::problem::{Problem, kind};
-use super::store::{Enqueued, JobRecord, JobStatus, Outcome, Store, now_rfc3339};
+use super::store::{Enqueued, GiveUp, JobRecord, JobStatus, Outcome, Requeued, Store, now_rfc3339};
 use axum::http::StatusCode;
 use kea_core::Error;
 use kea_core::exec::Memo;
@@ -172,7 +172,21 @@ impl Pool {
         workers: usize,
         job_time_limit: Duration,
     ) -> Result<Arc<Pool>, super::store::StoreError> {
-        let (requeued, cancelled) = store.requeue_all_running()?;
+        let give_up = GiveUp {
+            after: MAX_INTERRUPTIONS,
+            error_json: interrupted_problem(),
+        };
+        let Requeued {
+            requeued,
+            cancelled,
+            failed,
+        } = store.requeue_all_running(&give_up)?;
+        if failed > 0 {
+            tracing::error!(
+                failed,
+                "failed jobs that were running when kea stopped, {MAX_INTERRUPTIONS} times each: not run again"
+            );
+        }
         if requeued > 0 {
             tracing::warn!(
                 requeued,
@@ -483,12 +497,39 @@ impl Pool {
 }
 
 /// A failed job's error document: the problem without its HTTP status.
+/// A job found running at start-up this many times (each time the process ended
+/// without finishing or re-queuing it: a crash, a kill, the machine's power) fails
+/// instead of running again — so that a job that brings the server down (its memory,
+/// say) does not do so at every start. A graceful shutdown's re-queue is not counted.
+pub const MAX_INTERRUPTIONS: u32 = 3;
+
+/// The problem document of a job failed after [`MAX_INTERRUPTIONS`].
+fn interrupted_problem() -> String {
+    let p = Problem::new(
+        StatusCode::INTERNAL_SERVER_ERROR,
+        kind::INTERRUPTED,
+        "the server stopped while running this job, too many times",
+    )
+    .detail(format!(
+        "kea ended without finishing or re-queuing this job {MAX_INTERRUPTIONS} times while \
+         it ran (a crash, a kill or a power loss), so it is not run again: if it is what \
+         brought the server down (its memory, say), reduce its steps or its state \
+         dimension; otherwise submit it again"
+    ));
+    problem_json(p)
+}
+
 fn failed(p: Problem) -> Outcome {
+    Outcome::Failed {
+        error_json: problem_json(p),
+    }
+}
+
+/// A stored job's problem document: without `status` (the job's own says it failed).
+fn problem_json(p: Problem) -> String {
     let mut v = serde_json::to_value(&p).expect("problem serialises");
     if let Some(o) = v.as_object_mut() {
         o.remove("status");
     }
-    Outcome::Failed {
-        error_json: v.to_string(),
-    }
+    v.to_string()
 }

@@ -130,6 +130,24 @@ pub enum Enqueued {
     },
 }
 
+/// When [`Store::requeue_all_running`] stops running a job again.
+#[derive(Clone, Debug)]
+pub struct GiveUp {
+    /// After this many interruptions (processes that ended while the job ran).
+    pub after: u32,
+    /// The failed job's problem document.
+    pub error_json: String,
+}
+
+/// What [`Store::requeue_all_running`] did: how many jobs it re-queued, cancelled
+/// (a cancel was asked for) and failed (interrupted too often).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Requeued {
+    pub requeued: u64,
+    pub cancelled: u64,
+    pub failed: u64,
+}
+
 /// One page of a listing, newest first; `next_cursor` continues it.
 #[derive(Clone, Debug)]
 pub struct Page<T> {
@@ -186,9 +204,10 @@ pub trait Store: Send + Sync + 'static {
     /// mark it cancelled if a cancel was asked for. Its progress is kept: a run again
     /// shows it until the new run passes it, so progress never goes back.
     fn requeue(&self, id: &str) -> Result<()>;
-    /// [`Store::requeue`] for every running job (start-up after a crash); returns how
-    /// many were (re-queued, cancelled).
-    fn requeue_all_running(&self) -> Result<(u64, u64)>;
+    /// At start-up, the jobs a process that died left running: each counts one more
+    /// interruption; one whose cancel was asked for is cancelled, one interrupted
+    /// `give_up.after` times fails with `give_up.error_json`, any other is re-queued.
+    fn requeue_all_running(&self, give_up: &GiveUp) -> Result<Requeued>;
     /// Cancel a queued job (recording that a cancel was asked for); false if it was
     /// not queued.
     fn cancel_queued(&self, id: &str, finished_at: &str) -> Result<bool>;

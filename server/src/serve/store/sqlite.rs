@@ -2,8 +2,8 @@
 //! schema versioned by `PRAGMA user_version` and migrated forward on open.
 
 use super::{
-    Enqueued, JobRecord, JobStatus, ModelRecord, ModelSummary, Outcome, Page, Result, Store,
-    StoreError,
+    Enqueued, GiveUp, JobRecord, JobStatus, ModelRecord, ModelSummary, Outcome, Page, Requeued,
+    Result, Store, StoreError,
 };
 use rusqlite::{Connection, OptionalExtension, Row, TransactionBehavior, params};
 use std::collections::HashMap;
@@ -49,6 +49,9 @@ const MIGRATIONS: &[&str] = &[
         value TEXT NOT NULL,
         PRIMARY KEY (job_id, key)
      );",
+    // 4: how many times a process ended (a crash, a kill) while it ran this job, so
+    // that a job that brings the server down is not run on every start.
+    "ALTER TABLE jobs ADD COLUMN interruptions INTEGER NOT NULL DEFAULT 0;",
 ];
 
 pub struct SqliteStore {
@@ -165,24 +168,23 @@ impl SqliteStore {
         f(&mut conn).map_err(db_err)
     }
 
-    /// The running job `id` (every running job for None) back to the queue, or to
-    /// cancelled where a cancel was asked for; (re-queued, cancelled).
-    fn requeue_running(&self, id: Option<&str>) -> Result<(u64, u64)> {
+    /// The running job `id` back to the queue, or to cancelled where a cancel was
+    /// asked for.
+    fn requeue_running(&self, id: &str) -> Result<()> {
         let finished_at = super::now_rfc3339();
         self.with(|c| {
             let tx = c.transaction()?;
-            let cancelled = tx.execute(
+            tx.execute(
                 "UPDATE jobs SET status = 'cancelled', finished_at = ?2
-                 WHERE status = 'running' AND cancel_requested = 1 AND (?1 IS NULL OR id = ?1)",
+                 WHERE status = 'running' AND cancel_requested = 1 AND id = ?1",
                 params![id, finished_at],
             )?;
-            let requeued = tx.execute(
+            tx.execute(
                 "UPDATE jobs SET status = 'queued', started_at = NULL
-                 WHERE status = 'running' AND (?1 IS NULL OR id = ?1)",
+                 WHERE status = 'running' AND id = ?1",
                 params![id],
             )?;
-            tx.commit()?;
-            Ok((requeued as u64, cancelled as u64))
+            tx.commit()
         })
     }
 
@@ -452,11 +454,39 @@ impl Store for SqliteStore {
     }
 
     fn requeue(&self, id: &str) -> Result<()> {
-        self.requeue_running(Some(id)).map(|_| ())
+        self.requeue_running(id)
     }
 
-    fn requeue_all_running(&self) -> Result<(u64, u64)> {
-        self.requeue_running(None)
+    fn requeue_all_running(&self, give_up: &GiveUp) -> Result<Requeued> {
+        let finished_at = super::now_rfc3339();
+        self.with(|c| {
+            let tx = c.transaction()?;
+            // The cancels first: a job asked to stop is cancelled, not blamed.
+            let cancelled = tx.execute(
+                "UPDATE jobs SET status = 'cancelled', finished_at = ?1
+                 WHERE status = 'running' AND cancel_requested = 1",
+                params![finished_at],
+            )?;
+            tx.execute(
+                "UPDATE jobs SET interruptions = interruptions + 1 WHERE status = 'running'",
+                [],
+            )?;
+            let failed = tx.execute(
+                "UPDATE jobs SET status = 'failed', finished_at = ?1, error_json = ?2
+                 WHERE status = 'running' AND interruptions >= ?3",
+                params![finished_at, give_up.error_json, give_up.after],
+            )?;
+            let requeued = tx.execute(
+                "UPDATE jobs SET status = 'queued', started_at = NULL WHERE status = 'running'",
+                [],
+            )?;
+            tx.commit()?;
+            Ok(Requeued {
+                requeued: requeued as u64,
+                cancelled: cancelled as u64,
+                failed: failed as u64,
+            })
+        })
     }
 
     fn cancel_queued(&self, id: &str, finished_at: &str) -> Result<bool> {
@@ -514,6 +544,67 @@ mod tests {
         }
     }
 
+    fn give_up() -> GiveUp {
+        GiveUp {
+            after: 3,
+            error_json: "{\"type\":\"x\"}".into(),
+        }
+    }
+
+    fn counts(requeued: u64, cancelled: u64, failed: u64) -> Requeued {
+        Requeued {
+            requeued,
+            cancelled,
+            failed,
+        }
+    }
+
+    /// A job that every process dies running (it brings the server down) fails at its
+    /// third interruption; a graceful shutdown's re-queue is not one, and a job
+    /// interrupted fewer times runs again.
+    #[test]
+    fn a_job_interrupted_three_times_fails_instead_of_running_again() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (new_id(), new_id());
+        let claim = |s: &SqliteStore, want: &str| {
+            assert_eq!(s.claim_next(&now_rfc3339()).unwrap().unwrap().id, want);
+        };
+        // Each block is one process; it ends ("dies") with the jobs it claimed running.
+        {
+            let s = SqliteStore::open(dir.path()).unwrap();
+            s.insert_job(&job(&a)).unwrap();
+            s.insert_job(&job(&b)).unwrap();
+            for _ in 0..5 {
+                claim(&s, &a);
+                s.requeue(&a).unwrap(); // a shutdown: not counted
+            }
+            claim(&s, &a);
+        }
+        {
+            let s = SqliteStore::open(dir.path()).unwrap();
+            assert_eq!(s.requeue_all_running(&give_up()).unwrap(), counts(1, 0, 0));
+            claim(&s, &a);
+        }
+        {
+            let s = SqliteStore::open(dir.path()).unwrap();
+            assert_eq!(s.requeue_all_running(&give_up()).unwrap(), counts(1, 0, 0));
+            claim(&s, &a);
+            claim(&s, &b);
+        }
+        let s = SqliteStore::open(dir.path()).unwrap();
+        assert_eq!(s.requeue_all_running(&give_up()).unwrap(), counts(1, 0, 1));
+        let failed = s.get_job(&a).unwrap().unwrap();
+        assert_eq!(failed.status, JobStatus::Failed);
+        assert_eq!(
+            failed.error_json.as_deref(),
+            Some(give_up().error_json.as_str())
+        );
+        assert!(failed.finished_at.is_some());
+        assert_eq!(s.get_job(&b).unwrap().unwrap().status, JobStatus::Queued);
+        claim(&s, &b);
+        assert!(s.claim_next(&now_rfc3339()).unwrap().is_none());
+    }
+
     #[test]
     fn jobs_are_claimed_in_order_and_survive_reopen() {
         let dir = tempfile::tempdir().unwrap();
@@ -530,7 +621,7 @@ mod tests {
         }
         // Reopen: the running job is re-queued ahead of the other.
         let s = SqliteStore::open(dir.path()).unwrap();
-        assert_eq!(s.requeue_all_running().unwrap(), (1, 0));
+        assert_eq!(s.requeue_all_running(&give_up()).unwrap(), counts(1, 0, 0));
         assert_eq!(s.count_jobs(JobStatus::Queued).unwrap(), 2);
         let again = s.claim_next(&now_rfc3339()).unwrap().unwrap();
         assert_eq!((again.id.as_str(), again.attempts), (a.as_str(), 2));
@@ -580,7 +671,7 @@ mod tests {
         }
         // The process died with a and b running: a was asked to cancel, b runs again.
         let s = SqliteStore::open(dir.path()).unwrap();
-        assert_eq!(s.requeue_all_running().unwrap(), (1, 1));
+        assert_eq!(s.requeue_all_running(&give_up()).unwrap(), counts(1, 1, 0));
         assert_eq!(s.get_job(&a).unwrap().unwrap().status, JobStatus::Cancelled);
         assert_eq!(s.get_job(&b).unwrap().unwrap().status, JobStatus::Queued);
         assert_eq!(s.claim_next(&now_rfc3339()).unwrap().unwrap().id, b);
@@ -663,7 +754,7 @@ mod tests {
         assert_eq!(s.schema_version().unwrap(), MIGRATIONS.len());
         assert_eq!(s.get_job(&id).unwrap().unwrap().status, JobStatus::Running);
         assert!(s.request_cancel(&id).unwrap());
-        assert_eq!(s.requeue_all_running().unwrap(), (0, 1));
+        assert_eq!(s.requeue_all_running(&give_up()).unwrap(), counts(0, 1, 0));
         assert_eq!(
             s.get_job(&id).unwrap().unwrap().status,
             JobStatus::Cancelled

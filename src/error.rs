@@ -30,6 +30,23 @@ impl fmt::Display for FieldError {
     }
 }
 
+/// The path of member `key` of the object at `parent`: `parent.key` where the key is an
+/// identifier, else `parent["key"]` (JSON-quoted), so that a key with a dot, a space or
+/// a bracket in it (`params["a.b"]`) does not read as a path of its own.
+pub fn member_path(parent: &str, key: &str) -> String {
+    let mut chars = key.chars();
+    let identifier = matches!(chars.next(), Some(c) if c.is_alphabetic() || c == '_')
+        && chars.all(|c| c.is_alphanumeric() || c == '_');
+    match (identifier, parent.is_empty()) {
+        (true, true) => key.to_string(),
+        (true, false) => format!("{parent}.{key}"),
+        (false, _) => format!(
+            "{parent}[{}]",
+            serde_json::to_string(key).unwrap_or_else(|_| format!("\"{key}\""))
+        ),
+    }
+}
+
 /// Everything that can stop an analysis. None of these is a panic or a NaN.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Error {
@@ -322,6 +339,18 @@ fn got_kind(got: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn member_paths_quote_what_is_not_an_identifier() {
+        assert_eq!(member_path("params", "q"), "params.q");
+        assert_eq!(member_path("", "system"), "system");
+        assert_eq!(member_path("params", "σ_1"), "params.σ_1");
+        assert_eq!(member_path("params", "a.b"), r#"params["a.b"]"#);
+        assert_eq!(member_path("set", "1x"), r#"set["1x"]"#);
+        assert_eq!(member_path("set", ""), r#"set[""]"#);
+        assert_eq!(member_path("set", "q\"]"), r#"set["q\"]"]"#);
+        assert_eq!(member_path("", "a b"), r#"["a b"]"#);
+    }
 
     fn plain(path: &str, message: &str) -> (String, String) {
         let e = plain_serde_error(

@@ -2,7 +2,7 @@
 //! not an array of its fields in order), with every error at its field path and in
 //! kea's words.
 
-use crate::error::{Error, FieldError, plain_serde_error};
+use crate::error::{Error, FieldError, member_path, plain_serde_error};
 use serde::de::{
     self, DeserializeSeed, Deserializer, EnumAccess, IntoDeserializer, Unexpected, VariantAccess,
     Visitor,
@@ -19,14 +19,29 @@ pub fn from_value_at<T: serde::de::DeserializeOwned>(
     hints: &[(&str, &str)],
 ) -> Result<T, Error> {
     serde_path_to_error::deserialize(Objects(&value)).map_err(|e| {
-        let path = e.path().to_string();
-        let path = if path == "." { String::new() } else { path };
+        let path = path_string(e.path());
         let message = e.into_inner().to_string();
         Error::Invalid(vec![plain_serde_error(
             FieldError::new(path, message),
             hints,
         )])
     })
+}
+
+/// A deserializer's path as kea writes paths: `system.a[0]`, and a key that is not an
+/// identifier quoted (`params["a.b"]`, [`member_path`]).
+fn path_string(path: &serde_path_to_error::Path) -> String {
+    use serde_path_to_error::Segment;
+    let mut out = String::new();
+    for segment in path {
+        match segment {
+            Segment::Seq { index } => out.push_str(&format!("[{index}]")),
+            Segment::Map { key } => out = member_path(&out, key),
+            Segment::Enum { variant } => out = member_path(&out, variant),
+            Segment::Unknown => out = member_path(&out, "?"),
+        }
+    }
+    out
 }
 
 /// JSON text as a value, refusing an object with the same key twice. serde_json keeps

@@ -380,7 +380,7 @@ pub fn validate(req: &SynthesisRequest) -> Result<(), Error> {
             if !fixed_in_set.contains(&name) {
                 fixed_in_set.push(name);
                 errs.push(FieldError::new(
-                    format!("set.{name}"),
+                    crate::error::member_path("set", name),
                     format!("\"{name}\" is a searched param (at {path}): the search sets it, so it cannot be fixed in set"),
                 ));
             }
@@ -671,7 +671,7 @@ fn locate_model_errors(e: Error) -> Error {
         Error::Invalid(v) => Error::Invalid(
             v.into_iter()
                 .map(|f| {
-                    if f.path == "set" || f.path.starts_with("set.") {
+                    if f.path == "set" || f.path.starts_with("set.") || f.path.starts_with("set[") {
                         f
                     } else {
                         Error::Invalid(vec![f])

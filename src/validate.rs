@@ -2,7 +2,7 @@
 //! list of errors, each naming the field path and what was expected.
 
 use crate::Overrides;
-use crate::error::{Error, FieldError};
+use crate::error::{Error, FieldError, member_path};
 use crate::expr::{ExprBudget, TimeMatrix, TimeMatrixBuilder, compile_const};
 use crate::model::{MODEL_FORMAT_VERSION, Model, Steps, Value};
 use std::collections::BTreeMap;
@@ -183,7 +183,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
     // --- params and overrides
     let mut params = model.params.clone();
     for (name, value) in &model.params {
-        let path = format!("params.{name}");
+        let path = member_path("params", name);
         if !is_identifier(name) {
             errs.at(&path, "a parameter name must be an identifier (letters, digits, _; not starting with a digit)");
         } else if name == "t" {
@@ -202,7 +202,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         }
     }
     for (name, value) in set {
-        let path = format!("set.{name}");
+        let path = member_path("set", name);
         if !model.params.contains_key(name) {
             let known: Vec<&str> = model.params.keys().map(|s| s.as_str()).collect();
             errs.at(
@@ -224,11 +224,9 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
     }
     // Errors in the version or the params stop here (every expression depends on the
     // params); an unknown `set` name does not: the model's own errors are listed with it.
-    if errs
-        .0
-        .iter()
-        .any(|e| e.path == "kea_model" || e.path.starts_with("params."))
-    {
+    if errs.0.iter().any(|e| {
+        e.path == "kea_model" || e.path.starts_with("params.") || e.path.starts_with("params[")
+    }) {
         return Err(errs.into_error());
     }
 

@@ -385,6 +385,20 @@ fn names_pairs_and_overrides() {
         "no parameter \"mass\"",
     );
     expect(|_| {}, &[("m", f64::NAN)], "set.m", "finite");
+    // A name that is not an identifier is quoted in its path: `params.a.b` would
+    // read as member b of a param a.
+    expect(
+        |v| v["params"]["a.b"] = json!(1.0),
+        &[],
+        "params[\"a.b\"]",
+        "must be an identifier",
+    );
+    expect(
+        |_| {},
+        &[("x y", 1.0)],
+        "set[\"x y\"]",
+        "no parameter \"x y\"",
+    );
 }
 
 #[test]
@@ -400,6 +414,13 @@ fn malformed_json_is_located() {
         &[],
         "system.extra",
         "unknown member; expected one of: states, a, u, b",
+    );
+    // serde's path of a member whose key is not an identifier, quoted the same way.
+    expect(
+        |v| v["params"]["a[0]"] = json!("x"),
+        &[],
+        "params[\"a[0]\"]",
+        "",
     );
     expect(
         |v| v["kea_model"] = json!(7),

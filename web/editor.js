@@ -284,10 +284,23 @@ function parentPath(path) {
   return dot < 0 ? '' : path.slice(0, dot);
 }
 
+/** The path of param `name`, as the core writes it: `params.q`, or `params["a.b"]` for a name that is not an identifier. */
+function paramPath(name) {
+  return IDENTIFIER.test(name) ? `params.${name}` : `params[${JSON.stringify(name)}]`;
+}
+
+/** `{param, name}` for a path at a param's value (`params.q`, `params["a.b"]`) or, name true, its name cell (`….name`); else null. */
+function paramOf(path) {
+  const m = path.match(/^params(?:\.([^.[]+)|\[("(?:[^"\\]|\\.)*")\])(\.name)?$/);
+  if (!m) return null;
+  return { param: m[1] ?? JSON.parse(m[2]), name: Boolean(m[3]) };
+}
+
 /** A core error at `params.X` that is about the name X (not its value) belongs to the name cell. */
 function namePath(error) {
   const path = error.path ?? '';
-  if (/^params\.[^.[]+$/.test(path) && /parameter name|cannot be a parameter/.test(error.message)) return `${path}.name`;
+  const param = paramOf(path);
+  if (param && !param.name && /parameter name|cannot be a parameter/.test(error.message)) return `${path}.name`;
   return path;
 }
 
@@ -792,18 +805,18 @@ export class ModelEditor {
     const nameCell = el('td', {}, nameInput);
     const valueCell = el('td', {}, valueInput);
     const label = () => {
-      nameInput.dataset.path = `params.${name}.name`;
+      nameInput.dataset.path = `${paramPath(name)}.name`;
       nameInput.setAttribute('aria-label', `parameter name ${name}`);
-      valueInput.dataset.path = `params.${name}`;
+      valueInput.dataset.path = paramPath(name);
       valueInput.setAttribute('aria-label', `value of ${name}`);
       remove.setAttribute('aria-label', `remove parameter ${name}`);
       remove.dataset.focus = `remove-param:${name}`;
       remove.title = `Remove ${name}`;
-      this.register(`params.${name}.name`, nameInput, nameCell);
-      this.register(`params.${name}`, valueInput, valueCell);
+      this.register(`${paramPath(name)}.name`, nameInput, nameCell);
+      this.register(paramPath(name), valueInput, valueCell);
     };
     label();
-    this.setLocal(`params.${name}`, aNumber(valueInput.value), false);
+    this.setLocal(paramPath(name), aNumber(valueInput.value), false);
 
     nameInput.addEventListener('change', () => {
       const wanted = nameInput.value.trim();
@@ -815,38 +828,38 @@ export class ModelEditor {
         problem = `“${wanted}” is already a parameter: renaming ${old} to it would replace it; choose another name`;
       }
       if (problem || wanted === old) {
-        this.setLocal(`params.${old}.name`, problem);
+        this.setLocal(`${paramPath(old)}.name`, problem);
         return;
       }
       this.commitPending();
       // Keep the order: rebuild the object with the new key in place.
       m.params = Object.fromEntries(Object.entries(m.params).map(([k, v]) => [k === old ? wanted : k, v]));
-      const valueProblem = this.local.get(`params.${old}`);
-      for (const p of [`params.${old}`, `params.${old}.name`]) {
+      const valueProblem = this.local.get(paramPath(old));
+      for (const p of [paramPath(old), `${paramPath(old)}.name`]) {
         this.local.delete(p);
         this.fields.delete(p);
       }
       // The core's marks at the old name are stale until the next check.
-      this.core = this.core.filter((e) => !(e.path === `params.${old}` || e.path?.startsWith(`params.${old}.`)));
+      this.core = this.core.filter((e) => !(e.path === paramPath(old) || e.path?.startsWith(`${paramPath(old)}.`)));
       name = wanted;
       label();
-      this.setLocal(`params.${name}`, valueProblem ?? null);
+      this.setLocal(paramPath(name), valueProblem ?? null);
       this.renameUses(old, wanted);
-      const at = (p) => `[data-path="${CSS.escape(`params.${p}.name`)}"]`;
+      const at = (p) => `[data-path="${CSS.escape(`${paramPath(p)}.name`)}"]`;
       this.changed(`rename of parameter ${old} → ${wanted}`, { before: at(old), after: at(wanted) });
     });
     nameInput.addEventListener('keydown', (e) => {
       if (e.key !== 'Enter') return;
       e.preventDefault();
       nameInput.dispatchEvent(new Event('change')); // commit, then on to the value
-      if (!this.local.has(`params.${name}.name`)) {
+      if (!this.local.has(`${paramPath(name)}.name`)) {
         valueInput.focus();
         valueInput.select();
       }
     });
     valueInput.addEventListener('input', () => {
       m.params[name] = parseCell(valueInput.value);
-      this.setLocal(`params.${name}`, aNumber(valueInput.value));
+      this.setLocal(paramPath(name), aNumber(valueInput.value));
       this.changed();
     });
     remove.addEventListener('click', () => {
@@ -1754,8 +1767,8 @@ export class ModelEditor {
  */
 export function modelPlace(path) {
   if (Object.hasOwn(FIELD_LABELS, path ?? '')) return `${FIELD_LABELS[path]}: `;
-  const param = (path ?? '').match(/^params\.(.+?)(\.name)?$/);
-  if (param) return `${param[2] ? 'name of ' : ''}parameter “${param[1]}”: `;
+  const param = paramOf(path ?? '');
+  if (param) return `${param.name ? 'name of ' : ''}parameter “${param.param}”: `;
   const names = {
     'system.a': 'a', 'system.b': 'b', 'system.u': 'u', 'system.y0': 'y₀', 'system.eta0': 'η₀',
     'system.phi': 'φ', 'system.W': 'W', 'measurement.c': 'C', 'measurement.gamma': 'Γ',

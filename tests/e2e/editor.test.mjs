@@ -81,12 +81,15 @@ test('messages name single fields by their labels and parameters by their names,
   await page.fill(cell('params.w.name'), '2x');
   await page.press(cell('params.w.name'), 'Tab');
   assert.match(await refusedRun(page), /^parameter “2x”: a parameter name must be an identifier/);
+  // The core's error (at `params["2x"]`: the name is not an identifier) marks the name cell.
+  assert.equal(await page.getAttribute(`input[data-path='params["2x"].name']`, 'aria-invalid'), 'true');
+  assert.equal(await page.getAttribute(`input[data-path='params["2x"]']`, 'aria-invalid'), null);
   // Every single field and a parameter's two cells, as the page's other views name them.
   const places = await page.evaluate(async () => {
     const { modelPlace } = await import('./editor.js');
-    return ['time.t0', 'time.t_end', 'time.steps', 'criteria.confidence', 'options.trace_points', 'params.2x', 'params.2x.name', 'system.phi[0]', 'measurement.g[1][0]'].map(modelPlace);
+    return ['time.t0', 'time.t_end', 'time.steps', 'criteria.confidence', 'options.trace_points', 'params["2x"]', 'params["2x"].name', 'params["a.b"]', 'params.q.name', 'system.phi[0]', 'measurement.g[1][0]'].map(modelPlace);
   });
-  assert.deepEqual(places, ['t₀: ', 't_E: ', 'Steps D: ', 'Confidence P: ', 'Trace points: ', 'parameter “2x”: ', 'name of parameter “2x”: ', 'φ [1]: ', 'g [2, 1]: ']);
+  assert.deepEqual(places, ['t₀: ', 't_E: ', 'Steps D: ', 'Confidence P: ', 'Trace points: ', 'parameter “2x”: ', 'name of parameter “2x”: ', 'parameter “a.b”: ', 'name of parameter “q”: ', 'φ [1]: ', 'g [2, 1]: ']);
   await choosePreset(page, 'seed-example');
 });
 
@@ -229,8 +232,8 @@ test("a parameter's rename reaches its uses in every expression, whole names onl
   assert.equal(await page.textContent('[data-note="params"]'), 'mass is still used in 3 cells: expressions cannot use “2m” as a parameter');
   // Nor does a name the language reads as something else (t: the time variable, which
   // g = v*t/m_g uses; renamed back, the parameter must not take it).
-  await page.fill(cell('params.2m.name'), 'mass');
-  await page.press(cell('params.2m.name'), 'Tab');
+  await page.fill(`input[data-path='params["2m"].name']`, 'mass');
+  await page.press(`input[data-path='params["2m"].name']`, 'Tab');
   await page.fill(cell('params.v.name'), 't');
   await page.press(cell('params.v.name'), 'Tab');
   assert.equal(await page.inputValue(cell('system.b[0][0]')), 'v/mass');

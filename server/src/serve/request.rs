@@ -351,7 +351,7 @@ pub fn overrides(set: Option<&Value>) -> Result<Overrides, Vec<FieldError>> {
                 out.insert(name.clone(), x);
             }
             _ => errors.push(FieldError::new(
-                format!("set.{name}"),
+                kea_core::error::member_path("set", name),
                 format!("expected a number, got {}", json_kind(v)),
             )),
         }

@@ -85,7 +85,7 @@ fn mode_errors(mode: Option<&Value>) -> Vec<FieldError> {
         .filter(|k| !MODES.contains(&k.as_str()))
         .map(|k| {
             FieldError::new(
-                format!("mode.{k}"),
+                kea_core::error::member_path("mode", k),
                 format!("unknown mode; expected one of: {}", MODES.join(", ")),
             )
         })

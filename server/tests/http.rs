@@ -395,6 +395,69 @@ fn cancel_running_and_queued_jobs() {
     assert_eq!(s.delete("/v1/jobs/no-such-job").status, 404);
 }
 
+/// `DELETE …?purge=true` deletes a finished job with its result (and only a finished
+/// one); the other jobs stay.
+#[test]
+fn a_finished_job_is_purged_with_its_result() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &["--workers", "1"]);
+    let done = s.submit_analysis(preset("cv-tracker"));
+    let kept = s.submit_analysis(preset("cv-tracker"));
+    assert_eq!(s.wait_finished(&done, LONG)["status"], "succeeded");
+    assert_eq!(s.wait_finished(&kept, LONG)["status"], "succeeded");
+    let (running, _) = start_long_job(&s);
+
+    // Only finished jobs: a running one is a conflict, and stays running.
+    let r = s.delete(&format!("/v1/jobs/{running}?purge=true"));
+    assert_eq!(r.status, 409, "{}", r.text);
+    assert!(
+        r.json()["detail"]
+            .as_str()
+            .unwrap()
+            .contains("cancel it first"),
+        "{}",
+        r.text
+    );
+    assert_eq!(
+        s.get(&format!("/v1/jobs/{running}")).json()["status"],
+        "running"
+    );
+    // A value other than true or false, or another parameter: 400 naming it.
+    let r = s.delete(&format!("/v1/jobs/{done}?purge=yes"));
+    assert_eq!(r.status, 400, "{}", r.text);
+    assert_eq!(r.json()["errors"][0]["path"], "purge", "{}", r.text);
+    assert_eq!(s.delete(&format!("/v1/jobs/{done}?force=1")).status, 400);
+    // purge=false is the cancel: a finished job has nothing to cancel.
+    assert_eq!(
+        s.delete(&format!("/v1/jobs/{done}?purge=false")).status,
+        409
+    );
+
+    let r = s.delete(&format!("/v1/jobs/{done}?purge=true"));
+    assert_eq!(r.status, 204, "{}", r.text);
+    assert_eq!(s.get(&format!("/v1/jobs/{done}")).status, 404);
+    assert_eq!(s.get(&format!("/v1/jobs/{done}/result")).status, 404);
+    assert_eq!(s.delete(&format!("/v1/jobs/{done}?purge=true")).status, 404);
+    let listed: Vec<Value> = s.get("/v1/jobs").json()["items"]
+        .as_array()
+        .unwrap()
+        .clone();
+    assert!(
+        listed.iter().all(|j| j["id"] != done.as_str()),
+        "{listed:?}"
+    );
+    assert_eq!(s.get(&format!("/v1/jobs/{kept}/result")).status, 200);
+
+    // Cancelled, then purged.
+    assert_eq!(s.delete(&format!("/v1/jobs/{running}")).status, 200);
+    assert_eq!(s.wait_finished(&running, LONG)["status"], "cancelled");
+    assert_eq!(
+        s.delete(&format!("/v1/jobs/{running}?purge=true")).status,
+        204
+    );
+    assert_eq!(s.get(&format!("/v1/jobs/{running}")).status, 404);
+}
+
 /// A synthesis's analyses run beside each other and reported nothing, so a cancel (or
 /// the time limit, or a shutdown) waited for the analyses in hand: an audit saw a
 /// cancel take 22.5 s, and SIGTERM 21.4 s against a 10 s grace. Each analysis now asks

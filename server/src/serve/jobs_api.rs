@@ -4,7 +4,7 @@ use super::handlers::{check_work, prepare, raw_json, resolve_model_id};
 use super::problem::{Problem, kind};
 use super::request::{self, JobId, JsonBody};
 use super::state::AppState;
-use super::store::{Enqueued, JobRecord, JobStatus, new_id, now_rfc3339};
+use super::store::{Deleted, Enqueued, JobRecord, JobStatus, new_id, now_rfc3339};
 use super::worker::{CancelOutcome, Snapshot};
 use axum::Json;
 use axum::extract::{RawQuery, State};
@@ -178,7 +178,16 @@ pub async fn list(
 
 /// `DELETE /v1/jobs/{id}`: cancel. 200 with the job (cancelled, or still running
 /// with the cancellation requested); 409 if it had already finished.
-pub async fn cancel(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, Problem> {
+/// `?purge=true`: delete a finished job and its result instead (204; 409 while it
+/// is queued or running).
+pub async fn cancel(
+    State(state): State<AppState>,
+    JobId(id): JobId,
+    RawQuery(raw): RawQuery,
+) -> Result<Response, Problem> {
+    if request::flag_query(raw, "purge")? {
+        return purge(&state, &id).await;
+    }
     let pool = state.pool.clone();
     let key = id.clone();
     let outcome = tokio::task::spawn_blocking(move || pool.cancel(&key))
@@ -195,6 +204,24 @@ pub async fn cancel(State(state): State<AppState>, JobId(id): JobId) -> Result<R
             v["cancel_requested"] = Value::Bool(true);
             Ok((StatusCode::OK, Json(v)).into_response())
         }
+    }
+}
+
+/// Delete the finished job `id` with its result.
+async fn purge(state: &AppState, id: &str) -> Result<Response, Problem> {
+    let key = id.to_string();
+    match state.db(move |s| s.delete_finished_job(&key)).await? {
+        Deleted::Deleted => Ok(StatusCode::NO_CONTENT.into_response()),
+        Deleted::NotFound => Err(Problem::not_found("job", id)),
+        Deleted::NotFinished(s) => Err(Problem::conflict(
+            "the job has not finished",
+            format!(
+                "job `{id}` is {}: only a finished job (succeeded, failed or cancelled) is \
+                 purged; cancel it first (DELETE /v1/jobs/{id}), then purge it once it has \
+                 stopped",
+                s.as_str()
+            ),
+        )),
     }
 }
 

@@ -485,6 +485,28 @@ pub fn no_query(raw: Option<String>) -> Result<(), Problem> {
     }
 }
 
+/// A query of at most the one boolean parameter `name` (`true` or `false`; absent:
+/// false); anything else is a 400 naming it.
+pub fn flag_query(raw: Option<String>, name: &str) -> Result<bool, Problem> {
+    let mut errors = Vec::new();
+    let mut on = false;
+    for (_, v) in query_pairs(raw.as_deref(), &[name], &mut errors) {
+        match v.as_str() {
+            "true" => on = true,
+            "false" => on = false,
+            _ => errors.push(FieldError::new(
+                name,
+                format!("expected `true` or `false`, got `{v}`"),
+            )),
+        }
+    }
+    if errors.is_empty() {
+        Ok(on)
+    } else {
+        Err(query_problem(errors))
+    }
+}
+
 /// The decoded pairs of a query string whose names are in `known` and appear once;
 /// one error for each unknown name and each repeated one.
 fn query_pairs(

@@ -116,7 +116,13 @@ pub fn table() -> Vec<Route> {
             jobs_api::list,
         ),
         route(M::GET, "/v1/jobs/{id}", Api, NONE, jobs_api::get),
-        route(M::DELETE, "/v1/jobs/{id}", Api, NONE, jobs_api::cancel),
+        route(
+            M::DELETE,
+            "/v1/jobs/{id}",
+            Api,
+            Some(&["purge"]),
+            jobs_api::cancel,
+        ),
         route(M::GET, "/v1/jobs/{id}/result", Api, NONE, jobs_api::result),
         route(
             M::GET,

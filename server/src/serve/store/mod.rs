@@ -130,6 +130,15 @@ pub enum Enqueued {
     },
 }
 
+/// What [`Store::delete_finished_job`] did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Deleted {
+    Deleted,
+    NotFound,
+    /// Not deleted: the job is queued or running.
+    NotFinished(JobStatus),
+}
+
 /// When [`Store::requeue_all_running`] stops running a job again.
 #[derive(Clone, Debug)]
 pub struct GiveUp {
@@ -211,6 +220,9 @@ pub trait Store: Send + Sync + 'static {
     /// Cancel a queued job (recording that a cancel was asked for); false if it was
     /// not queued.
     fn cancel_queued(&self, id: &str, finished_at: &str) -> Result<bool>;
+    /// Delete a finished job (succeeded, failed or cancelled) with its result, in one
+    /// transaction; a job still queued or running is left as it is.
+    fn delete_finished_job(&self, id: &str) -> Result<Deleted>;
     /// A finished job's result JSON and traces CSV.
     fn get_result(&self, id: &str) -> Result<Option<(String, Option<String>)>>;
 }

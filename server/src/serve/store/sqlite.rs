@@ -2,8 +2,8 @@
 //! schema versioned by `PRAGMA user_version` and migrated forward on open.
 
 use super::{
-    Enqueued, GiveUp, JobRecord, JobStatus, ModelRecord, ModelSummary, Outcome, Page, Requeued,
-    Result, Store, StoreError,
+    Deleted, Enqueued, GiveUp, JobRecord, JobStatus, ModelRecord, ModelSummary, Outcome, Page,
+    Requeued, Result, Store, StoreError,
 };
 use rusqlite::{Connection, OptionalExtension, Row, TransactionBehavior, params};
 use std::collections::HashMap;
@@ -500,6 +500,30 @@ impl Store for SqliteStore {
         })
     }
 
+    fn delete_finished_job(&self, id: &str) -> Result<Deleted> {
+        self.with(|c| {
+            let tx = c.transaction()?;
+            // The result and any checkpoints go with it (ON DELETE CASCADE).
+            let deleted = tx.execute(
+                "DELETE FROM jobs WHERE id = ?1 AND status IN ('succeeded', 'failed', 'cancelled')",
+                [id],
+            )?;
+            let out = if deleted > 0 {
+                Deleted::Deleted
+            } else {
+                let status: Option<String> = tx
+                    .query_row("SELECT status FROM jobs WHERE id = ?1", [id], |r| r.get(0))
+                    .optional()?;
+                match status.as_deref().and_then(JobStatus::parse) {
+                    None => Deleted::NotFound,
+                    Some(s) => Deleted::NotFinished(s),
+                }
+            };
+            tx.commit()?;
+            Ok(out)
+        })
+    }
+
     fn get_result(&self, id: &str) -> Result<Option<(String, Option<String>)>> {
         self.with(|c| {
             c.query_row(
@@ -603,6 +627,47 @@ mod tests {
         assert_eq!(s.get_job(&b).unwrap().unwrap().status, JobStatus::Queued);
         claim(&s, &b);
         assert!(s.claim_next(&now_rfc3339()).unwrap().is_none());
+    }
+
+    /// Only a finished job is deleted, and its result and checkpoints with it.
+    #[test]
+    fn a_finished_job_is_deleted_with_its_result() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = SqliteStore::open(dir.path()).unwrap();
+        let (a, b) = (new_id(), new_id());
+        s.insert_job(&job(&a)).unwrap();
+        s.insert_job(&job(&b)).unwrap();
+        assert_eq!(
+            s.delete_finished_job(&a).unwrap(),
+            Deleted::NotFinished(JobStatus::Queued)
+        );
+        s.claim_next(&now_rfc3339()).unwrap().unwrap();
+        s.keep_checkpoints(&a, &[("k".into(), "v".into())]).unwrap();
+        assert_eq!(
+            s.delete_finished_job(&a).unwrap(),
+            Deleted::NotFinished(JobStatus::Running)
+        );
+        let result = Outcome::Succeeded {
+            result_json: "{}".into(),
+            traces_csv: None,
+        };
+        s.finish_job(&a, &result, 1.0, &now_rfc3339()).unwrap();
+        assert!(s.get_result(&a).unwrap().is_some());
+        assert_eq!(s.delete_finished_job(&a).unwrap(), Deleted::Deleted);
+        assert!(s.get_job(&a).unwrap().is_none());
+        assert!(s.get_result(&a).unwrap().is_none());
+        let left: i64 = s
+            .with(|c| {
+                c.query_row(
+                    "SELECT (SELECT count(*) FROM job_results) + (SELECT count(*) FROM job_checkpoints)",
+                    [],
+                    |r| r.get(0),
+                )
+            })
+            .unwrap();
+        assert_eq!(left, 0);
+        assert_eq!(s.delete_finished_job(&a).unwrap(), Deleted::NotFound);
+        assert_eq!(s.get_job(&b).unwrap().unwrap().status, JobStatus::Queued);
     }
 
     #[test]

@@ -34,10 +34,7 @@ impl fmt::Display for FieldError {
 /// identifier, else `parent["key"]` (JSON-quoted), so that a key with a dot, a space or
 /// a bracket in it (`params["a.b"]`) does not read as a path of its own.
 pub fn member_path(parent: &str, key: &str) -> String {
-    let mut chars = key.chars();
-    let identifier = matches!(chars.next(), Some(c) if c.is_alphabetic() || c == '_')
-        && chars.all(|c| c.is_alphanumeric() || c == '_');
-    match (identifier, parent.is_empty()) {
+    match (crate::validate::is_identifier(key), parent.is_empty()) {
         (true, true) => key.to_string(),
         (true, false) => format!("{parent}.{key}"),
         (false, _) => format!(

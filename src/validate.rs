@@ -752,7 +752,8 @@ fn blind_measurements(
     }
 }
 
-fn is_identifier(s: &str) -> bool {
+/// A name an expression can use (and a key `error::member_path` writes unquoted).
+pub(crate) fn is_identifier(s: &str) -> bool {
     let mut it = s.chars();
     matches!(it.next(), Some(c) if c.is_alphabetic() || c == '_')
         && it.all(|c| c.is_alphanumeric() || c == '_')

@@ -168,17 +168,27 @@ impl SqliteStore {
         f(&mut conn).map_err(db_err)
     }
 
+    /// Running jobs (the one `id`, or all where `id` is None) asked to stop become
+    /// cancelled; the count of them.
+    fn cancel_asked(
+        tx: &rusqlite::Transaction,
+        id: Option<&str>,
+        finished_at: &str,
+    ) -> rusqlite::Result<usize> {
+        tx.execute(
+            "UPDATE jobs SET status = 'cancelled', finished_at = ?1
+             WHERE status = 'running' AND cancel_requested = 1 AND (?2 IS NULL OR id = ?2)",
+            params![finished_at, id],
+        )
+    }
+
     /// The running job `id` back to the queue, or to cancelled where a cancel was
     /// asked for.
     fn requeue_running(&self, id: &str) -> Result<()> {
         let finished_at = super::now_rfc3339();
         self.with(|c| {
             let tx = c.transaction()?;
-            tx.execute(
-                "UPDATE jobs SET status = 'cancelled', finished_at = ?2
-                 WHERE status = 'running' AND cancel_requested = 1 AND id = ?1",
-                params![id, finished_at],
-            )?;
+            Self::cancel_asked(&tx, Some(id), &finished_at)?;
             tx.execute(
                 "UPDATE jobs SET status = 'queued', started_at = NULL
                  WHERE status = 'running' AND id = ?1",
@@ -462,11 +472,7 @@ impl Store for SqliteStore {
         self.with(|c| {
             let tx = c.transaction()?;
             // The cancels first: a job asked to stop is cancelled, not blamed.
-            let cancelled = tx.execute(
-                "UPDATE jobs SET status = 'cancelled', finished_at = ?1
-                 WHERE status = 'running' AND cancel_requested = 1",
-                params![finished_at],
-            )?;
+            let cancelled = Self::cancel_asked(&tx, None, &finished_at)?;
             tx.execute(
                 "UPDATE jobs SET interruptions = interruptions + 1 WHERE status = 'running'",
                 [],
@@ -503,20 +509,16 @@ impl Store for SqliteStore {
     fn delete_finished_job(&self, id: &str) -> Result<Deleted> {
         self.with(|c| {
             let tx = c.transaction()?;
-            // The result and any checkpoints go with it (ON DELETE CASCADE).
-            let deleted = tx.execute(
-                "DELETE FROM jobs WHERE id = ?1 AND status IN ('succeeded', 'failed', 'cancelled')",
-                [id],
-            )?;
-            let out = if deleted > 0 {
-                Deleted::Deleted
-            } else {
-                let status: Option<String> = tx
-                    .query_row("SELECT status FROM jobs WHERE id = ?1", [id], |r| r.get(0))
-                    .optional()?;
-                match status.as_deref().and_then(JobStatus::parse) {
-                    None => Deleted::NotFound,
-                    Some(s) => Deleted::NotFinished(s),
+            let status: Option<String> = tx
+                .query_row("SELECT status FROM jobs WHERE id = ?1", [id], |r| r.get(0))
+                .optional()?;
+            let out = match status.as_deref().and_then(JobStatus::parse) {
+                None => Deleted::NotFound,
+                Some(s) if !s.is_terminal() => Deleted::NotFinished(s),
+                Some(_) => {
+                    // The result and any checkpoints go with it (ON DELETE CASCADE).
+                    tx.execute("DELETE FROM jobs WHERE id = ?1", [id])?;
+                    Deleted::Deleted
                 }
             };
             tx.commit()?;

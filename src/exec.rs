@@ -36,17 +36,6 @@ impl Executor for Sequential {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn sequential_preserves_order() {
-        assert_eq!(Sequential.map(vec![3, 1, 2], |x| x * 10), vec![30, 10, 20]);
-        assert_eq!(Sequential.threads(), 1);
-    }
-}
-
 /// Where a computation keeps the parts it has finished, so that a run of the same
 /// request after an interruption takes them instead of computing them again: the
 /// computation visits the same parts in the same order (every answer is bit-identical
@@ -68,4 +57,15 @@ impl Memo for Forgetful {
         None
     }
     fn keep(&self, _: &str, _: &str) {}
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sequential_preserves_order() {
+        assert_eq!(Sequential.map(vec![3, 1, 2], |x| x * 10), vec![30, 10, 20]);
+        assert_eq!(Sequential.threads(), 1);
+    }
 }

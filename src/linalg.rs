@@ -404,7 +404,6 @@ fn fixed_first<const N: usize>(u: &mut [[f64; N]; N], r: &[[f64; N]; N], e: &Spa
                 let k = i as isize + d;
                 if (0..N as isize).contains(&k) {
                     let (v, rk) = (vals[i], &r[k as usize]);
-                    #[allow(clippy::needless_range_loop)]
                     for j in 0..N {
                         w[j] += v * rk[j];
                     }
@@ -420,7 +419,6 @@ fn fixed_first<const N: usize>(u: &mut [[f64; N]; N], r: &[[f64; N]; N], e: &Spa
     *u = *r;
     for &(i, k, v) in &e.nz {
         let (ui, rk) = (&mut u[i], &r[k]);
-        #[allow(clippy::needless_range_loop)]
         for j in 0..N {
             ui[j] += v * rk[j];
         }
@@ -458,7 +456,6 @@ fn fixed_second<const N: usize>(
                 add_shifted(&mut w, vals.try_into().expect("N"), ua, d);
             }
             let b_row = &b[a];
-            #[allow(clippy::needless_range_loop)]
             for j in 0..N {
                 w[j] += b_row[j];
             }

@@ -99,6 +99,11 @@ pub fn dare_doubling(
 use crate::lanes::Lanes;
 use crate::linalg::{SparseRows, mat_mut, mirror, predict_cov, predict_work};
 
+/// The measurement covariance Rv has a negative pivot beyond rounding: it is not
+/// positive semi-definite.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NotSemidefinite;
+
 /// The measurements used at one step, prepared for sequential (scalar) processing:
 /// P Rv Pᵀ = L D Lᵀ (P a permutation, L unit lower triangular, D ≥ 0 diagonal), so
 /// the whitened measurements L⁻¹ P Z have rows L⁻¹ P C and independent noises of
@@ -144,7 +149,7 @@ impl Prepared {
     }
 
     /// Prepare the rows of C (nm × n) and Rv (nm × nm) of the measurements with
-    /// `avail[j]` (all when None). Err(()) if Rv is not positive semi-definite.
+    /// `avail[j]` (all when None). Err if Rv is not positive semi-definite.
     pub fn prepare(
         &mut self,
         c: &[f64],
@@ -152,7 +157,7 @@ impl Prepared {
         avail: Option<&[bool]>,
         n: usize,
         nm: usize,
-    ) -> Result<(), ()> {
+    ) -> Result<(), NotSemidefinite> {
         self.idx.clear();
         self.idx
             .extend((0..nm).filter(|&j| avail.is_none_or(|a| a[j])));
@@ -284,7 +289,6 @@ impl Prepared {
     /// predicted r bound every q of the step. Never where
     /// [`Self::gain_from_covariance`] holds (q ≤ 16 d for every row), which the step
     /// asks first.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn needs_exact(&self, r_pred: &[f64], n: usize) -> bool {
         self.unit[..self.idx.len()]
             .iter()
@@ -332,7 +336,7 @@ const EXACT_Q_OVER_D: f64 = 1e3;
 /// P a Pᵀ = L D Lᵀ in place (a full symmetric m × m; its strict lower triangle := L),
 /// for a positive semi-definite a, with diagonal pivoting: each step takes the largest
 /// pivot left (LAPACK's `pstrf` order), and `perm[j]` is the row of a that became row
-/// j. A zero pivot zeroes its column of L. Err(()) on a negative pivot beyond rounding.
+/// j. A zero pivot zeroes its column of L. Err on a negative pivot beyond rounding.
 ///
 /// A singular a (fewer noise sources than measurements: Γ Ψ² Γᵀ of rank M < n) has
 /// pivots that are 0 exactly and only near 0 in floating point. Without pivoting the
@@ -343,7 +347,7 @@ const EXACT_Q_OVER_D: f64 = 1e3;
 /// is what the validator lets through: a covariance whose smallest eigenvalue is down
 /// to −1e-12 of its largest (`validate.rs`); no pivot is below the smallest
 /// eigenvalue, and the largest is at most m·scale.
-fn ldl(a: &mut [f64], d: &mut [f64], perm: &mut [usize], m: usize) -> Result<(), ()> {
+fn ldl(a: &mut [f64], d: &mut [f64], perm: &mut [usize], m: usize) -> Result<(), NotSemidefinite> {
     let scale = (0..m).map(|i| a[i * m + i].abs()).fold(0.0, f64::max);
     let tiny = 1e-14 * scale;
     let negative_zero = tiny + 1e-12 * m as f64 * scale;
@@ -376,7 +380,7 @@ fn ldl(a: &mut [f64], d: &mut [f64], perm: &mut [usize], m: usize) -> Result<(),
             perm.swap(j, p);
         }
         if !dj.is_finite() || dj < -negative_zero {
-            return Err(());
+            return Err(NotSemidefinite);
         }
         if dj <= tiny {
             dj = 0.0;

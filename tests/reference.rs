@@ -27,6 +27,7 @@ fn max_rel(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
 }
 
 /// Scalar model: dY/dt = a Y + u + b F, Z = c y + γ Φ, constant coefficients.
+#[allow(clippy::too_many_arguments)] // the equation's coefficients, in its order
 fn scalar(
     a: f64,
     u: f64,

@@ -3,12 +3,14 @@
 //! - `cargo xtask serve [-- <kea serve args>]`: build the wasm module and start
 //!   `kea serve` with the web UI — the README's one run command.
 //! - `cargo xtask test`: every test — Rust (release, so the builds are shared with
-//!   `serve`), then the browser end-to-end tests against the real server.
+//!   `serve`), then the browser end-to-end tests against the real server, then the
+//!   lints (`cargo fmt --check`, clippy with warnings denied).
+//! - `cargo xtask lint`: only the lints.
 //! - `cargo xtask e2e`: only the browser end-to-end tests.
 //! - `cargo xtask wasm`: only build the wasm module into `web/pkg`.
 //! - `cargo xtask bench-web`: the wasm-in-browser vs native benchmark.
 //!
-//! Missing tools are installed on the way: the `wasm32-unknown-unknown` target, the
+//! Missing tools are installed on the way: rustfmt and clippy, the `wasm32-unknown-unknown` target, the
 //! `wasm-bindgen` CLI of exactly the version pinned in `wasm/Cargo.toml`, Chromium (apt) and the
 //! e2e tests' npm packages (`npm ci`).
 
@@ -25,7 +27,8 @@ const USAGE: &str = "usage: cargo xtask <command>
 
 commands:
   serve [-- <kea serve args>]   build the wasm module, then run `kea serve` (web UI at /)
-  test                          run every test: Rust (release) and the browser e2e tests
+  test                          run every test: Rust (release), the browser e2e tests, the lints
+  lint                          only the lints: rustfmt --check, clippy (warnings denied)
   e2e                           only the browser e2e tests (tests/e2e, Chromium + kea serve)
   wasm                          build the wasm module into web/pkg
   bench-web                     benchmark the analysis in the browser (wasm) against native
@@ -50,6 +53,7 @@ fn main() -> ExitCode {
         "test" => test(),
         "e2e" => build_wasm().and_then(|()| e2e_tests()),
         "wasm" => build_wasm(),
+        "lint" => lint(),
         "bench-web" => bench_web(),
         "-h" | "--help" | "help" => {
             print!("{USAGE}");
@@ -158,19 +162,19 @@ fn wasm_bindgen_exe() -> PathBuf {
     let cargo_home = env::var_os("CARGO_HOME")
         .map(PathBuf::from)
         .or_else(|| env::var_os("HOME").map(|h| PathBuf::from(h).join(".cargo")));
-    if output(Command::new("wasm-bindgen").arg("--version")).is_none() {
-        if let Some(home) = cargo_home {
-            let exe = home.join("bin").join("wasm-bindgen");
-            if exe.exists() {
-                return exe;
-            }
+    if output(Command::new("wasm-bindgen").arg("--version")).is_none()
+        && let Some(home) = cargo_home
+    {
+        let exe = home.join("bin").join("wasm-bindgen");
+        if exe.exists() {
+            return exe;
         }
     }
     PathBuf::from("wasm-bindgen")
 }
 
-/// Make sure the wasm target and the matching wasm-bindgen CLI are installed.
-fn ensure_wasm_toolchain() -> Result<PathBuf> {
+/// Make sure the wasm target is installed.
+fn ensure_wasm_target() -> Result<()> {
     let installed = output(Command::new("rustup").args(["target", "list", "--installed"]));
     match installed {
         Some(list) if list.lines().any(|l| l.trim() == WASM_TARGET) => {}
@@ -179,6 +183,12 @@ fn ensure_wasm_toolchain() -> Result<PathBuf> {
             eprintln!("xtask: rustup not found; assuming the {WASM_TARGET} target is installed")
         }
     }
+    Ok(())
+}
+
+/// Make sure the wasm target and the matching wasm-bindgen CLI are installed.
+fn ensure_wasm_toolchain() -> Result<PathBuf> {
+    ensure_wasm_target()?;
 
     let version = pinned_wasm_bindgen()?;
     let exe = wasm_bindgen_exe();
@@ -260,12 +270,61 @@ fn test() -> Result<()> {
         eprintln!("xtask: {e}");
         failed.push("browser e2e tests");
     }
+    if let Err(e) = lint() {
+        eprintln!("xtask: {e}");
+        failed.push("lints");
+    }
     if failed.is_empty() {
         eprintln!("xtask: all tests passed");
         Ok(())
     } else {
         Err(format!("failed: {}", failed.join(", ")))
     }
+}
+
+/// Formatting and clippy (warnings denied; the exceptions are `[workspace.lints]` in
+/// Cargo.toml), for the host and for the wasm adapter's own target.
+fn lint() -> Result<()> {
+    ensure_components(&["rustfmt", "clippy"])?;
+    ensure_wasm_target()?;
+    run(cargo().args(["fmt", "--all", "--check"]))?;
+    let clippy = ["clippy", "--release", "--quiet"];
+    run(cargo()
+        .args(clippy)
+        .args(["--workspace", "--all-targets", "--", "-D", "warnings"]))?;
+    run(cargo().args(clippy).args([
+        "-p",
+        "kea-wasm",
+        "--target",
+        WASM_TARGET,
+        "--",
+        "-D",
+        "warnings",
+    ]))
+}
+
+/// Make sure the rustup components are installed (a toolchain without rustup is
+/// assumed to have them).
+fn ensure_components(names: &[&str]) -> Result<()> {
+    let Some(list) = output(Command::new("rustup").args(["component", "list", "--installed"]))
+    else {
+        eprintln!(
+            "xtask: rustup not found; assuming {} are installed",
+            names.join(", ")
+        );
+        return Ok(());
+    };
+    let missing: Vec<&str> = names
+        .iter()
+        .copied()
+        .filter(|n| !list.lines().any(|l| l.trim().starts_with(&format!("{n}-"))))
+        .collect();
+    if missing.is_empty() {
+        return Ok(());
+    }
+    run(Command::new("rustup")
+        .args(["component", "add"])
+        .args(missing))
 }
 
 /// The browser end-to-end tests only (builds what they need).

@@ -458,6 +458,65 @@ fn a_finished_job_is_purged_with_its_result() {
     assert_eq!(s.get(&format!("/v1/jobs/{running}")).status, 404);
 }
 
+/// A job's request reads back as stored — its `model_id` replaced by the model, its
+/// `set` kept — and submitted again it gives the same result; the job's view names
+/// the model.
+#[test]
+fn a_jobs_request_reads_back_and_runs_again() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &["--workers", "1"]);
+    let model = preset("cv-tracker");
+    let name = model["name"].as_str().unwrap().to_string();
+    let stored = s.post("/v1/models", &model).json()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let r = s.post(
+        "/v1/jobs",
+        &json!({"kind": "analysis", "model_id": stored, "set": {"q": 2}}),
+    );
+    assert_eq!(r.status, 202, "{}", r.text);
+    assert_eq!(r.json()["model_name"], name.as_str(), "{}", r.text);
+    let first = r.json()["id"].as_str().unwrap().to_string();
+    assert_eq!(s.wait_finished(&first, LONG)["status"], "succeeded");
+    // The stored model may go: the job's request has its own copy.
+    assert_eq!(s.delete(&format!("/v1/models/{stored}")).status, 204);
+
+    let r = s.get(&format!("/v1/jobs/{first}/request"));
+    assert_eq!(r.status, 200, "{}", r.text);
+    let request = r.json();
+    assert_eq!(request["kind"], "analysis");
+    assert_eq!(request["model"], model);
+    assert_eq!(request["set"], json!({"q": 2}));
+    assert!(request.get("model_id").is_none(), "{}", r.text);
+    let listed = s.get("/v1/jobs").json();
+    assert_eq!(listed["items"][0]["id"], first.as_str());
+    assert_eq!(listed["items"][0]["model_name"], name.as_str());
+
+    let again = s.post("/v1/jobs", &request);
+    assert_eq!(again.status, 202, "{}", again.text);
+    let again = again.json()["id"].as_str().unwrap().to_string();
+    assert_eq!(s.wait_finished(&again, LONG)["status"], "succeeded");
+    let result = |id: &str| without_timing(s.get(&format!("/v1/jobs/{id}/result")).json());
+    let (a, b) = (result(&first), result(&again));
+    assert_eq!(a, b);
+    // `set` took effect (q = 2 is not the preset's value).
+    assert_ne!(model["params"]["q"], json!(2));
+    let unset = s.post("/v1/analyze", &json!({"model": model})).json();
+    assert_ne!(a["criteria"], unset["criteria"]);
+
+    // A model without a name: null.
+    let mut unnamed = model.clone();
+    unnamed.as_object_mut().unwrap().remove("name");
+    let r = s.post("/v1/jobs", &json!({"kind": "analysis", "model": unnamed}));
+    assert_eq!(r.json()["model_name"], Value::Null, "{}", r.text);
+    assert_eq!(
+        s.get("/v1/jobs/00000000-0000-0000-0000-000000000000/request")
+            .status,
+        404
+    );
+}
+
 /// A synthesis's analyses run beside each other and reported nothing, so a cancel (or
 /// the time limit, or a shutdown) waited for the analyses in hand: an audit saw a
 /// cancel take 22.5 s, and SIGTERM 21.4 s against a 10 s grace. Each analysis now asks

@@ -584,6 +584,10 @@ fn responses_validate_against_the_spec() {
         assert_eq!(done["status"], "succeeded", "{done}");
         let jp = format!("/v1/jobs/{jid}");
         expect("get", &jp, &s.get(&jp), 200);
+        let qp = format!("/v1/jobs/{jid}/request");
+        let stored = s.get(&qp);
+        expect("get", &qp, &stored, 200);
+        assert_eq!(stored.json(), jb, "the {kind} job's stored request");
         let rp = format!("/v1/jobs/{jid}/result");
         let result = s.get(&rp);
         expect("get", &rp, &result, 200);
@@ -634,6 +638,8 @@ fn responses_validate_against_the_spec() {
     expect("delete", &jp, &s.delete(&jp), 409);
     expect("delete", &mp, &s.delete("/v1/models/gone"), 404);
     expect("get", "/v1/jobs/x", &s.get("/v1/jobs/x"), 404);
+    let qp = "/v1/jobs/x/request";
+    expect("get", qp, &s.get(qp), 404);
     // A failed job carries its error (no measurement error and no initial error:
     // the innovation covariance is singular at the first step).
     let mut singular = preset("cv-tracker");

@@ -25,6 +25,7 @@ pub fn job_view(job: &JobRecord, live: Option<Snapshot>) -> Value {
     let mut v = json!({
         "id": job.id,
         "kind": job.kind,
+        "model_name": job.model_name,
         "status": job.status,
         "progress": progress,
         "cancel_requested": job.cancel_requested,
@@ -89,6 +90,11 @@ pub async fn submit(
         )]));
     }
     let stored = resolve_model_id(&state, &mut obj).await?;
+    let model_name = obj
+        .get("model")
+        .and_then(|m| m.get("name"))
+        .and_then(Value::as_str)
+        .map(str::to_owned);
     let request = Value::Object(obj);
     let request_json = request.to_string();
     let prepared = prepare(&state, &kind_name, request, stored.as_deref()).await?;
@@ -112,6 +118,7 @@ pub async fn submit(
         error_json: None,
         attempts: 0,
         cancel_requested: false,
+        model_name,
     };
     let pool = state.pool.clone();
     let stored = job.clone();
@@ -243,6 +250,17 @@ async fn finished(state: &AppState, id: &str) -> Result<(String, Option<String>)
         .db(move |s| s.get_result(&key))
         .await?
         .ok_or_else(|| Problem::internal(format!("job {id} succeeded without a stored result")))
+}
+
+/// `GET /v1/jobs/{id}/request`: the request as stored — the submitted one with a
+/// `model_id` replaced by the model it named then — so that it can be read, opened
+/// or submitted again as it is.
+pub async fn request(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, Problem> {
+    let job = load(&state, &id).await?;
+    let mut stored: serde_json::Map<String, Value> = serde_json::from_str(&job.request_json)
+        .map_err(|e| Problem::internal(format!("job {id}'s stored request: {e}")))?;
+    stored.insert("kind".into(), Value::String(job.kind));
+    Ok(Json(Value::Object(stored)).into_response())
 }
 
 /// `GET /v1/jobs/{id}/result`.

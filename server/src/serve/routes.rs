@@ -123,6 +123,13 @@ pub fn table() -> Vec<Route> {
             Some(&["purge"]),
             jobs_api::cancel,
         ),
+        route(
+            M::GET,
+            "/v1/jobs/{id}/request",
+            Api,
+            NONE,
+            jobs_api::request,
+        ),
         route(M::GET, "/v1/jobs/{id}/result", Api, NONE, jobs_api::result),
         route(
             M::GET,

@@ -105,6 +105,8 @@ pub struct JobRecord {
     pub attempts: u32,
     /// A cancel was asked for (`DELETE`), whether or not the job has stopped yet.
     pub cancel_requested: bool,
+    /// The submitted model's `name`, if it has one (for a list of jobs).
+    pub model_name: Option<String>,
 }
 
 /// How a job ended.

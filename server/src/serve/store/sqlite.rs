@@ -52,6 +52,10 @@ const MIGRATIONS: &[&str] = &[
     // 4: how many times a process ended (a crash, a kill) while it ran this job, so
     // that a job that brings the server down is not run on every start.
     "ALTER TABLE jobs ADD COLUMN interruptions INTEGER NOT NULL DEFAULT 0;",
+    // 5: the submitted model's name, for a list of jobs (read from the stored requests).
+    "ALTER TABLE jobs ADD COLUMN model_name TEXT;
+     UPDATE jobs SET model_name = json_extract(request_json, '$.model.name')
+      WHERE json_valid(request_json) AND json_type(request_json, '$.model.name') = 'text';",
 ];
 
 pub struct SqliteStore {
@@ -90,7 +94,8 @@ fn db_err(e: rusqlite::Error) -> StoreError {
 }
 
 const JOB_COLUMNS: &str = "id, kind, status, progress, request_json, work, created_at, \
-                           started_at, finished_at, error_json, attempts, cancel_requested";
+                           started_at, finished_at, error_json, attempts, cancel_requested, \
+                           model_name";
 
 fn job_from_row(row: &Row<'_>) -> rusqlite::Result<JobRecord> {
     let status: String = row.get(2)?;
@@ -107,6 +112,7 @@ fn job_from_row(row: &Row<'_>) -> rusqlite::Result<JobRecord> {
         error_json: row.get(9)?,
         attempts: row.get(10)?,
         cancel_requested: row.get::<_, i64>(11)? != 0,
+        model_name: row.get(12)?,
     })
 }
 
@@ -263,8 +269,9 @@ impl Store for SqliteStore {
     fn insert_job(&self, j: &JobRecord) -> Result<()> {
         self.with(|c| {
             c.execute(
-                "INSERT INTO jobs (id, kind, status, progress, request_json, work, created_at)
-                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+                "INSERT INTO jobs (id, kind, status, progress, request_json, work, created_at,
+                                   model_name)
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)",
                 params![
                     j.id,
                     j.kind,
@@ -272,7 +279,8 @@ impl Store for SqliteStore {
                     j.progress,
                     j.request_json,
                     j.work,
-                    j.created_at
+                    j.created_at,
+                    j.model_name
                 ],
             )
             .map(|_| ())
@@ -295,15 +303,17 @@ impl Store for SqliteStore {
                 return Ok(Enqueued::Full { queued });
             }
             tx.execute(
-                "INSERT INTO jobs (id, kind, status, progress, request_json, work, created_at)
-                 VALUES (?1, ?2, 'queued', ?3, ?4, ?5, ?6)",
+                "INSERT INTO jobs (id, kind, status, progress, request_json, work, created_at,
+                                   model_name)
+                 VALUES (?1, ?2, 'queued', ?3, ?4, ?5, ?6, ?7)",
                 params![
                     j.id,
                     j.kind,
                     j.progress,
                     j.request_json,
                     j.work,
-                    j.created_at
+                    j.created_at,
+                    j.model_name
                 ],
             )?;
             tx.commit()?;
@@ -567,6 +577,7 @@ mod tests {
             error_json: None,
             attempts: 0,
             cancel_requested: false,
+            model_name: None,
         }
     }
 
@@ -817,8 +828,37 @@ mod tests {
             )
             .unwrap();
         }
+        // Finished jobs of every shape of request: migration 5 reads their model's name.
+        let named = [
+            (
+                r#"{"model":{"name":"Tracker \"A\"","time":{}}}"#,
+                Some("Tracker \"A\""),
+            ),
+            (r#"{"model":{"time":{}}}"#, None),
+            (r#"{"model":{"name":7}}"#, None),
+            ("{}", None),
+            ("not json", None),
+        ];
+        let named: Vec<(String, Option<&str>)> = named
+            .into_iter()
+            .map(|(request, name)| {
+                let id = new_id();
+                let c = Connection::open(dir.path().join("kea.sqlite")).unwrap();
+                c.execute(
+                    "INSERT INTO jobs (id, kind, status, request_json, work, created_at)
+                     VALUES (?1, 'analysis', 'succeeded', ?2, 1, '2026-01-01T00:00:00Z')",
+                    params![id, request],
+                )
+                .unwrap();
+                (id, name)
+            })
+            .collect();
         let s = SqliteStore::open(dir.path()).unwrap();
         assert_eq!(s.schema_version().unwrap(), MIGRATIONS.len());
+        for (id, name) in &named {
+            let job = s.get_job(id).unwrap().unwrap();
+            assert_eq!(job.model_name.as_deref(), *name, "{}", job.request_json);
+        }
         assert_eq!(s.get_job(&id).unwrap().unwrap().status, JobStatus::Running);
         assert!(s.request_cancel(&id).unwrap());
         assert_eq!(s.requeue_all_running(&give_up()).unwrap(), counts(0, 1, 0));

@@ -396,14 +396,15 @@ function resume() {
 /**
  * Show a run (`start(onProgress)` → {result, job}) in the run bar, then its result:
  * current if the model has not changed since `edits` (the count when the run's model
- * was taken). `resumed`: the id of a server job taken over after a reload.
+ * was taken). `resumed`: the id of a server job taken over after a reload, or opened
+ * from the Server jobs tab (`opened`).
  */
-async function follow(where, runner, start, edits, resumed = null) {
+async function follow(where, runner, start, edits, resumed = null, opened = false) {
   state.running = runner;
   $('run').disabled = true;
   $('cancel').disabled = false;
   $('progress').value = 0;
-  const label = resumed ? `Following server job ${resumed} (started before the reload)…` : where === 'browser' ? 'Running in this browser…' : 'Running on the server…';
+  const label = opened ? `Opening server job ${resumed}…` : resumed ? `Following server job ${resumed} (started before the reload)…` : where === 'browser' ? 'Running in this browser…' : 'Running on the server…';
   setStatus(label);
   const started = performance.now();
   const shown = new ProgressText(label);
@@ -421,7 +422,9 @@ async function follow(where, runner, start, edits, resumed = null) {
     if (current) editor.showErrors([]); // else the check of the edited model has the say
     showResult(result, where, elapsed, current);
     setStatus(
-      resumed
+      opened
+        ? `Server job ${job}, opened from the Server jobs tab.`
+        : resumed
         ? `Done (server job ${job}, followed after the reload).`
         : `Done in ${duration(elapsed)} (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`,
     );
@@ -429,7 +432,7 @@ async function follow(where, runner, start, edits, resumed = null) {
     if (e.kind === 'cancelled') {
       setStatus('Cancelled.');
     } else if (e.kind === 'gone' && resumed) {
-      setStatus('');
+      setStatus(opened ? `The server no longer has job ${resumed}.` : '', opened);
     } else if (e.kind === 'too-much-work') {
       setStatus(e.title, true);
       anyway.offer(e);
@@ -450,6 +453,30 @@ async function follow(where, runner, start, edits, resumed = null) {
 
 function cancel() {
   state.running?.cancel();
+}
+
+/**
+ * Open a server job (the Server jobs tab): its model — with the values its `set` gave
+ * the params — in the editor, as an import is (one Undo, or Back, away from the model
+ * shown before), its tab shown with its request, and the job followed there as a run
+ * is: its result, its error at the fields, or its progress to its end.
+ */
+async function openJob(job, tabs) {
+  const r = await api(`v1/jobs/${job.id}/request`);
+  if (!r.ok) throw new Error(r.status === 404 ? 'the server no longer has it' : `HTTP ${r.status}`);
+  const request = await r.json();
+  const model = request.model;
+  if (!model || typeof model !== 'object' || Array.isArray(model)) throw new Error('its request has no model');
+  if (request.set && typeof request.set === 'object') model.params = { ...(model.params ?? {}), ...request.set };
+  const own = await replaceModel(() => loadModel(model, null, { label: `opening of server job ${job.id}` }));
+  setPageStatus(`Opened server job ${job.id}; ${own ? 'Undo or the browser’s Back brings your model back' : 'Undo brings the preset back'}.`);
+  tabs.show(job.kind);
+  // Kept for this browser tab as a job started here is: a reload follows it again.
+  const body = JSON.stringify({ kind: job.kind, model });
+  if (job.kind !== 'analysis') return tabs.open(job.kind, job.id, request, model, body);
+  const runner = runners.server;
+  runner.store({ id: job.id, body });
+  follow('server', runner, (onProgress) => runner.attach(job.id, onProgress), state.edits, job.id, true);
 }
 
 /** Show a run's result; `current`: the model has not changed since the run started. */
@@ -586,6 +613,8 @@ async function main() {
     download,
     fileStem,
     server: !document.querySelector('input[name=mode][value=server]').disabled,
+    openJob: (job) => openJob(job, tabs),
+    analysisBusy: () => state.running !== null,
   });
   shareRunIn();
   const draft = leftDraft;

@@ -76,6 +76,16 @@ export class SimulationView extends RunView {
     for (const type of ['input', 'change']) this.form.addEventListener(type, () => this.kept.save());
   }
 
+  /** A request's settings (a server job opened) in the fields. */
+  fill(request) {
+    this.runs.value = String(request.runs ?? '');
+    this.seed.value = String(request.seed ?? 1); // the defaults of the request format
+    this.truth.value = request.truth ?? 'process';
+    this.modelError.value = request.model_error ?? 'white';
+    this.tracePoints.value = request.trace_points === undefined ? '' : String(request.trace_points);
+    this.kept.save();
+  }
+
   /** The request for the current model and form; throws {errors} for unreadable inputs. */
   request() {
     const errors = [];

@@ -315,6 +315,14 @@ export class SynthesisView extends RunView {
     this.showMode();
   }
 
+  /** A request's target and mode (a server job opened) in the fields. */
+  fill(request) {
+    this.exampleNote.hidden = true;
+    this.applyExample(request);
+    this.gridSummary();
+    this.kept.save();
+  }
+
   /** The grid's cells as the values fields read now: "f: 3 values (2, 4, 8) × … = 6 cells". */
   gridSummary() {
     const parts = [];

@@ -1,13 +1,16 @@
 // The tabs of the run pane: Analysis (app.js), Synthesis (synthesis.js) and Monte
-// Carlo (simulation.js), all on the model in the editor. Arrow keys move between the
-// tabs; Ctrl+Enter runs and Esc cancels in the tab shown.
+// Carlo (simulation.js), all on the model in the editor, and Server jobs (jobs.js).
+// Arrow keys move between the tabs; Ctrl+Enter runs and Esc cancels in the tab shown.
 
+import { JobsView } from './jobs.js';
 import { SimulationView } from './simulation.js';
 import { SynthesisView } from './synthesis.js';
 
 /**
  * `ctx`: {model(), example() (a loaded preset's synthesis example), showModelErrors(errors),
- * download(name, type, text), fileStem(), server: whether a kea server answers}. Returns the name of the tab shown, as a function.
+ * download(name, type, text), fileStem(), server: whether a kea server answers,
+ * openJob(job) (app.js), analysisBusy()}. Returns {current() (the name of the tab
+ * shown), show(name), open(kind, id, request, model, body) (a server job in its tab)}.
  */
 export function mountTabs(ctx) {
   const pane = document.getElementById('results-pane');
@@ -19,6 +22,12 @@ export function mountTabs(ctx) {
   if (!ctx.server) {
     for (const v of Object.values(views)) v.bar.disableServer('No kea server answers here (open the page through `kea serve`).');
   }
+  const names = { analysis: 'Analysis', synthesis: 'Synthesis', simulation: 'Monte Carlo' };
+  const busy = (kind) => {
+    const running = kind === 'analysis' ? ctx.analysisBusy() : views[kind]?.bar.running;
+    return running ? `A run is under way in the ${names[kind] ?? kind} tab: let it end, or cancel it, before opening a job there.` : null;
+  };
+  views.jobs = new JobsView(document.getElementById('jobs-panel'), { server: ctx.server, open: (job) => ctx.openJob(job), busy });
   const current = () => pane.dataset.tab ?? 'analysis';
 
   function show(name, focus = false) {
@@ -33,7 +42,10 @@ export function mountTabs(ctx) {
     }
     for (const [key, v] of Object.entries(views)) {
       v.root.hidden = key !== name;
-      if (key === name) v.draw?.();
+      if (key === name) {
+        v.draw?.();
+        v.shown?.();
+      } else v.leave?.();
     }
     if (changed) document.dispatchEvent(new CustomEvent('kea:tab-changed', { detail: name }));
   }
@@ -52,17 +64,17 @@ export function mountTabs(ctx) {
   });
 
   document.addEventListener('kea:model-changed', () => {
-    for (const v of Object.values(views)) v.markStale();
+    for (const v of Object.values(views)) v.markStale?.();
     views.synthesis.refreshChoices();
   });
 
   document.addEventListener('keydown', (e) => {
     const view = views[current()];
-    if (!view) return;
+    if (!view?.bar) return;
     if ((e.ctrlKey || e.metaKey) && e.key === 'Enter') view.bar.run();
     if (e.key === 'Escape' && view.bar.running) view.bar.cancel();
   });
 
   show(current());
-  return { current, show };
+  return { current, show, open: (kind, id, request, model, body) => views[kind].openJob(id, request, model, body) };
 }

@@ -214,15 +214,26 @@ export class RunBar {
   }
 
   /**
-   * Show a run (`start(onProgress)` → the job's id, if a server job) in the bar, to its
-   * end; `resumed`: the id of a job taken over after a reload.
+   * The server job `id`, opened from the Server jobs tab (`model`: the model it runs,
+   * `body`: what a reload needs to follow it again): followed as a run is.
    */
-  async follow(where, runner, start, resumed = null) {
+  open(id, model, body) {
+    const runner = this.runners.server;
+    runner.store({ id, body });
+    return this.follow('server', runner, (onProgress) => this.onResume(model, () => runner.attach(id, onProgress)), id, true);
+  }
+
+  /**
+   * Show a run (`start(onProgress)` → the job's id, if a server job) in the bar, to its
+   * end; `resumed`: the id of a job taken over after a reload, or opened from the
+   * Server jobs tab (`opened`).
+   */
+  async follow(where, runner, start, resumed = null, opened = false) {
     this.running = runner;
     this.runButton.disabled = true;
     this.cancelButton.disabled = false;
     this.progress.value = 0;
-    const label = resumed ? `Following server job ${resumed} (started before the reload)…` : where === 'browser' ? 'Running in this browser…' : 'Running on the server…';
+    const label = opened ? `Opening server job ${resumed}…` : resumed ? `Following server job ${resumed} (started before the reload)…` : where === 'browser' ? 'Running in this browser…' : 'Running on the server…';
     this.setStatus(label);
     const shown = new ProgressText(label);
     const onProgress = (p) => {
@@ -234,11 +245,15 @@ export class RunBar {
       const job = await start(onProgress);
       this.progress.value = 1;
       const ms = performance.now() - started;
-      this.setStatus(resumed ? `Done (server job ${job}, followed after the reload).` : `Done in ${duration(ms)} (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`);
+      this.setStatus(
+        opened ? `Server job ${job}, opened from the Server jobs tab.`
+        : resumed ? `Done (server job ${job}, followed after the reload).`
+        : `Done in ${duration(ms)} (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`,
+      );
     } catch (e) {
       this.progress.value = 0;
       if (e?.kind === 'cancelled') this.setStatus('Cancelled.');
-      else if (e?.kind === 'gone' && resumed) this.setStatus('');
+      else if (e?.kind === 'gone' && resumed) this.setStatus(opened ? `The server no longer has job ${resumed}.` : '', opened);
       else if (e?.kind === 'too-much-work') {
         this.setStatus(e.title, true);
         this.anyway.offer(e);
@@ -488,6 +503,12 @@ export function recheckControl(control, local) {
  * `show(result, where, current)`.
  */
 export class RunView {
+  /** A server job opened from the Server jobs tab: its request in the fields, then the job followed as a run. */
+  openJob(id, request, model, body) {
+    this.fill(request);
+    return this.bar.open(id, model, body);
+  }
+
   /** A server job taken over after a reload (RunBar.resume); `model`: the model it runs. */
   async resume(model, exec) {
     try {

@@ -339,8 +339,9 @@ impl Store for SqliteStore {
         limit: usize,
     ) -> Result<Page<JobRecord>> {
         let mut items = self.with(|c| {
+            let columns = JOB_COLUMNS.replace("request_json", "'' AS request_json");
             let mut st = c.prepare_cached(&format!(
-                "SELECT {JOB_COLUMNS} FROM jobs
+                "SELECT {columns} FROM jobs
                  WHERE (?1 IS NULL OR status = ?1) AND (?2 IS NULL OR id < ?2)
                  ORDER BY id DESC LIMIT ?3"
             ))?;
@@ -866,6 +867,27 @@ mod tests {
             s.get_job(&id).unwrap().unwrap().status,
             JobStatus::Cancelled
         );
+    }
+
+    /// A listing names each job's model but does not read its request.
+    #[test]
+    fn a_listing_reads_no_requests() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = SqliteStore::open(dir.path()).unwrap();
+        let id = new_id();
+        s.insert_job(&JobRecord {
+            request_json: r#"{"model":{"name":"m"}}"#.into(),
+            model_name: Some("m".into()),
+            ..job(&id)
+        })
+        .unwrap();
+        let page = s.list_jobs(None, None, 10).unwrap();
+        assert_eq!(page.items.len(), 1);
+        assert_eq!(page.items[0].id, id);
+        assert_eq!(page.items[0].model_name.as_deref(), Some("m"));
+        assert_eq!(page.items[0].request_json, "");
+        let got = s.get_job(&id).unwrap().unwrap();
+        assert_eq!(got.request_json, r#"{"model":{"name":"m"}}"#);
     }
 
     #[test]

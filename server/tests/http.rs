@@ -458,6 +458,37 @@ fn a_finished_job_is_purged_with_its_result() {
     assert_eq!(s.get(&format!("/v1/jobs/{running}")).status, 404);
 }
 
+/// `--keep-finished`: a finished job goes with its result once it has been finished
+/// that long (the sweep runs every second here); /v1/limits says so; without the
+/// option nothing is deleted.
+#[test]
+fn finished_jobs_go_after_keep_finished() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &["--keep-finished", "2"]);
+    assert_eq!(s.get("/v1/limits").json()["server"]["keep_finished_s"], 2);
+    let id = s.submit_analysis(preset("cv-tracker"));
+    assert_eq!(s.wait_finished(&id, LONG)["status"], "succeeded");
+    assert_eq!(s.get(&format!("/v1/jobs/{id}/result")).status, 200);
+    let started = std::time::Instant::now();
+    while s.get(&format!("/v1/jobs/{id}")).status != 404 {
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "job {id} still kept after 30 s"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    // Within the retention and the sweep's interval (2 + 1 s), with slack for a busy host.
+    assert!(started.elapsed() < Duration::from_secs(10));
+    assert_eq!(s.get(&format!("/v1/jobs/{id}/result")).status, 404);
+
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    assert_eq!(
+        s.get("/v1/limits").json()["server"]["keep_finished_s"],
+        Value::Null
+    );
+}
+
 /// A job's request reads back as stored — its `model_id` replaced by the model, its
 /// `set` kept — and submitted again it gives the same result; the job's view names
 /// the model.
@@ -824,6 +855,11 @@ fn refuses_limits_that_would_refuse_everything() {
         ),
         (
             "--read-timeout",
+            "0",
+            "expected a whole number of at least 1",
+        ),
+        (
+            "--keep-finished",
             "0",
             "expected a whole number of at least 1",
         ),

@@ -38,6 +38,7 @@ pub async fn limits(State(state): State<AppState>) -> Json<Value> {
             "sync_time_s": l.sync_time().as_secs(),
             "queue": l.queue,
             "shutdown_grace_s": l.shutdown_grace.as_secs(),
+            "keep_finished_s": l.keep_finished.map(|d| d.as_secs()),
             "workers": state.config.workers,
             "max_page": request::MAX_PAGE,
         },

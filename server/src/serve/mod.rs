@@ -11,6 +11,7 @@ pub mod jobs;
 pub mod jobs_api;
 pub mod problem;
 pub mod request;
+pub mod retention;
 pub mod routes;
 pub mod state;
 pub mod store;
@@ -84,6 +85,10 @@ pub struct Args {
     /// On shutdown, seconds running jobs may take to finish before being re-queued.
     #[arg(long, env = "KEA_SHUTDOWN_GRACE", default_value_t = 10)]
     pub shutdown_grace: u64,
+    /// Delete a finished job, with its result, this many seconds after it finished
+    /// (2592000: 30 days) [default: kept until deleted with DELETE ?purge=true].
+    #[arg(long, env = "KEA_KEEP_FINISHED", value_parser = at_least_one::<u64>)]
+    pub keep_finished: Option<u64>,
     /// Log format: text or json (level via KEA_LOG, e.g. `info`, `debug`).
     #[arg(long, env = "KEA_LOG_FORMAT", default_value = "text", value_parser = ["text", "json"])]
     pub log_format: String,
@@ -188,6 +193,7 @@ fn serve(args: Args) -> Result<(), Failure> {
             job_time: Duration::from_secs(args.job_time_limit),
             queue: args.queue_limit,
             shutdown_grace: Duration::from_secs(args.shutdown_grace),
+            keep_finished: args.keep_finished.map(Duration::from_secs),
         },
     };
     let store: Arc<dyn store::Store> = Arc::new(
@@ -230,6 +236,9 @@ fn serve(args: Args) -> Result<(), Failure> {
         // The one line on stdout: scripts and tests read the bound address here.
         println!("kea: listening on http://{local}");
         let _ = std::io::stdout().flush();
+        if let Some(keep) = config.limits.keep_finished {
+            tokio::spawn(retention::sweep(state.store.clone(), keep));
+        }
         let header_timeout = config.limits.read_timeout;
         serve_connections(listener, routes::app(state), header_timeout, async move {
             shutdown_signal().await;

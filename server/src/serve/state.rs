@@ -28,6 +28,9 @@ pub struct Limits {
     pub queue: u64,
     /// How long a shutdown lets running jobs finish before re-queueing them.
     pub shutdown_grace: Duration,
+    /// How long a finished job is kept (then deleted with its result); `None`: until
+    /// it is purged.
+    pub keep_finished: Option<Duration>,
 }
 
 /// The longest a synchronous analysis runs however low its estimate (the estimate

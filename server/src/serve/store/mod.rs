@@ -181,6 +181,9 @@ pub trait Store: Send + Sync + 'static {
     /// the insert in one transaction, so concurrent submissions cannot pass the limit.
     fn enqueue_job(&self, job: &JobRecord, queue_limit: u64) -> Result<Enqueued>;
     fn get_job(&self, id: &str) -> Result<Option<JobRecord>>;
+    /// Delete the finished jobs (with their results) that finished before `cutoff`
+    /// (RFC 3339); how many.
+    fn purge_finished_before(&self, cutoff: &str) -> Result<u64>;
     /// Newest first, optionally only one status. The records come without their
     /// request (`request_json` empty): a listing shows jobs, and a page of jobs with
     /// requests of up to 2 MiB each would read up to 100 MiB for it.

@@ -537,6 +537,22 @@ impl Store for SqliteStore {
         })
     }
 
+    fn purge_finished_before(&self, cutoff: &str) -> Result<u64> {
+        let terminal: Vec<String> = JobStatus::ALL
+            .into_iter()
+            .filter(|s| s.is_terminal())
+            .map(|s| format!("'{}'", s.as_str()))
+            .collect();
+        // julianday: the stored times have as many fractional digits as they need, so
+        // their text does not sort as their times do.
+        let sql = format!(
+            "DELETE FROM jobs WHERE status IN ({}) AND finished_at IS NOT NULL
+             AND julianday(finished_at) < julianday(?1)",
+            terminal.join(", ")
+        );
+        self.with(|c| c.execute(&sql, [cutoff]).map(|n| n as u64))
+    }
+
     fn get_result(&self, id: &str) -> Result<Option<(String, Option<String>)>> {
         self.with(|c| {
             c.query_row(
@@ -866,6 +882,58 @@ mod tests {
         assert_eq!(
             s.get_job(&id).unwrap().unwrap().status,
             JobStatus::Cancelled
+        );
+    }
+
+    /// Retention deletes the finished jobs that finished before the cutoff, by time
+    /// (not by the text, whose fractional digits vary), with their results; never a
+    /// queued or running job.
+    #[test]
+    fn finished_jobs_before_the_cutoff_are_deleted() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = SqliteStore::open(dir.path()).unwrap();
+        let cases = [
+            (JobStatus::Succeeded, Some("2026-01-01T00:00:00Z"), true),
+            (JobStatus::Failed, Some("2026-01-01T00:00:00.5Z"), true),
+            (JobStatus::Cancelled, Some("2026-01-01T00:00:00.9Z"), false),
+            (JobStatus::Succeeded, Some("2026-01-01T00:00:01Z"), false),
+            (JobStatus::Running, None, false),
+            (JobStatus::Queued, None, false),
+        ];
+        let ids: Vec<String> = cases
+            .iter()
+            .map(|(status, finished, _)| {
+                let id = new_id();
+                s.insert_job(&JobRecord {
+                    status: *status,
+                    ..job(&id)
+                })
+                .unwrap();
+                s.with(|c| {
+                    c.execute(
+                        "UPDATE jobs SET finished_at = ?2 WHERE id = ?1",
+                        params![id, finished],
+                    )?;
+                    c.execute(
+                        "INSERT INTO job_results (job_id, result_json) VALUES (?1, '{}')",
+                        [&id],
+                    )
+                })
+                .unwrap();
+                id
+            })
+            .collect();
+        assert_eq!(
+            s.purge_finished_before("2026-01-01T00:00:00.75Z").unwrap(),
+            2
+        );
+        for ((_, _, gone), id) in cases.iter().zip(&ids) {
+            assert_eq!(s.get_job(id).unwrap().is_none(), *gone, "{id}");
+            assert_eq!(s.get_result(id).unwrap().is_none(), *gone, "{id}");
+        }
+        assert_eq!(
+            s.purge_finished_before("2026-01-01T00:00:00.75Z").unwrap(),
+            0
         );
     }
 

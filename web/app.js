@@ -473,7 +473,11 @@ async function openJob(job, tabs) {
   tabs.show(job.kind);
   // Kept for this browser tab as a job started here is: a reload follows it again.
   const body = JSON.stringify({ kind: job.kind, model });
-  if (job.kind !== 'analysis') return tabs.open(job.kind, job.id, request, model, body);
+  // Not awaited: the job is followed in its tab, to its end.
+  if (job.kind !== 'analysis') {
+    tabs.open(job.kind, job.id, request, model, body);
+    return;
+  }
   const runner = runners.server;
   runner.store({ id: job.id, body });
   follow('server', runner, (onProgress) => runner.attach(job.id, onProgress), state.edits, job.id, true);

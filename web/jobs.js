@@ -8,7 +8,8 @@ import { api } from './api.js';
 import { duration, el } from './views.js';
 
 const PAGE = 50;
-const KINDS = { analysis: 'Analysis', synthesis: 'Synthesis', simulation: 'Monte Carlo' };
+/** Each job kind's tab, as the page names it. */
+export const KINDS = { analysis: 'Analysis', synthesis: 'Synthesis', simulation: 'Monte Carlo' };
 const ACTIVE = ['queued', 'running'];
 const POLL_MS = 2000;
 

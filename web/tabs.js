@@ -2,7 +2,7 @@
 // Carlo (simulation.js), all on the model in the editor, and Server jobs (jobs.js).
 // Arrow keys move between the tabs; Ctrl+Enter runs and Esc cancels in the tab shown.
 
-import { JobsView } from './jobs.js';
+import { JobsView, KINDS } from './jobs.js';
 import { SimulationView } from './simulation.js';
 import { SynthesisView } from './synthesis.js';
 
@@ -22,10 +22,9 @@ export function mountTabs(ctx) {
   if (!ctx.server) {
     for (const v of Object.values(views)) v.bar.disableServer('No kea server answers here (open the page through `kea serve`).');
   }
-  const names = { analysis: 'Analysis', synthesis: 'Synthesis', simulation: 'Monte Carlo' };
   const busy = (kind) => {
     const running = kind === 'analysis' ? ctx.analysisBusy() : views[kind]?.bar.running;
-    return running ? `A run is under way in the ${names[kind] ?? kind} tab: let it end, or cancel it, before opening a job there.` : null;
+    return running ? `A run is under way in the ${KINDS[kind] ?? kind} tab: let it end, or cancel it, before opening a job there.` : null;
   };
   views.jobs = new JobsView(document.getElementById('jobs-panel'), { server: ctx.server, open: (job) => ctx.openJob(job), busy });
   const current = () => pane.dataset.tab ?? 'analysis';

@@ -7,7 +7,7 @@
 
 import { ModelEditor, modelProblem } from './editor.js';
 import { api } from './api.js';
-import { BrowserRunner, ServerRunner, WasmWorker } from './runner.js';
+import { BrowserRunner, ServerRunner, WasmWorker, problemOf } from './runner.js';
 import { TraceChart, criteriaTable, duration, finalTable, fmt, scrollHint } from './results.js';
 import { mountTabs } from './tabs.js';
 import { ProgressText, modelErrorsText, runAnyway, runPart } from './views.js';
@@ -463,7 +463,7 @@ function cancel() {
  */
 async function openJob(job, tabs) {
   const r = await api(`v1/jobs/${job.id}/request`);
-  if (!r.ok) throw new Error(r.status === 404 ? 'the server no longer has it' : `HTTP ${r.status}`);
+  if (!r.ok) throw new Error(r.status === 404 ? 'the server no longer has it' : (await problemOf(r)).title);
   const request = await r.json();
   const model = request.model;
   if (!model || typeof model !== 'object' || Array.isArray(model)) throw new Error('its request has no model');

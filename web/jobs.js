@@ -5,22 +5,18 @@
 // with its result once finished (DELETE ?purge=true). Without a server the tab says so.
 
 import { api } from './api.js';
+import { ACTIVE, problemOf } from './runner.js';
 import { duration, el } from './views.js';
 
 const PAGE = 50;
 /** Each job kind's tab, as the page names it. */
 export const KINDS = { analysis: 'Analysis', synthesis: 'Synthesis', simulation: 'Monte Carlo' };
-const ACTIVE = ['queued', 'running'];
 const POLL_MS = 2000;
 
-/** A problem's words, from a response that is not ok. */
+/** A refused request's problem, in words. */
 async function problemText(r) {
-  try {
-    const p = await r.json();
-    return [p.title, p.detail].filter(Boolean).join(': ') || `HTTP ${r.status}`;
-  } catch {
-    return `HTTP ${r.status}`;
-  }
+  const p = await problemOf(r);
+  return [p.title, p.detail].filter(Boolean).join(': ');
 }
 
 /** "2026-11-24 14:05:09" in the browser's time zone. */

@@ -148,8 +148,11 @@ function modelPaths(problem) {
   };
 }
 
+/** A job's statuses before its end. */
+export const ACTIVE = ['queued', 'running'];
+
 /** A refused request's problem+json body (or its status when it has none). */
-async function problemOf(response) {
+export async function problemOf(response) {
   let body = {};
   try {
     body = await response.json();
@@ -302,7 +305,7 @@ export class ServerRunner {
           }
           if (typeof event.progress === 'number') onProgress?.(event.progress);
           const status = event.status ?? event.state;
-          if (status && !['queued', 'running'].includes(status)) break;
+          if (status && !ACTIVE.includes(status)) break;
         }
       } catch {
         // The stream failed or was refused: the job itself says where it is.
@@ -312,7 +315,7 @@ export class ServerRunner {
       const r = await ask(`${this.base}/v1/jobs/${id}`);
       if (!r.ok) throw await problemOf(r);
       const job = await r.json();
-      if (!['queued', 'running'].includes(job.status)) return job;
+      if (!ACTIVE.includes(job.status)) return job;
       await new Promise((resolve) => setTimeout(resolve, 1000));
     }
   }

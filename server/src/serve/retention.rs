@@ -1,6 +1,7 @@
 //! `--keep-finished`: finished jobs (succeeded, failed, cancelled), with their results,
 //! deleted once they have been finished that long. Off by default: nothing the user
 //! submitted or computed goes unless asked for (this option, or `DELETE ?purge=true`).
+//! A sweep that deleted jobs gives their space back to the file system.
 
 use super::store::Store;
 use std::sync::Arc;
@@ -19,8 +20,9 @@ pub fn cutoff(keep: Duration) -> String {
         .expect("RFC 3339 formatting of a time")
 }
 
-/// Delete the jobs finished more than `keep` ago, now and every [`interval`], for as
-/// long as the server runs. A failed sweep is logged and tried again at the next.
+/// Delete the jobs finished more than `keep` ago, then give the space they took back
+/// to the file system, now and every [`interval`], for as long as the server runs. A
+/// failed sweep is logged and tried again at the next.
 pub async fn sweep(store: Arc<dyn Store>, keep: Duration) {
     let mut tick = tokio::time::interval(interval(keep));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -28,10 +30,20 @@ pub async fn sweep(store: Arc<dyn Store>, keep: Duration) {
         tick.tick().await;
         let store = store.clone();
         let before = cutoff(keep);
-        match tokio::task::spawn_blocking(move || store.purge_finished_before(&before)).await {
-            Ok(Ok(0)) => {}
-            Ok(Ok(n)) => tracing::info!(
-                deleted = n,
+        let swept = tokio::task::spawn_blocking(move || {
+            let deleted = store.purge_finished_before(&before)?;
+            let reclaimed = if deleted > 0 {
+                store.reclaim_free_space()?
+            } else {
+                0
+            };
+            Ok::<_, super::store::StoreError>((deleted, reclaimed))
+        });
+        match swept.await {
+            Ok(Ok((0, _))) => {}
+            Ok(Ok((deleted, reclaimed))) => tracing::info!(
+                deleted,
+                reclaimed_bytes = reclaimed,
                 keep_s = keep.as_secs(),
                 "deleted finished jobs past their retention"
             ),

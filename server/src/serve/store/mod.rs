@@ -167,7 +167,9 @@ pub struct Page<T> {
 }
 
 /// Everything the server stores. Implementations must be safe to call from many
-/// threads; every method is one short transaction.
+/// threads; every method is one short transaction, but [`Store::reclaim_free_space`],
+/// a series of them. What a delete removes goes back to the file system, up to a bound
+/// at once (a delete stays fast); [`Store::reclaim_free_space`] gives back the rest.
 pub trait Store: Send + Sync + 'static {
     fn insert_model(&self, model: &ModelRecord) -> Result<()>;
     fn get_model(&self, id: &str) -> Result<Option<ModelRecord>>;
@@ -184,6 +186,10 @@ pub trait Store: Send + Sync + 'static {
     /// Delete the finished jobs (with their results) that finished before `cutoff`
     /// (RFC 3339); how many.
     fn purge_finished_before(&self, cutoff: &str) -> Result<u64>;
+    /// Give all the space that deletes freed back to the file system (after a batch of
+    /// deletes); how many bytes. In steps, each its own short transaction, so that
+    /// other calls go on between them.
+    fn reclaim_free_space(&self) -> Result<u64>;
     /// Newest first, optionally only one status. The records come without their
     /// request (`request_json` empty): a listing shows jobs, and a page of jobs with
     /// requests of up to 2 MiB each would read up to 100 MiB for it.

@@ -1,5 +1,7 @@
 //! The embedded store: one SQLite file (`kea.sqlite`) in the data directory, WAL mode,
-//! schema versioned by `PRAGMA user_version` and migrated forward on open.
+//! schema versioned by `PRAGMA user_version` and migrated forward on open, and
+//! `auto_vacuum = INCREMENTAL`, so that what is deleted goes back to the file system
+//! (`reclaim_step` after each delete, [`Store::reclaim_free_space`] after a batch).
 
 use super::{
     Deleted, Enqueued, GiveUp, JobRecord, JobStatus, ModelRecord, ModelSummary, Outcome, Page,
@@ -57,6 +59,19 @@ const MIGRATIONS: &[&str] = &[
      UPDATE jobs SET model_name = json_extract(request_json, '$.model.name')
       WHERE json_valid(request_json) AND json_type(request_json, '$.model.name') = 'text';",
 ];
+
+/// How much free space one delete gives back at once (`PRAGMA incremental_vacuum`
+/// moves pages from the file's end into the holes, then truncates): a bound on what a
+/// `DELETE` request waits for. [`Store::reclaim_free_space`] gives back the rest, in
+/// steps of this size with the store unlocked between them.
+const RECLAIM_STEP_BYTES: i64 = 16 << 20;
+
+/// The `-wal` file is cut back to this size when a checkpoint has emptied it: without
+/// a limit it keeps the size of the largest transaction it ever held.
+const WAL_SIZE_LIMIT_BYTES: i64 = 8 << 20;
+
+/// `PRAGMA auto_vacuum` of a database that keeps free pages for `incremental_vacuum`.
+const AUTO_VACUUM_INCREMENTAL: i64 = 2;
 
 pub struct SqliteStore {
     conn: Mutex<Connection>,
@@ -130,16 +145,80 @@ impl SqliteStore {
         let conn = Connection::open(dir.join("kea.sqlite")).map_err(db_err)?;
         conn.busy_timeout(std::time::Duration::from_secs(10))
             .map_err(db_err)?;
-        conn.execute_batch(
-            "PRAGMA journal_mode = WAL; PRAGMA synchronous = NORMAL; PRAGMA foreign_keys = ON;",
-        )
+        // First, before anything writes the file: a new database has no table yet, so
+        // it takes the setting at once (an existing one, see `use_incremental_vacuum`).
+        conn.pragma_update(None, "auto_vacuum", "INCREMENTAL")
+            .map_err(db_err)?;
+        conn.execute_batch(&format!(
+            "PRAGMA journal_mode = WAL; PRAGMA synchronous = NORMAL; PRAGMA foreign_keys = ON;
+             PRAGMA journal_size_limit = {WAL_SIZE_LIMIT_BYTES};"
+        ))
         .map_err(db_err)?;
         let store = SqliteStore {
             conn: Mutex::new(conn),
             _lock: lock,
         };
         store.migrate()?;
+        store.use_incremental_vacuum();
+        // What a process that ended in the middle of giving space back had left (a
+        // failure here leaves free pages for reuse; it does not keep the store shut).
+        if let Err(e) = store.reclaim_free_space() {
+            tracing::warn!(error = %e, "could not give the store's free space back to the file system");
+        }
         Ok(store)
+    }
+
+    /// Switch a store created before kea set `auto_vacuum` (none: SQLite keeps freed
+    /// pages in the file for reuse and never shrinks it) to incremental, once. The
+    /// setting changes only with a `VACUUM`, which rewrites the whole file; it is not a
+    /// migration, since `VACUUM` cannot run in a migration's transaction and a new
+    /// store needs none. It takes time in proportion to the file (seconds a GB) and
+    /// free disk of about the file's size twice over: SQLite's copy in the temporary
+    /// directory, then the rewritten pages in the `-wal` (emptied by the checkpoint
+    /// after it). If it fails (a full disk, say), the store works as before, reusing
+    /// its free pages, and the next start tries again. `VACUUM` may renumber rows but
+    /// copies them in their order, so the queue's order (`claim_next`, by rowid) holds.
+    fn use_incremental_vacuum(&self) {
+        let converted = self.with(|c| {
+            let mode: i64 = c.query_row("PRAGMA auto_vacuum", [], |r| r.get(0))?;
+            if mode == AUTO_VACUUM_INCREMENTAL {
+                return Ok(None);
+            }
+            let before = file_bytes(c)?;
+            tracing::info!(
+                size_bytes = before,
+                "switching the store to incremental auto-vacuum, once: a VACUUM rewrites the \
+                 file (it needs free disk of its size in the temporary directory and as \
+                 much again in the data directory)"
+            );
+            let started = std::time::Instant::now();
+            c.pragma_update(None, "auto_vacuum", "INCREMENTAL")?;
+            c.execute_batch("VACUUM")?;
+            checkpoint(c)?;
+            Ok(Some((before, file_bytes(c)?, started.elapsed())))
+        });
+        match converted {
+            Ok(None) => {}
+            Ok(Some((before, after, took))) => tracing::info!(
+                size_bytes_before = before,
+                size_bytes = after,
+                took_ms = took.as_millis() as u64,
+                "the store now gives deleted space back to the file system"
+            ),
+            Err(e) => tracing::warn!(
+                error = %e,
+                "could not switch the store to incremental auto-vacuum (tried again at the \
+                 next start); deleted space is reused but not given back"
+            ),
+        }
+    }
+
+    /// Give back what a delete freed, up to [`RECLAIM_STEP_BYTES`]; a failure is
+    /// logged, not returned: the delete itself is done.
+    fn reclaim_after_delete(&self) {
+        if let Err(e) = self.with(|c| reclaim_step(c).map(|_| ())) {
+            tracing::warn!(error = %e, "could not give deleted space back to the file system");
+        }
     }
 
     fn migrate(&self) -> Result<()> {
@@ -260,10 +339,14 @@ impl Store for SqliteStore {
     }
 
     fn delete_model(&self, id: &str) -> Result<bool> {
-        self.with(|c| {
+        let deleted = self.with(|c| {
             c.execute("DELETE FROM models WHERE id = ?1", [id])
                 .map(|n| n > 0)
-        })
+        })?;
+        if deleted {
+            self.reclaim_after_delete();
+        }
+        Ok(deleted)
     }
 
     fn insert_job(&self, j: &JobRecord) -> Result<()> {
@@ -518,7 +601,7 @@ impl Store for SqliteStore {
     }
 
     fn delete_finished_job(&self, id: &str) -> Result<Deleted> {
-        self.with(|c| {
+        let out = self.with(|c| {
             let tx = c.transaction()?;
             let status: Option<String> = tx
                 .query_row("SELECT status FROM jobs WHERE id = ?1", [id], |r| r.get(0))
@@ -534,7 +617,11 @@ impl Store for SqliteStore {
             };
             tx.commit()?;
             Ok(out)
-        })
+        })?;
+        if out == Deleted::Deleted {
+            self.reclaim_after_delete();
+        }
+        Ok(out)
     }
 
     fn purge_finished_before(&self, cutoff: &str) -> Result<u64> {
@@ -550,7 +637,23 @@ impl Store for SqliteStore {
              AND julianday(finished_at) < julianday(?1)",
             terminal.join(", ")
         );
-        self.with(|c| c.execute(&sql, [cutoff]).map(|n| n as u64))
+        let deleted = self.with(|c| c.execute(&sql, [cutoff]).map(|n| n as u64))?;
+        if deleted > 0 {
+            self.reclaim_after_delete();
+        }
+        Ok(deleted)
+    }
+
+    fn reclaim_free_space(&self) -> Result<u64> {
+        let mut given_back = 0;
+        // One step per lock: requests go on between the steps.
+        loop {
+            let step = self.with(reclaim_step)?;
+            given_back += step.bytes;
+            if !step.more {
+                return Ok(given_back);
+            }
+        }
     }
 
     fn get_result(&self, id: &str) -> Result<Option<(String, Option<String>)>> {
@@ -563,6 +666,70 @@ impl Store for SqliteStore {
             .optional()
         })
     }
+}
+
+/// The database file's size as SQLite sees it (`page_count` × `page_size`; the `-wal`
+/// not counted).
+fn file_bytes(c: &Connection) -> rusqlite::Result<i64> {
+    c.query_row(
+        "SELECT page_count * page_size FROM pragma_page_count(), pragma_page_size()",
+        [],
+        |r| r.get(0),
+    )
+}
+
+/// Copy the `-wal` into the database file and truncate it: only then is the database
+/// file cut to its new size, and the `-wal` back to nothing. Busy (not done) is not an
+/// error: the next checkpoint does it.
+fn checkpoint(c: &Connection) -> rusqlite::Result<()> {
+    let busy: i64 = c.query_row("PRAGMA wal_checkpoint(TRUNCATE)", [], |r| r.get(0))?;
+    if busy != 0 {
+        tracing::debug!("the store's checkpoint was busy; the next one finishes it");
+    }
+    Ok(())
+}
+
+/// What one [`reclaim_step`] did.
+struct ReclaimStep {
+    /// How much smaller the database file is.
+    bytes: u64,
+    /// Free pages are left (more than one step's worth were free).
+    more: bool,
+}
+
+/// Give up to [`RECLAIM_STEP_BYTES`] of free pages back to the file system: one
+/// `incremental_vacuum` (its own transaction), then a checkpoint so that the file
+/// shrinks now. With no free page it costs one read of the header.
+fn reclaim_step(c: &mut Connection) -> rusqlite::Result<ReclaimStep> {
+    let (free, page_size): (i64, i64) = c.query_row(
+        "SELECT freelist_count, page_size FROM pragma_freelist_count(), pragma_page_size()",
+        [],
+        |r| Ok((r.get(0)?, r.get(1)?)),
+    )?;
+    let step = (RECLAIM_STEP_BYTES / page_size.max(1)).max(1);
+    if free == 0 {
+        return Ok(ReclaimStep {
+            bytes: 0,
+            more: false,
+        });
+    }
+    let before = file_bytes(c)?;
+    {
+        // One result row per page freed, and each step of the statement frees one: it
+        // must be stepped to its end (`execute_batch` would free a single page).
+        let mut vacuum = c.prepare(&format!("PRAGMA incremental_vacuum({})", free.min(step)))?;
+        let mut rows = vacuum.query([])?;
+        while rows.next()?.is_some() {}
+    }
+    let after = file_bytes(c)?;
+    if after < before {
+        checkpoint(c)?;
+    }
+    Ok(ReclaimStep {
+        bytes: (before - after).max(0) as u64,
+        // Not in incremental mode, nothing moves: no point in going on.
+        more: free > step && after < before,
+    })
 }
 
 /// Trim a `limit + 1` query to `limit` items; the cursor is set when more exist.
@@ -611,6 +778,225 @@ mod tests {
             cancelled,
             failed,
         }
+    }
+
+    /// The store's bytes on disk: the database file and its `-wal`.
+    fn on_disk(dir: &Path) -> u64 {
+        ["kea.sqlite", "kea.sqlite-wal"]
+            .iter()
+            .map(|f| std::fs::metadata(dir.join(f)).map_or(0, |m| m.len()))
+            .sum()
+    }
+
+    /// A request of about 1 MB (SQLite stores text as it is: no compression to defeat).
+    fn big_request(i: usize) -> String {
+        format!(
+            "{{\"pad\":\"{}\"}}",
+            char::from(b'a' + (i % 26) as u8)
+                .to_string()
+                .repeat(1 << 20)
+        )
+    }
+
+    /// A finished job with a ~1 MB request and a result, finished at `finished_at`.
+    fn insert_finished(s: &SqliteStore, i: usize, finished_at: &str) -> String {
+        let id = new_id();
+        s.insert_job(&JobRecord {
+            status: JobStatus::Succeeded,
+            request_json: big_request(i),
+            ..job(&id)
+        })
+        .unwrap();
+        s.with(|c| {
+            c.execute(
+                "UPDATE jobs SET finished_at = ?2 WHERE id = ?1",
+                params![id, finished_at],
+            )?;
+            c.execute(
+                "INSERT INTO job_results (job_id, result_json) VALUES (?1, '{}')",
+                [&id],
+            )
+        })
+        .unwrap();
+        id
+    }
+
+    fn auto_vacuum(s: &SqliteStore) -> i64 {
+        s.with(|c| c.query_row("PRAGMA auto_vacuum", [], |r| r.get(0)))
+            .unwrap()
+    }
+
+    /// Retention's batch (`purge_finished_before`, then `reclaim_free_space`) gives the
+    /// space back: the file and its `-wal` end far below their peak, and the jobs kept
+    /// (one at the file's end, whose pages move into the holes) are intact.
+    #[test]
+    fn purged_jobs_give_their_space_back_to_the_file_system() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = SqliteStore::open(dir.path()).unwrap();
+        assert_eq!(auto_vacuum(&s), AUTO_VACUUM_INCREMENTAL);
+        let first = insert_finished(&s, 0, "2026-01-02T00:00:00Z");
+        for i in 1..=30 {
+            insert_finished(&s, i, "2026-01-01T00:00:00Z");
+        }
+        let last = new_id();
+        s.insert_job(&JobRecord {
+            request_json: big_request(31),
+            ..job(&last)
+        })
+        .unwrap();
+        let peak = on_disk(dir.path());
+        assert!(peak > 30 << 20, "{peak}");
+        assert_eq!(s.purge_finished_before("2026-01-01T12:00:00Z").unwrap(), 30);
+        s.reclaim_free_space().unwrap();
+        let after = on_disk(dir.path());
+        assert!(
+            after * 4 < peak,
+            "{after} bytes on disk after the purge, {peak} at the peak"
+        );
+        assert_eq!(
+            s.get_job(&first).unwrap().unwrap().request_json,
+            big_request(0)
+        );
+        assert_eq!(
+            s.get_job(&last).unwrap().unwrap().request_json,
+            big_request(31)
+        );
+        assert!(s.get_result(&first).unwrap().is_some());
+        let check: String = s
+            .with(|c| c.query_row("PRAGMA integrity_check", [], |r| r.get(0)))
+            .unwrap();
+        assert_eq!(check, "ok");
+    }
+
+    /// A delete on its own (`DELETE /v1/jobs/{id}?purge=true`, `DELETE /v1/models/{id}`)
+    /// gives its space back at once, with no sweep.
+    #[test]
+    fn a_deleted_job_or_model_gives_its_space_back_at_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = SqliteStore::open(dir.path()).unwrap();
+        let jobs: Vec<String> = (0..20)
+            .map(|i| insert_finished(&s, i, "2026-01-01T00:00:00Z"))
+            .collect();
+        let models: Vec<String> = (0..10)
+            .map(|i| {
+                let id = new_id();
+                s.insert_model(&ModelRecord {
+                    id: id.clone(),
+                    name: None,
+                    created_at: now_rfc3339(),
+                    model_json: big_request(i),
+                })
+                .unwrap();
+                id
+            })
+            .collect();
+        let kept = insert_finished(&s, 20, "2026-01-01T00:00:00Z");
+        let peak = on_disk(dir.path());
+        assert!(peak > 30 << 20, "{peak}");
+        for id in &jobs {
+            assert_eq!(s.delete_finished_job(id).unwrap(), Deleted::Deleted);
+        }
+        for id in &models {
+            assert!(s.delete_model(id).unwrap());
+        }
+        let after = on_disk(dir.path());
+        assert!(
+            after * 4 < peak,
+            "{after} bytes on disk after the deletes, {peak} at the peak"
+        );
+        assert_eq!(
+            s.get_job(&kept).unwrap().unwrap().request_json,
+            big_request(20)
+        );
+    }
+
+    /// A data directory of a kea before auto-vacuum (the schema of today, `auto_vacuum`
+    /// none, free pages left by deletes) is switched on open, keeps its data and the
+    /// queue's order, and from then on gives deleted space back.
+    #[test]
+    fn a_store_without_auto_vacuum_is_switched_on_open_and_keeps_its_data() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b, done, gone) = (new_id(), new_id(), new_id(), new_id());
+        let model = new_id();
+        {
+            // What the store's open did before: WAL, the migrations, no auto_vacuum.
+            let mut c = Connection::open(dir.path().join("kea.sqlite")).unwrap();
+            c.execute_batch("PRAGMA journal_mode = WAL; PRAGMA foreign_keys = ON;")
+                .unwrap();
+            let tx = c.transaction().unwrap();
+            for sql in MIGRATIONS {
+                tx.execute_batch(sql).unwrap();
+            }
+            tx.pragma_update(None, "user_version", MIGRATIONS.len() as i64)
+                .unwrap();
+            tx.commit().unwrap();
+            let insert = |id: &str, status: &str, i: usize| {
+                c.execute(
+                    "INSERT INTO jobs (id, kind, status, request_json, work, created_at)
+                     VALUES (?1, 'analysis', ?2, ?3, 1, '2026-01-01T00:00:00Z')",
+                    params![id, status, big_request(i)],
+                )
+                .unwrap();
+            };
+            insert(&gone, "succeeded", 0);
+            insert(&a, "queued", 1);
+            insert(&done, "succeeded", 2);
+            insert(&b, "queued", 3);
+            c.execute(
+                "INSERT INTO job_results (job_id, result_json, traces_csv)
+                 VALUES (?1, '{\"x\":1}', 't\n0\n')",
+                [&done],
+            )
+            .unwrap();
+            c.execute(
+                "INSERT INTO models (id, name, created_at, model_json)
+                 VALUES (?1, 'm', '2026-01-01T00:00:00Z', '{}')",
+                [&model],
+            )
+            .unwrap();
+            c.execute("DELETE FROM jobs WHERE id = ?1", [&gone])
+                .unwrap();
+            let (mode, free): (i64, i64) = c
+                .query_row(
+                    "SELECT auto_vacuum, freelist_count
+                     FROM pragma_auto_vacuum(), pragma_freelist_count()",
+                    [],
+                    |r| Ok((r.get(0)?, r.get(1)?)),
+                )
+                .unwrap();
+            assert_eq!(mode, 0);
+            assert!(free > 200, "{free}");
+        }
+        let before = on_disk(dir.path());
+        let s = SqliteStore::open(dir.path()).unwrap();
+        assert_eq!(auto_vacuum(&s), AUTO_VACUUM_INCREMENTAL);
+        assert_eq!(s.schema_version().unwrap(), MIGRATIONS.len());
+        let after = on_disk(dir.path());
+        assert!(
+            after + (1 << 20) / 2 < before,
+            "the free pages went with the VACUUM: {before} -> {after} bytes"
+        );
+        assert!(s.get_job(&gone).unwrap().is_none());
+        assert_eq!(s.get_job(&a).unwrap().unwrap().request_json, big_request(1));
+        assert_eq!(
+            s.get_result(&done).unwrap(),
+            Some(("{\"x\":1}".into(), Some("t\n0\n".into())))
+        );
+        assert_eq!(
+            s.get_model(&model).unwrap().unwrap().name.as_deref(),
+            Some("m")
+        );
+        assert_eq!(s.claim_next(&now_rfc3339()).unwrap().unwrap().id, a);
+        assert_eq!(s.claim_next(&now_rfc3339()).unwrap().unwrap().id, b);
+        // From now on a delete gives its space back.
+        let with_done = on_disk(dir.path());
+        assert_eq!(s.delete_finished_job(&done).unwrap(), Deleted::Deleted);
+        assert!(on_disk(dir.path()) + (1 << 20) / 2 < with_done);
+        drop(s);
+        // Switched once: a second open finds it done.
+        let s = SqliteStore::open(dir.path()).unwrap();
+        assert_eq!(auto_vacuum(&s), AUTO_VACUUM_INCREMENTAL);
+        assert_eq!(s.get_job(&b).unwrap().unwrap().status, JobStatus::Running);
     }
 
     /// A job that every process dies running (it brings the server down) fails at its

@@ -397,7 +397,7 @@ function resume() {
  * Show a run (`start(onProgress)` → {result, job}) in the run bar, then its result:
  * current if the model has not changed since `edits` (the count when the run's model
  * was taken). `resumed`: the id of a server job taken over after a reload, or opened
- * from the Server jobs tab (`opened`).
+ * from the Server tab (`opened`).
  */
 async function follow(where, runner, start, edits, resumed = null, opened = false) {
   state.running = runner;
@@ -423,7 +423,7 @@ async function follow(where, runner, start, edits, resumed = null, opened = fals
     showResult(result, where, elapsed, current);
     setStatus(
       opened
-        ? `Server job ${job}, opened from the Server jobs tab.`
+        ? `Server job ${job}, opened from the Server tab.`
         : resumed
         ? `Done (server job ${job}, followed after the reload).`
         : `Done in ${duration(elapsed)} (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`,
@@ -456,7 +456,7 @@ function cancel() {
 }
 
 /**
- * Open a server job (the Server jobs tab): its model — with the values its `set` gave
+ * Open a server job (the Server tab): its model — with the values its `set` gave
  * the params — in the editor, as an import is (one Undo, or Back, away from the model
  * shown before), its tab shown with its request, and the job followed there as a run
  * is: its result, its error at the fields, or its progress to its end.
@@ -481,6 +481,19 @@ async function openJob(job, tabs) {
   const runner = runners.server;
   runner.store({ id: job.id, body });
   follow('server', runner, (onProgress) => runner.attach(job.id, onProgress), state.edits, job.id, true);
+}
+
+/**
+ * Open a model stored on the server (the Server tab) in the editor, as an import is (one
+ * Undo, or Back, away from the model shown before).
+ */
+async function openStoredModel(record) {
+  const model = record.model;
+  const problem = modelProblem(model);
+  if (problem) throw new Error(`it is not a model this page can show: ${problem}`);
+  const name = record.name ?? record.id;
+  const own = await replaceModel(() => loadModel(model, null, { label: `opening of the stored model ${name}` }));
+  setPageStatus(`Opened the stored model “${name}”; ${own ? 'Undo or the browser’s Back brings your model back' : 'Undo brings the preset back'}.`);
 }
 
 /** Show a run's result; `current`: the model has not changed since the run started. */
@@ -618,9 +631,22 @@ async function main() {
     fileStem,
     server: !document.querySelector('input[name=mode][value=server]').disabled,
     openJob: (job) => openJob(job, tabs),
+    openModel: openStoredModel,
     analysisBusy: () => state.running !== null,
   });
   shareRunIn();
+  if (!document.querySelector('input[name=mode][value=server]').disabled) {
+    $('store-model').hidden = false;
+    $('store-model').addEventListener('click', async () => {
+      $('store-model').disabled = true;
+      try {
+        const { ok, text } = await tabs.storeModel();
+        setPageStatus(ok ? `${text} The Server tab lists it.` : text, !ok);
+      } finally {
+        $('store-model').disabled = false;
+      }
+    });
+  }
   const draft = leftDraft;
   if (draft) await loadDraft(draft);
   else await loadFromUrl();

@@ -1,31 +1,19 @@
-// The Server jobs tab: the jobs the kea server keeps (GET /v1/jobs), newest first —
+// The Server tab's jobs: the jobs the kea server keeps (GET /v1/jobs), newest first —
 // of every client, the page's own and a script's alike. A job is opened (its model
 // into the editor, its request into its tab's fields, its result, error or progress
-// into that tab, as if just run), cancelled while it is queued or running, or deleted
-// with its result once finished (DELETE ?purge=true). Without a server the tab says so.
+// into that tab, as if just run), cancelled while it is queued or running, run again
+// once finished (its stored request submitted as a new job, which is then opened), or
+// deleted with its result (DELETE ?purge=true). Without a server the tab says so.
 
 import { api } from './api.js';
-import { ACTIVE, problemOf } from './runner.js';
-import { duration, el } from './views.js';
+import { ACTIVE, problemText } from './runner.js';
+import { duration, el, when } from './views.js';
+import { modelName } from './models.js';
 
 const PAGE = 50;
 /** Each job kind's tab, as the page names it. */
 export const KINDS = { analysis: 'Analysis', synthesis: 'Synthesis', simulation: 'Monte Carlo' };
 const POLL_MS = 2000;
-
-/** A refused request's problem, in words. */
-async function problemText(r) {
-  const p = await problemOf(r);
-  return [p.title, p.detail].filter(Boolean).join(': ');
-}
-
-/** "2026-11-24 14:05:09" in the browser's time zone. */
-function when(iso) {
-  const d = new Date(iso);
-  if (Number.isNaN(d.getTime())) return iso ?? '';
-  const p = (x) => String(x).padStart(2, '0');
-  return `${d.getFullYear()}-${p(d.getMonth() + 1)}-${p(d.getDate())} ${p(d.getHours())}:${p(d.getMinutes())}:${p(d.getSeconds())}`;
-}
 
 /**
  * `ctx`: {server: whether a kea server answers, open(job): open the job (app.js), busy(kind):
@@ -39,16 +27,19 @@ export class JobsView {
     this.cursor = null;
     this.timer = null;
     this.seq = 0;
+    this.visible = false; // whether the tab is shown (its active rows are followed then)
     this.build();
   }
 
   build() {
+    const title = el('h3', { id: 'jobs-title', text: 'Jobs' });
+    this.root.setAttribute('aria-labelledby', 'jobs-title');
     const help = el('p', {
       class: 'help',
       text: 'The jobs this kea server keeps, newest first — run from this page or by a script. Open shows a job’s model in the editor, its request in its tab and its result (or its progress, or why it failed). A finished job is kept until it is deleted here.',
     });
     if (!this.ctx.server) {
-      this.root.append(help, el('p', { id: 'jobs-status', class: 'view-status', text: 'No kea server answers here, so there are no server jobs (a run in this browser is not kept). Open the page through `kea serve` to see its jobs.' }));
+      this.root.append(title, help, el('p', { id: 'jobs-status', class: 'view-status', text: 'No kea server answers here, so there are no server jobs (a run in this browser is not kept). Open the page through `kea serve` to see its jobs.' }));
       return;
     }
     this.filter = el('select', { id: 'jobs-filter', 'aria-label': 'Jobs of status' });
@@ -67,6 +58,7 @@ export class JobsView {
     );
     this.more = el('button', { type: 'button', id: 'jobs-more', text: `Show ${PAGE} more`, hidden: true, onclick: () => this.load(true) });
     this.root.append(
+      title,
       help,
       el('div', { class: 'jobs-bar' }, el('label', { for: 'jobs-filter', text: 'Status' }), this.filter, refresh, this.status),
       el('div', { class: 'grid-wrap' }, this.table),
@@ -76,11 +68,13 @@ export class JobsView {
 
   /** The tab is shown: list the jobs as they are now, and keep following those that run. */
   shown() {
+    this.visible = true;
     if (this.ctx.server) this.refresh();
   }
 
   /** The tab is left: its rows stop following their jobs. */
   leave() {
+    this.visible = false;
     clearTimeout(this.timer);
   }
 
@@ -110,7 +104,7 @@ export class JobsView {
     this.render();
     this.say(this.jobs.length ? '' : this.filter.value ? `No ${this.filter.value} jobs.` : 'No jobs yet: run one on the server (Run in: the server).');
     // While a job shown is queued or running, its row follows it.
-    if (this.jobs.some((j) => ACTIVE.includes(j.status)) && !this.root.hidden) {
+    if (this.jobs.some((j) => ACTIVE.includes(j.status)) && this.visible) {
       this.timer = setTimeout(() => this.follow(), POLL_MS);
     }
   }
@@ -126,7 +120,7 @@ export class JobsView {
           .catch(() => j),
       ),
     );
-    if (seq !== this.seq || this.root.hidden) return;
+    if (seq !== this.seq || !this.visible) return;
     const byId = new Map(active.map((j, i) => [j.id, fresh[i]]));
     this.jobs = this.jobs.flatMap((j) => (byId.has(j.id) ? (byId.get(j.id) ? [byId.get(j.id)] : []) : [j]));
     this.render();
@@ -153,12 +147,13 @@ export class JobsView {
       : job.status;
     const statusCell = el('td', { class: `job-status ${job.status}`, text: status });
     if (job.error) statusCell.title = [job.error.title, job.error.detail].filter(Boolean).join(': ');
-    const name = job.model_name ?? '(unnamed model)';
+    const name = modelName(job.model_name);
     const open = el('button', { type: 'button', class: 'job-open', text: 'Open', title: `Open job ${job.id}: its model, its request and its result`, onclick: () => this.open(job) });
     const actions = [open];
     if (ACTIVE.includes(job.status)) {
       actions.push(el('button', { type: 'button', class: 'job-cancel', text: 'Cancel', disabled: job.cancel_requested, onclick: () => this.cancel(job) }));
     } else {
+      actions.push(el('button', { type: 'button', class: 'job-again', text: 'Run again', title: 'Submit this job’s request again, as a new job, and open it', onclick: () => this.again(job) }));
       actions.push(el('button', { type: 'button', class: 'job-delete', text: 'Delete', title: 'Delete this job and its result from the server', onclick: () => this.purge(job) }));
     }
     return el(
@@ -185,6 +180,26 @@ export class JobsView {
     }
   }
 
+  /** Submit a finished job's stored request again, as a new job, and open that one. */
+  async again(job) {
+    const busy = this.ctx.busy(job.kind);
+    if (busy) return this.say(busy, true);
+    this.say(`Submitting job ${job.id} again…`);
+    let fresh;
+    try {
+      const r = await api(`v1/jobs/${job.id}/request`);
+      if (!r.ok) throw new Error(r.status === 404 ? 'the server no longer has it' : await problemText(r));
+      const submitted = await api('v1/jobs', { method: 'POST', headers: { 'content-type': 'application/json' }, body: await r.text() });
+      if (!submitted.ok) throw new Error(await problemText(submitted));
+      fresh = await submitted.json();
+    } catch (e) {
+      return this.say(`Could not run job ${job.id} again (${e.message ?? e}).`, true);
+    }
+    this.jobs = [fresh, ...this.jobs];
+    this.render();
+    await this.open(fresh);
+  }
+
   async cancel(job) {
     const r = await api(`v1/jobs/${job.id}`, { method: 'DELETE' }).catch((e) => e);
     if (!(r instanceof Response) || (!r.ok && r.status !== 409)) {
@@ -194,7 +209,7 @@ export class JobsView {
   }
 
   async purge(job) {
-    const what = `${KINDS[job.kind] ?? job.kind} of “${job.model_name ?? 'an unnamed model'}”, ${when(job.created_at)}`;
+    const what = `${KINDS[job.kind] ?? job.kind} of “${modelName(job.model_name)}”, ${when(job.created_at)}`;
     if (!window.confirm(`Delete this job (${what}) and its result from the server? This cannot be undone.`)) return;
     const r = await api(`v1/jobs/${job.id}?purge=true`, { method: 'DELETE' }).catch((e) => e);
     if (r instanceof Response && (r.ok || r.status === 404)) {

@@ -67,6 +67,14 @@ export function duration(ms) {
   return `${Math.floor(min / 60)} h${min % 60 ? ` ${min % 60} min` : ''}`;
 }
 
+/** A time stamp (RFC 3339) as "2026-11-24 14:05:09" in the browser's time zone. */
+export function when(iso) {
+  const d = new Date(iso);
+  if (Number.isNaN(d.getTime())) return iso ?? '';
+  const p = (x) => String(x).padStart(2, '0');
+  return `${d.getFullYear()}-${p(d.getMonth() + 1)}-${p(d.getDate())} ${p(d.getHours())}:${p(d.getMinutes())}:${p(d.getSeconds())}`;
+}
+
 /** The hint a table's caption shows when its box scrolls sideways (style.css, `.grid-wrap`). */
 export function scrollHintText() {
   return el('span', { class: 'scroll-hint', text: ' — scroll sideways for more ↔' });

@@ -168,6 +168,12 @@ export async function problemOf(response) {
   };
 }
 
+/** A refused request's problem, in words: its title and detail. */
+export async function problemText(response) {
+  const p = await problemOf(response);
+  return [p.title, p.detail].filter(Boolean).join(': ');
+}
+
 const CANCELLED = { kind: 'cancelled', title: 'cancelled', errors: [] };
 
 /**

@@ -1,16 +1,19 @@
 // The tabs of the run pane: Analysis (app.js), Synthesis (synthesis.js) and Monte
-// Carlo (simulation.js), all on the model in the editor, and Server jobs (jobs.js).
+// Carlo (simulation.js), all on the model in the editor, and Server: the models
+// (models.js) and jobs (jobs.js) the kea server keeps.
 // Arrow keys move between the tabs; Ctrl+Enter runs and Esc cancels in the tab shown.
 
 import { JobsView, KINDS } from './jobs.js';
+import { ModelsView } from './models.js';
 import { SimulationView } from './simulation.js';
 import { SynthesisView } from './synthesis.js';
 
 /**
  * `ctx`: {model(), example() (a loaded preset's synthesis example), showModelErrors(errors),
  * download(name, type, text), fileStem(), server: whether a kea server answers,
- * openJob(job) (app.js), analysisBusy()}. Returns {current() (the name of the tab
- * shown), show(name), open(kind, id, request, model, body) (a server job in its tab)}.
+ * openJob(job), openModel(record) (app.js), analysisBusy()}. Returns {current() (the name
+ * of the tab shown), show(name), open(kind, id, request, model, body) (a server job in
+ * its tab), storeModel() (the editor's model stored on the server: {ok, text})}.
  */
 export function mountTabs(ctx) {
   const pane = document.getElementById('results-pane');
@@ -26,7 +29,27 @@ export function mountTabs(ctx) {
     const running = kind === 'analysis' ? ctx.analysisBusy() : views[kind]?.bar.running;
     return running ? `A run is under way in the ${KINDS[kind] ?? kind} tab: let it end, or cancel it, before opening a job there.` : null;
   };
-  views.jobs = new JobsView(document.getElementById('jobs-panel'), { server: ctx.server, open: (job) => ctx.openJob(job), busy });
+  // The Server tab: its stored models, then its jobs, each a section of the panel.
+  const panel = document.getElementById('jobs-panel');
+  const [modelsRoot, jobsRoot] = [document.createElement('section'), document.createElement('section')];
+  modelsRoot.id = 'models-section';
+  jobsRoot.id = 'jobs-section';
+  panel.append(modelsRoot, jobsRoot);
+  const models = new ModelsView(modelsRoot, {
+    server: ctx.server,
+    model: ctx.model,
+    showModelErrors: ctx.showModelErrors,
+    open: (record) => ctx.openModel(record),
+  });
+  const jobs = new JobsView(jobsRoot, { server: ctx.server, open: (job) => ctx.openJob(job), busy });
+  views.jobs = {
+    root: panel,
+    shown: () => {
+      models.shown();
+      jobs.shown();
+    },
+    leave: () => jobs.leave(),
+  };
   const current = () => pane.dataset.tab ?? 'analysis';
 
   function show(name, focus = false) {
@@ -75,5 +98,10 @@ export function mountTabs(ctx) {
   });
 
   show(current());
-  return { current, show, open: (kind, id, request, model, body) => views[kind].openJob(id, request, model, body) };
+  return {
+    current,
+    show,
+    open: (kind, id, request, model, body) => views[kind].openJob(id, request, model, body),
+    storeModel: () => models.store(),
+  };
 }

@@ -4,10 +4,10 @@
 // the run bar (where, Run, Cancel, progress, status) and the fields kept over a reload.
 
 import { ServerRunner, WasmWorker, WorkGate } from './runner.js';
-import { duration, fmt, scrollHint, scrollHintText } from './results.js';
+import { duration, fmt, scrollHint, scrollHintText, when } from './results.js';
 import { modelPlace } from './editor.js';
 
-export { duration, fmt, scrollHint, scrollHintText };
+export { duration, fmt, scrollHint, scrollHintText, when };
 
 export function el(tag, attrs = {}, ...children) {
   const e = document.createElement(tag);
@@ -214,7 +214,7 @@ export class RunBar {
   }
 
   /**
-   * The server job `id`, opened from the Server jobs tab (`model`: the model it runs,
+   * The server job `id`, opened from the Server tab (`model`: the model it runs,
    * `body`: what a reload needs to follow it again): followed as a run is.
    */
   open(id, model, body) {
@@ -226,7 +226,7 @@ export class RunBar {
   /**
    * Show a run (`start(onProgress)` → the job's id, if a server job) in the bar, to its
    * end; `resumed`: the id of a job taken over after a reload, or opened from the
-   * Server jobs tab (`opened`).
+   * Server tab (`opened`).
    */
   async follow(where, runner, start, resumed = null, opened = false) {
     this.running = runner;
@@ -246,7 +246,7 @@ export class RunBar {
       this.progress.value = 1;
       const ms = performance.now() - started;
       this.setStatus(
-        opened ? `Server job ${job}, opened from the Server jobs tab.`
+        opened ? `Server job ${job}, opened from the Server tab.`
         : resumed ? `Done (server job ${job}, followed after the reload).`
         : `Done in ${duration(ms)} (${where === 'browser' ? 'browser, wasm' : `server job ${job}`}).`,
       );
@@ -503,7 +503,7 @@ export function recheckControl(control, local) {
  * `show(result, where, current)`.
  */
 export class RunView {
-  /** A server job opened from the Server jobs tab: its request in the fields, then the job followed as a run. */
+  /** A server job opened from the Server tab: its request in the fields, then the job followed as a run. */
   openJob(id, request, model, body) {
     this.fill(request);
     return this.bar.open(id, model, body);

@@ -1,4 +1,4 @@
-// The Server jobs tab in a real browser against the real server: jobs submitted by a
+// The Server tab in a real browser against the real server: jobs submitted by a
 // script (not by the page) are listed with their model's name; opened, each shows its
 // model (with the values its `set` gave), its request in its tab's fields and the very
 // result the API returns; a running one is followed and cancelled; a finished one is
@@ -63,7 +63,7 @@ async function openJob(id, { result, run, download }) {
   await page.click('#tab-jobs');
   await page.click(`${row(id)} .job-open`);
   await page.waitForFunction(
-    ([r, b]) => document.getElementById(r).offsetParent !== null && !document.getElementById(b).disabled && document.getElementById(b).closest('.run-controls').querySelector('[role=status]').textContent.includes('opened from the Server jobs tab'),
+    ([r, b]) => document.getElementById(r).offsetParent !== null && !document.getElementById(b).disabled && document.getElementById(b).closest('.run-controls').querySelector('[role=status]').textContent.includes('opened from the Server tab'),
     [result, run],
     { timeout: 30000 },
   );
@@ -123,6 +123,27 @@ test('jobs of every kind are listed, opened with their model, request and result
   assert.deepEqual(syn, expected[synthesis]);
   assert.equal(await page.inputValue('#syn-mode'), 'grid');
   assert.equal(await page.evaluate(() => document.getElementById('syn-result').classList.contains('stale')), false);
+
+  // Run again: the Monte Carlo's stored request submitted as a new job and opened in
+  // its tab; seeded, it gives the same result but for the time taken.
+  await page.click('#tab-jobs');
+  await page.click(`${row(simulation)} .job-again`);
+  await page.waitForFunction(
+    (old) => {
+      const status = document.querySelector('#mc-run').closest('.run-controls').querySelector('[role=status]').textContent;
+      return document.getElementById('mc-result').offsetParent !== null && !document.getElementById('mc-run').disabled && status.includes('opened from the Server tab') && !status.includes(old);
+    },
+    simulation,
+    { timeout: 30000 },
+  );
+  const newest = (await call('GET', '/v1/jobs?limit=1')).json.items[0];
+  assert.notEqual(newest.id, simulation);
+  assert.equal(newest.kind, 'simulation');
+  assert.deepEqual((await call('GET', `/v1/jobs/${newest.id}/request`)).json, (await call('GET', `/v1/jobs/${simulation}/request`)).json);
+  const [file] = await Promise.all([page.waitForEvent('download'), page.click('#mc-download')]);
+  const rerun = JSON.parse(readFileSync(await file.path(), 'utf8'));
+  const untimed = ({ timing, ...rest }) => rest;
+  assert.deepEqual(untimed(rerun), untimed(expected[simulation]));
 
   // Delete (confirmed): gone from the list and from the server; dismissed: kept.
   await page.click('#tab-jobs');

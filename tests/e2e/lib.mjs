@@ -139,6 +139,21 @@ export function kea(...args) {
   return execFileSync(KEA_BIN, args, { cwd: ROOT, encoding: 'utf8', maxBuffer: 256 * 1024 * 1024 });
 }
 
+/**
+ * A script's client of the server at `base`: `call(method, path, body?)` resolves to
+ * {status, json} (json null for a 204).
+ */
+export function client(base) {
+  return async (method, path, body) => {
+    const r = await fetch(`${base}${path}`, {
+      method,
+      headers: body ? { 'content-type': 'application/json' } : {},
+      body: body ? JSON.stringify(body) : undefined,
+    });
+    return { status: r.status, json: r.status === 204 ? null : await r.json() };
+  };
+}
+
 export function screenshot(page, name) {
   return page.screenshot({ path: path.join(ARTIFACTS, `${name}.png`), fullPage: true });
 }

@@ -6,31 +6,23 @@
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
-import { exportedModel, kea, openApp, screenshot } from './lib.mjs';
+import { client, exportedModel, kea, openApp, screenshot } from './lib.mjs';
 
 let app;
 let page;
-let base;
+let call;
 const consoleErrors = [];
 
 before(async () => {
   app = await openApp(consoleErrors);
   ({ page } = app);
-  base = app.server.url;
+  call = client(app.server.url);
 });
 
 after(async () => {
   await app?.close();
 });
 
-async function call(method, path, body) {
-  const r = await fetch(`${base}${path}`, {
-    method,
-    headers: body ? { 'content-type': 'application/json' } : {},
-    body: body ? JSON.stringify(body) : undefined,
-  });
-  return { status: r.status, json: r.status === 204 ? null : await r.json() };
-}
 
 const row = (id) => `#models-table tr[data-model="${id}"]`;
 

@@ -54,20 +54,24 @@ export class WasmWorker {
 }
 
 /**
- * This server's `--max-work` (GET /v1/limits), asked once it answers; null where it
- * does not (no server, or one with a token not given yet: no token prompt for a run
- * in this browser), and the core's default is used then.
+ * This server's `--max-work` (GET v1/limits, relative: the page may be served under a
+ * path), asked once it answers; null where it does not (no server, or one with a token
+ * not given yet: no token prompt for a run in this browser), and the core's default is
+ * used then. Where nothing answers (a static host: 404, or no answer at all) it is not
+ * asked again: each question would cost a run a round trip and the console an error.
  */
 let serverMaxWork = null;
+let noServer = false;
 async function serverWorkLimit() {
-  if (serverMaxWork !== null) return serverMaxWork;
+  if (serverMaxWork !== null || noServer) return serverMaxWork;
   try {
     const token = sessionStorage.getItem(TOKEN_KEY);
-    const response = await fetch('/v1/limits', token ? { headers: { authorization: `Bearer ${token}` } } : {});
+    const response = await fetch('v1/limits', token ? { headers: { authorization: `Bearer ${token}` } } : {});
+    noServer = response.status === 404;
     const limit = response.ok ? (await response.json())?.server?.max_work : null;
     if (typeof limit === 'number') serverMaxWork = limit;
   } catch {
-    // no server: the default
+    noServer = true; // no server: the default
   }
   return serverMaxWork;
 }

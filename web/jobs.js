@@ -34,10 +34,9 @@ export class JobsView {
   build() {
     const title = el('h3', { id: 'jobs-title', text: 'Jobs' });
     this.root.setAttribute('aria-labelledby', 'jobs-title');
-    const help = el('p', {
-      class: 'help',
-      text: 'The jobs this kea server keeps, newest first — run from this page or by a script. Open shows a job’s model in the editor, its request in its tab and its result (or its progress, or why it failed). A finished job is kept until it is deleted here.',
-    });
+    const about = 'The jobs this kea server keeps, newest first — run from this page or by a script. Open shows a job’s model in the editor, its request in its tab and its result (or its progress, or why it failed).';
+    const help = el('p', { class: 'help', text: `${about} A finished job is kept until it is deleted here.` });
+    this.help = { p: help, about, asked: false };
     if (!this.ctx.server) {
       this.root.append(title, help, el('p', { id: 'jobs-status', class: 'view-status', text: 'No kea server answers here, so there are no server jobs (a run in this browser is not kept). Open the page through `kea serve` to see its jobs.' }));
       return;
@@ -66,10 +65,30 @@ export class JobsView {
     );
   }
 
+  /**
+   * A server that deletes finished jobs itself (`--keep-finished`) is said to in the help
+   * (asked once, when the tab is first shown: by then a token the server needs is given).
+   */
+  async keptFor() {
+    const { p: help, about } = this.help;
+    this.help.asked = true;
+    try {
+      const r = await api('v1/limits');
+      const keep = r.ok ? (await r.json())?.server?.keep_finished_s : null;
+      if (typeof keep === 'number') {
+        help.textContent = `${about} This server deletes a finished job ${duration(keep * 1000)} after it finished (its --keep-finished), or here before that.`;
+      }
+    } catch {
+      // the help as it is
+    }
+  }
+
   /** The tab is shown: list the jobs as they are now, and keep following those that run. */
   shown() {
     this.visible = true;
-    if (this.ctx.server) this.refresh();
+    if (!this.ctx.server) return;
+    if (!this.help.asked) this.keptFor();
+    this.refresh();
   }
 
   /** The tab is left: its rows stop following their jobs. */

@@ -170,3 +170,16 @@ test('a running job is followed in the list and cancelled from it', async () => 
   await page.waitForFunction(() => document.getElementById('jobs-status').textContent === 'No failed jobs.');
   assert.deepEqual(consoleErrors, []);
 });
+
+test('a server that deletes finished jobs itself says when, in the help', async () => {
+  const errors = [];
+  const kept = await openApp(errors, ['--keep-finished', '86400']);
+  try {
+    await kept.page.click('#tab-jobs');
+    await kept.page.waitForFunction(() => /deletes a finished job 24 h after it finished/.test(document.querySelector('#jobs-section .help').textContent));
+  } finally {
+    await kept.close();
+  }
+  assert.match(await page.textContent('#jobs-section .help'), /A finished job is kept until it is deleted here\./, 'the default server keeps them');
+  assert.deepEqual(errors, []);
+});

@@ -7,10 +7,12 @@
 
 use crate::decimate::Decimator;
 use crate::error::Error;
+use crate::exec::Memo;
 use crate::inputs::{Inputs, time_err};
 use crate::lanes::{Lanes, Scalar};
 use crate::linalg::{SparseRows, arr, arr_mut, cov_rel_diff, mat, predict_in_place, predict_work};
 use crate::result::*;
+use crate::resume::{F, LoopState, STATE_KEY, bits, values};
 use crate::riccati::{Prepared, SequentialJoseph};
 use crate::steps::select_steps;
 use crate::validate::{CompiledModel, StepPlan};
@@ -70,13 +72,31 @@ impl Checkpoints {
         k: u64,
         fraction: impl FnOnce() -> f64,
     ) -> Result<(), Error> {
+        self.reported(progress, k, fraction).map(|_| ())
+    }
+
+    /// [`Checkpoints::at`], returning whether it reported.
+    #[inline(always)]
+    pub(crate) fn reported(
+        &mut self,
+        progress: &mut dyn Progress,
+        k: u64,
+        fraction: impl FnOnce() -> f64,
+    ) -> Result<bool, Error> {
         if k == self.next {
             self.next += self.every;
             if let ControlFlow::Break(()) = progress.report(fraction()) {
                 return Err(Error::Cancelled);
             }
+            return Ok(true);
         }
-        Ok(())
+        Ok(false)
+    }
+
+    /// Reports for a loop that goes on after step `k` (the first due after it).
+    pub(crate) fn after(mut self, k: u64) -> Checkpoints {
+        self.next = (k / self.every + 1) * self.every;
+        self
     }
 }
 
@@ -93,6 +113,19 @@ const STEADY_TOL: f64 = 1e-13;
 
 /// Run the analysis of a compiled model.
 pub fn run(model: &CompiledModel, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
+    run_resumable(model, progress, &crate::exec::Forgetful)
+}
+
+/// [`run`], keeping the step loop's state in `memo` when it asks for it
+/// ([`Memo::state_due`]), and going on from a state an earlier run of the same model
+/// kept there ([`crate::resume`]): the result is the one an uninterrupted run gives
+/// (but for `timing`). A `"steps": "auto"` selection is made again (its trial runs
+/// are not kept).
+pub fn run_resumable(
+    model: &CompiledModel,
+    progress: &mut dyn Progress,
+    memo: &dyn Memo,
+) -> Result<AnalysisResult, Error> {
     let (steps, selection) = match model.steps {
         StepPlan::Fixed(d) => (d, None),
         StepPlan::Auto {
@@ -104,7 +137,7 @@ pub fn run(model: &CompiledModel, progress: &mut dyn Progress) -> Result<Analysi
             (s.chosen, Some(s.selection))
         }
     };
-    let mut result = dispatch(model, steps, false, progress)?;
+    let mut result = dispatch(model, steps, false, progress, memo)?;
     if let Some(w) = selection.as_ref().and_then(unconverged) {
         result.warnings.insert(0, w);
     }
@@ -175,7 +208,7 @@ pub fn covariance_recursion(
             "the covariance recursion alone runs a fixed number of steps, not \"auto\"",
         ));
     };
-    let r = dispatch(model, steps, true, progress)?;
+    let r = dispatch(model, steps, true, progress, &crate::exec::Forgetful)?;
     Ok(FinalCovariance {
         covariance: r.final_.covariance,
         gain: r.final_.gain,
@@ -188,21 +221,22 @@ fn dispatch(
     steps: u64,
     covariance_only: bool,
     progress: &mut dyn Progress,
+    memo: &dyn Memo,
 ) -> Result<AnalysisResult, Error> {
     match model.n_states() {
-        1 => Engine::<1>::new(model, steps, covariance_only).run(progress),
-        2 => Engine::<2>::new(model, steps, covariance_only).run(progress),
-        3 => Engine::<3>::new(model, steps, covariance_only).run(progress),
-        4 => Engine::<4>::new(model, steps, covariance_only).run(progress),
-        5 => Engine::<5>::new(model, steps, covariance_only).run(progress),
-        6 => Engine::<6>::new(model, steps, covariance_only).run(progress),
-        7 => Engine::<7>::new(model, steps, covariance_only).run(progress),
-        8 => Engine::<8>::new(model, steps, covariance_only).run(progress),
-        9 => Engine::<9>::new(model, steps, covariance_only).run(progress),
-        10 => Engine::<10>::new(model, steps, covariance_only).run(progress),
-        11 => Engine::<11>::new(model, steps, covariance_only).run(progress),
-        12 => Engine::<12>::new(model, steps, covariance_only).run(progress),
-        _ => Engine::<0>::new(model, steps, covariance_only).run(progress),
+        1 => Engine::<1>::new(model, steps, covariance_only, memo).run(progress),
+        2 => Engine::<2>::new(model, steps, covariance_only, memo).run(progress),
+        3 => Engine::<3>::new(model, steps, covariance_only, memo).run(progress),
+        4 => Engine::<4>::new(model, steps, covariance_only, memo).run(progress),
+        5 => Engine::<5>::new(model, steps, covariance_only, memo).run(progress),
+        6 => Engine::<6>::new(model, steps, covariance_only, memo).run(progress),
+        7 => Engine::<7>::new(model, steps, covariance_only, memo).run(progress),
+        8 => Engine::<8>::new(model, steps, covariance_only, memo).run(progress),
+        9 => Engine::<9>::new(model, steps, covariance_only, memo).run(progress),
+        10 => Engine::<10>::new(model, steps, covariance_only, memo).run(progress),
+        11 => Engine::<11>::new(model, steps, covariance_only, memo).run(progress),
+        12 => Engine::<12>::new(model, steps, covariance_only, memo).run(progress),
+        _ => Engine::<0>::new(model, steps, covariance_only, memo).run(progress),
     }
 }
 
@@ -413,10 +447,12 @@ struct Engine<'m, const N: usize> {
     dt: f64,
     /// Only the filter's covariance recursion and the mean ([`covariance_recursion`]).
     covariance_only: bool,
+    /// Where the loop's state is kept, and an earlier run's found ([`crate::resume`]).
+    memo: &'m dyn Memo,
 }
 
 impl<'m, const N: usize> Engine<'m, N> {
-    fn new(m: &'m CompiledModel, steps: u64, covariance_only: bool) -> Self {
+    fn new(m: &'m CompiledModel, steps: u64, covariance_only: bool, memo: &'m dyn Memo) -> Self {
         let nn = if N == 0 { m.n_states() } else { N };
         debug_assert_eq!(nn, m.n_states());
         Engine {
@@ -426,6 +462,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             nm: m.n_measurements(),
             dt: (m.t_end - m.t0) / steps as f64,
             covariance_only,
+            memo,
         }
     }
 
@@ -548,9 +585,77 @@ impl<'m, const N: usize> Engine<'m, N> {
         let mut ill_conditioned: Option<(u64, f64, f64)> = None;
         let mut checkpoints = Checkpoints::analysis(m);
 
-        for k in 1..=self.steps {
+        // An earlier run's state (a restart): its values, and on from its step. (The
+        // inputs of the next step are evaluated whole, which counts as Rv changed: the
+        // factorisation of Rv is made again, from the same Rv and mask.)
+        let mut first = 1;
+        let mut resumed_from = None;
+        let py_len = if N > 0 { N } else { 0 };
+        let earlier = (!self.covariance_only)
+            .then(|| self.memo.recall(STATE_KEY))
+            .flatten()
+            .and_then(|text| LoopState::from_text(&text, self.steps, (n, nm, py_len), &dec));
+        if let Some(s) = earlier {
+            let put = |dst: &mut [f64], src: &[F]| dst.copy_from_slice(&values(src));
+            put(&mut y, &s.y);
+            put(&mut y_max, &s.y_max);
+            put(&mut ydot_max, &s.ydot_max);
+            put(&mut big_r, &s.big_r);
+            put(&mut p_y, &s.p_y);
+            put(&mut py_diag[..py_len], &s.py_diag);
+            put(&mut eta, &s.eta);
+            put(&mut chi, &s.chi);
+            put(&mut joseph.r_pred, &s.r_pred);
+            put(&mut joseph.gain_t, &s.gain_t);
+            put(&mut joseph.ht, &s.ht);
+            joseph.exact = s.exact;
+            avail.copy_from_slice(&s.avail);
+            avail_prev.copy_from_slice(&s.avail_prev);
+            put(&mut abs_ht, &s.abs_ht);
+            put(&mut pz, &s.pz);
+            put(&mut pot, &s.pot);
+            put(&mut inv_pot, &s.inv_pot);
+            put(&mut running.sum, &s.sum);
+            running.count.copy_from_slice(&s.count);
+            running.excluded.copy_from_slice(&s.excluded);
+            put(&mut row, &s.row);
+            part.copy_from_slice(&s.part);
+            part_for = s.part_for;
+            put(&mut zeta_s, &s.zeta_s);
+            put(&mut meas_s, &s.meas_s);
+            put(&mut inv_zeta_s, &s.inv_zeta_s);
+            put(&mut inv_meas_s, &s.inv_meas_s);
+            has_meas.copy_from_slice(&s.has_meas);
+            dec.restore(&s.dec);
+            constant_rows = s.constant_rows;
+            written = s
+                .written
+                .map(|(k, t, bound_ok, open_ok, constants)| Written {
+                    k,
+                    t: t.0,
+                    bound_ok,
+                    open_ok,
+                    constants,
+                });
+            frozen_at = s.frozen_at;
+            bound_diverged = s.bound_diverged.map(|(k, t, e)| (k, t.0, e));
+            open_diverged = s.open_diverged.map(|(k, t)| (k, t.0));
+            steady_at = s.steady_at;
+            steady_cov = s.steady_cov.map(|(r, g)| (values(&r), values(&g)));
+            cancelled = s.cancelled.map(|(k, t, i)| (k, t.0, i));
+            cancelled_steps = s.cancelled_steps;
+            ill_conditioned = s.ill_conditioned.map(|(k, t, x)| (k, t.0, x.0));
+            first = s.k + 1;
+            resumed_from = Some(s.k);
+            checkpoints = checkpoints.after(s.k);
+            if first <= self.steps {
+                inp.at(m, first, true)?;
+            }
+        }
+
+        for k in first..=self.steps {
             let t_k = t0 + k as f64 * dt;
-            if k > 1 {
+            if k > first {
                 inp.at(m, k, false)?;
             }
 
@@ -838,7 +943,62 @@ impl<'m, const N: usize> Engine<'m, N> {
                 constants,
             });
 
-            checkpoints.at(progress, k, || k as f64 / self.steps as f64)?;
+            if checkpoints.reported(progress, k, || k as f64 / self.steps as f64)?
+                && self.memo.state_due()
+            {
+                let w = written
+                    .as_ref()
+                    .map(|w| (w.k, F(w.t), w.bound_ok, w.open_ok, w.constants));
+                let state = LoopState {
+                    format: 0,
+                    steps: 0,
+                    n: 0,
+                    nm: 0,
+                    k,
+                    y: bits(&y),
+                    y_max: bits(&y_max),
+                    ydot_max: bits(&ydot_max),
+                    big_r: bits(&big_r),
+                    p_y: bits(&p_y),
+                    py_diag: bits(&py_diag[..py_len]),
+                    eta: bits(&eta),
+                    chi: bits(&chi),
+                    r_pred: bits(&joseph.r_pred),
+                    gain_t: bits(&joseph.gain_t),
+                    ht: bits(&joseph.ht),
+                    exact: joseph.exact,
+                    avail: avail.clone(),
+                    avail_prev: avail_prev.clone(),
+                    abs_ht: bits(&abs_ht),
+                    pz: bits(&pz),
+                    pot: bits(&pot),
+                    inv_pot: bits(&inv_pot),
+                    sum: bits(&running.sum),
+                    count: running.count.clone(),
+                    excluded: running.excluded.clone(),
+                    row: bits(&row),
+                    part: part.clone(),
+                    part_for,
+                    zeta_s: bits(&zeta_s),
+                    meas_s: bits(&meas_s),
+                    inv_zeta_s: bits(&inv_zeta_s),
+                    inv_meas_s: bits(&inv_meas_s),
+                    has_meas: has_meas.clone(),
+                    dec: dec.state(),
+                    constant_rows,
+                    written: w,
+                    frozen_at,
+                    bound_diverged: bound_diverged.map(|(k, t, e)| (k, F(t), e)),
+                    open_diverged: open_diverged.map(|(k, t)| (k, F(t))),
+                    steady_at,
+                    steady_cov: steady_cov.as_ref().map(|(r, g)| (bits(r), bits(g))),
+                    cancelled: cancelled.map(|(k, t, i)| (k, F(t), i)),
+                    cancelled_steps,
+                    ill_conditioned: ill_conditioned.map(|(k, t, x)| (k, F(t), F(x))),
+                };
+                self.memo
+                    .keep(STATE_KEY, &state.stamped(self.steps, n, nm).to_text());
+            }
         }
         if let Some(w) = written.take() {
             take_row(&mut row, &part, &mut running, &mut dec, n, w);
@@ -1004,7 +1164,10 @@ impl<'m, const N: usize> Engine<'m, N> {
             final_,
             steady_state,
             traces,
-            timing: Timing::default(),
+            timing: Timing {
+                resumed_from_step: resumed_from,
+                ..Timing::default()
+            },
             warnings,
         })
     }

@@ -3,6 +3,8 @@
 //! its minimum and maximum over the bucket on them, in the order they occurred. So a
 //! spike that lasts one step survives decimation. Memory is O(rows), not O(steps).
 
+use crate::resume::{DecimatorState, F, bits, values};
+
 /// Decimates `series` parallel series sampled at steps 1..=steps.
 #[derive(Clone, Debug)]
 pub struct Decimator {
@@ -61,6 +63,56 @@ impl Decimator {
 
     pub fn bucket_steps(&self) -> u64 {
         self.bucket
+    }
+
+    /// The state after a step (for [`crate::resume`]).
+    pub(crate) fn state(&self) -> DecimatorState {
+        DecimatorState {
+            min: bits(&self.min),
+            min_at: self.min_at.clone(),
+            max: bits(&self.max),
+            max_at: self.max_at.clone(),
+            in_bucket: self.in_bucket,
+            first_t: F(self.first_t),
+            last_t: F(self.last_t),
+            t: bits(&self.t),
+            columns: (self.columns.iter())
+                .map(|c| c.iter().map(|v| v.map(F)).collect())
+                .collect(),
+        }
+    }
+
+    /// Whether `s` is a state of this decimator's series.
+    pub(crate) fn fits(&self, s: &DecimatorState) -> bool {
+        let series = self.series;
+        [
+            s.min.len(),
+            s.min_at.len(),
+            s.max.len(),
+            s.max_at.len(),
+            s.columns.len(),
+        ]
+        .iter()
+        .all(|&l| l == series)
+            && s.columns.iter().all(|c| c.len() == s.t.len())
+            && s.in_bucket < self.bucket
+    }
+
+    /// Take a state that [`Decimator::fits`].
+    pub(crate) fn restore(&mut self, s: &DecimatorState) {
+        self.min = values(&s.min);
+        self.min_at.clone_from(&s.min_at);
+        self.max = values(&s.max);
+        self.max_at.clone_from(&s.max_at);
+        self.in_bucket = s.in_bucket;
+        self.first_t = s.first_t.0;
+        self.last_t = s.last_t.0;
+        self.t.clear();
+        self.t.extend(s.t.iter().map(|x| x.0));
+        for (col, from) in self.columns.iter_mut().zip(&s.columns) {
+            col.clear();
+            col.extend(from.iter().map(|v| v.map(|x| x.0)));
+        }
     }
 
     /// Start a step at time t (steps must come in order).

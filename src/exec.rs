@@ -46,6 +46,12 @@ impl Executor for Sequential {
 pub trait Memo: Sync {
     fn recall(&self, key: &str) -> Option<String>;
     fn keep(&self, key: &str, value: &str);
+    /// Whether a long computation should keep its state now (an analysis's step loop
+    /// asks at its progress reports, [`crate::resume`]): the keeper's clock says, as
+    /// the core has none. Never, by default.
+    fn state_due(&self) -> bool {
+        false
+    }
 }
 
 /// No memory: every part is computed (the CLI, the browser; a server job keeps its

@@ -20,6 +20,7 @@ pub mod model;
 pub mod presets;
 pub mod report;
 pub mod result;
+pub mod resume;
 pub mod riccati;
 pub mod schedule;
 pub mod simulation;

@@ -39,6 +39,7 @@ pub async fn limits(State(state): State<AppState>) -> Json<Value> {
             "queue": l.queue,
             "shutdown_grace_s": l.shutdown_grace.as_secs(),
             "keep_finished_s": l.keep_finished.map(|d| d.as_secs()),
+            "state_every_s": l.state_every.as_secs(),
             "workers": state.config.workers,
             "max_page": request::MAX_PAGE,
         },

@@ -89,6 +89,11 @@ pub struct Args {
     /// (2592000: 30 days) [default: kept until deleted with DELETE ?purge=true].
     #[arg(long, env = "KEA_KEEP_FINISHED", value_parser = at_least_one::<u64>)]
     pub keep_finished: Option<u64>,
+    /// Seconds between the states an analysis job keeps as it runs: a restart (a
+    /// crash, a shutdown) goes on from the last one, so it loses at most this much of
+    /// the job's work.
+    #[arg(long, env = "KEA_STATE_EVERY", default_value_t = 10, value_parser = at_least_one::<u64>)]
+    pub state_every: u64,
     /// Log format: text or json (level via KEA_LOG, e.g. `info`, `debug`).
     #[arg(long, env = "KEA_LOG_FORMAT", default_value = "text", value_parser = ["text", "json"])]
     pub log_format: String,
@@ -194,6 +199,7 @@ fn serve(args: Args) -> Result<(), Failure> {
             queue: args.queue_limit,
             shutdown_grace: Duration::from_secs(args.shutdown_grace),
             keep_finished: args.keep_finished.map(Duration::from_secs),
+            state_every: Duration::from_secs(args.state_every),
         },
     };
     let store: Arc<dyn store::Store> = Arc::new(
@@ -205,6 +211,7 @@ fn serve(args: Args) -> Result<(), Failure> {
         registry.clone(),
         workers,
         config.limits.job_time,
+        config.limits.state_every,
     )
     .map_err(|e| failure(e.to_string()))?;
     let runtime = tokio::runtime::Builder::new_multi_thread()

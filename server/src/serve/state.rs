@@ -31,6 +31,8 @@ pub struct Limits {
     /// How long a finished job is kept (then deleted with its result); `None`: until
     /// it is purged.
     pub keep_finished: Option<Duration>,
+    /// How often an analysis job keeps its step loop's state (what a restart loses).
+    pub state_every: Duration,
 }
 
 /// The longest a synchronous analysis runs however low its estimate (the estimate

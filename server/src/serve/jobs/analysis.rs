@@ -61,11 +61,14 @@ impl PreparedJob for Prepared {
         self: Box<Self>,
         progress: &mut dyn Progress,
         _stop: &(dyn Fn() -> bool + Sync),
-        _memo: &dyn kea_core::exec::Memo,
+        memo: &dyn kea_core::exec::Memo,
     ) -> Result<JobOutput, Error> {
         let start = Instant::now();
-        let mut result =
-            kea_core::analyze(&self.model, &self.set, progress).map_err(request::locate)?;
+        // The step loop's state is kept in the job's memo as it goes: a run after a
+        // restart goes on from the last one kept (kea_core::resume).
+        let compiled = request::compile(&self.model, &self.set)?;
+        let mut result = kea_core::analysis::run_resumable(&compiled, progress, memo)
+            .map_err(request::locate)?;
         result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         let result_json = serde_json::to_string(&result)
             .map_err(|e| Error::invalid("", format!("result not serialisable: {e}")))?;

@@ -416,6 +416,8 @@ test('synthesis inputs are refused at their control, in words', async () => {
   assert.equal(await page.$('#syn-bisect-low + .control-error'), null, 'the fixed field is re-checked as it is typed');
   await page.fill('#syn-bisect-high', '10');
   await runRefused();
+  // (Under load the status can say the refusal a moment before the field is marked.)
+  await page.waitForSelector('#synthesis-panel .control-error');
   const shown = await page.$$eval('#synthesis-panel .control-error', (es) => es.map((e) => e.textContent));
   assert.equal(shown.length, 1, shown.join(' | '));
   assert.doesNotMatch(await status(), /mode\.bisect/);

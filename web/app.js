@@ -505,6 +505,9 @@ function showResult(r, where, elapsed, current) {
     `t ∈ [${fmt(r.t0)}, ${fmt(r.t_end)}]`,
     r.steady_state ? `steady state from step ${r.steady_state.reached_at_step.toLocaleString('en')}${r.steady_state.shortcut_used ? ' (shortcut used)' : ''}` : null,
     `computed in ${duration(r.timing.wall_ms)} on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`,
+    // A server job a restart interrupted went on from the state it had kept: the time
+    // above is from there.
+    r.timing.resumed_from_step ? `resumed from step ${r.timing.resumed_from_step.toLocaleString('en')} after a server restart` : null,
   ].filter(Boolean);
   $('summary').textContent = parts.join(' · ');
   $('summary').dataset.where = where;

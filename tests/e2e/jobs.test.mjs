@@ -183,3 +183,22 @@ test('a server that deletes finished jobs itself says when, in the help', async 
   assert.match(await page.textContent('#jobs-section .help'), /A finished job is kept until it is deleted here\./, 'the default server keeps them');
   assert.deepEqual(errors, []);
 });
+
+test('an analysis a server restart interrupted says from which step it went on', async () => {
+  const id = await submit({ kind: 'analysis', model: tracker() });
+  assert.equal((await finished(id)).status, 'succeeded');
+  // (A restart's result, as the server gives it: the same but for its timing.)
+  await page.route(`**/v1/jobs/${id}/result`, async (route) => {
+    const r = await route.fetch();
+    const body = await r.json();
+    body.timing.resumed_from_step = 123456;
+    await route.fulfill({ response: r, json: body });
+  });
+  await page.click('#tab-jobs');
+  await page.selectOption('#jobs-filter', ''); // (all: a test before chose one status)
+  await page.click(`${row(id)} .job-open`);
+  await page.waitForFunction((job) => document.getElementById('status').textContent === `Server job ${job}, opened from the Server tab.`, id, { timeout: 30000 });
+  assert.match(await page.textContent('#summary'), /computed in .* on the server · resumed from step 123,456 after a server restart/);
+  await page.unroute(`**/v1/jobs/${id}/result`);
+  assert.deepEqual(consoleErrors, []);
+});

@@ -96,8 +96,9 @@ impl Memo for StoreMemo<'_> {
     }
 
     /// Every `state_every` (`kea serve --state-every`; the state then kept replaces
-    /// the one before). Writing one costs about what serialising the traces so far
-    /// does (a few ms at N = 10, ≈ 0.1 s at N = 200 with 1000 trace points).
+    /// the one before). A state is mostly the traces so far: near a run's end, 2 MB
+    /// made in ≈ 1 ms at N = 10 with 1000 trace points, 32 MB in ≈ 55 ms at N = 200
+    /// with 768 (BENCHMARKS.md), then written to the store.
     fn state_due(&self) -> bool {
         let Ok(mut at) = self.state_at.lock() else {
             return false;

@@ -6,7 +6,7 @@
 // deleted with its result (DELETE ?purge=true). Without a server the tab says so.
 
 import { api } from './api.js';
-import { ACTIVE, problemText } from './runner.js';
+import { ACTIVE, problemText, problemWords } from './runner.js';
 import { duration, el, when } from './views.js';
 import { modelName } from './models.js';
 
@@ -165,7 +165,7 @@ export class JobsView {
       : job.status === 'queued' && job.cancel_requested ? 'queued (cancel asked)'
       : job.status;
     const statusCell = el('td', { class: `job-status ${job.status}`, text: status });
-    if (job.error) statusCell.title = [job.error.title, job.error.detail].filter(Boolean).join(': ');
+    if (job.error) statusCell.title = problemWords(job.error);
     const name = modelName(job.model_name);
     const open = el('button', { type: 'button', class: 'job-open', text: 'Open', title: `Open job ${job.id}: its model, its request and its result`, onclick: () => this.open(job) });
     const actions = [open];

@@ -5,7 +5,7 @@
 // a model before it stores it: a refused one's errors are shown at the editor's fields.
 
 import { api } from './api.js';
-import { problemOf, problemText } from './runner.js';
+import { problemOf, problemText, problemWords } from './runner.js';
 import { el, modelErrorsText, when } from './views.js';
 
 const PAGE = 50;
@@ -130,7 +130,7 @@ export class ModelsView {
         this.ctx.showModelErrors(p.errors);
         return this.told(false, `The server did not store the model: ${modelErrorsText(p.errors)} (see the marked fields).`);
       }
-      return this.told(false, `The server did not store the model (${[p.title, p.detail].filter(Boolean).join(': ')}).`);
+      return this.told(false, `The server did not store the model (${problemWords(p)}).`);
     }
     const m = await r.json();
     this.models = [m, ...this.models.filter((x) => x.id !== m.id)];

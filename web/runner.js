@@ -172,10 +172,14 @@ export async function problemOf(response) {
   };
 }
 
-/** A refused request's problem, in words: its title and detail. */
-export async function problemText(response) {
-  const p = await problemOf(response);
+/** A problem ({title, detail}) in words: its title and detail. */
+export function problemWords(p) {
   return [p.title, p.detail].filter(Boolean).join(': ');
+}
+
+/** A refused request's problem, in words. */
+export async function problemText(response) {
+  return problemWords(await problemOf(response));
 }
 
 const CANCELLED = { kind: 'cancelled', title: 'cancelled', errors: [] };

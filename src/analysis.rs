@@ -997,7 +997,7 @@ impl<'m, const N: usize> Engine<'m, N> {
                     ill_conditioned: ill_conditioned.map(|(k, t, x)| (k, F(t), F(x))),
                 };
                 self.memo
-                    .keep(STATE_KEY, &state.stamped(self.steps, n, nm).to_text());
+                    .keep_state(STATE_KEY, &state.stamped(self.steps, n, nm).to_text());
             }
         }
         if let Some(w) = written.take() {

@@ -46,9 +46,16 @@ impl Executor for Sequential {
 pub trait Memo: Sync {
     fn recall(&self, key: &str) -> Option<String>;
     fn keep(&self, key: &str, value: &str);
+    /// Keep a long computation's state under `key`, replacing the one kept before, and
+    /// write it through now: it is kept seldom ([`Memo::state_due`]), and a restart
+    /// goes on from it. Like [`Memo::keep`], by default.
+    fn keep_state(&self, key: &str, value: &str) {
+        self.keep(key, value);
+    }
     /// Whether a long computation should keep its state now (an analysis's step loop
-    /// asks at its progress reports, [`crate::resume`]): the keeper's clock says, as
-    /// the core has none. Never, by default.
+    /// asks at its progress reports, a Monte Carlo between its chunks:
+    /// [`crate::resume`]): the keeper's clock says, as the core has none. Never, by
+    /// default.
     fn state_due(&self) -> bool {
         false
     }

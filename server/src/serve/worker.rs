@@ -84,15 +84,22 @@ impl Memo for StoreMemo<'_> {
         let due = match self.pending.lock() {
             Ok(mut p) => {
                 p.0.push((key.to_string(), value.to_string()));
-                // (A step loop's state is written at once: it is kept seldom, and a
-                // restart goes on from it.)
-                p.1.elapsed() >= PERSIST_EVERY || key == kea_core::resume::STATE_KEY
+                p.1.elapsed() >= PERSIST_EVERY
             }
             Err(_) => false,
         };
         if due {
             self.flush();
         }
+    }
+
+    /// Written at once, with whatever is pending (in order: the later value of a key
+    /// replaces the earlier).
+    fn keep_state(&self, key: &str, value: &str) {
+        if let Ok(mut p) = self.pending.lock() {
+            p.0.push((key.to_string(), value.to_string()));
+        }
+        self.flush();
     }
 
     /// Every `state_every` (`kea serve --state-every`; the state then kept replaces
@@ -169,7 +176,7 @@ pub struct Pool {
     store: Arc<dyn Store>,
     registry: Registry,
     job_time_limit: Duration,
-    /// How often an analysis job keeps its state ([`StoreMemo`]).
+    /// How often an analysis or Monte Carlo job keeps its state ([`StoreMemo`]).
     state_every: Duration,
     /// Live jobs by id. Claims, submissions and cancellations take this lock so a
     /// cancellation never slips between "claimed in the store" and "known here".

@@ -49,6 +49,10 @@ const MIN_BLOCK_RUNS: usize = 32;
 pub const BAND_PROBABILITY: f64 = 0.95;
 
 pub use crate::exec::{Executor, Sequential};
+use crate::exec::{Forgetful, Memo};
+use crate::resume::{
+    BlockState, F, RowsState, SIMULATION_KEY, SimulationStamp, SimulationState, bits, values,
+};
 
 /// What the filter is compared with (METHOD §1.8).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -313,14 +317,28 @@ pub fn simulate<E: Executor>(
     exec: &E,
     progress: &mut dyn Progress,
 ) -> Result<SimulationResult, Error> {
+    simulate_resumable(model, set, req, exec, progress, &Forgetful)
+}
+
+/// [`simulate`], keeping the analysis's and the runs' states in `memo` when it asks
+/// for them ([`Memo::state_due`]), and going on from states an earlier run of the
+/// same request kept there ([`crate::resume`]): the result is the one an
+/// uninterrupted run gives (but for `timing`).
+pub fn simulate_resumable<E: Executor>(
+    model: &Model,
+    set: &Overrides,
+    req: &SimulationRequest,
+    exec: &E,
+    progress: &mut dyn Progress,
+    memo: &dyn Memo,
+) -> Result<SimulationResult, Error> {
     let compiled = crate::validate::compile(model, set)?;
     check_request(req, &compiled)?;
     // The analysis takes a small share of the work; report it as the first 5 %.
     let mut scaled = |f: f64| progress.report(0.05 * f);
-    let analysis = crate::analysis::run(&compiled, &mut scaled)?;
-    run(&compiled, &analysis, req, exec, &mut |f: f64| {
-        progress.report(0.05 + 0.95 * f)
-    })
+    let analysis = crate::analysis::run_resumable(&compiled, &mut scaled, memo)?;
+    let mut rest = |f: f64| progress.report(0.05 + 0.95 * f);
+    run_resumable(&compiled, &analysis, req, exec, &mut rest, memo)
 }
 
 /// Simulate a compiled model, given its analysis (D, y_B, z_B, the other sets).
@@ -331,18 +349,31 @@ pub fn run<E: Executor>(
     exec: &E,
     progress: &mut dyn Progress,
 ) -> Result<SimulationResult, Error> {
+    run_resumable(model, analysis, req, exec, progress, &Forgetful)
+}
+
+/// [`run`], keeping the runs' state in `memo` between chunks when it asks for it, and
+/// going on from a state kept there ([`simulate_resumable`]).
+pub fn run_resumable<E: Executor>(
+    model: &CompiledModel,
+    analysis: &AnalysisResult,
+    req: &SimulationRequest,
+    exec: &E,
+    progress: &mut dyn Progress,
+    memo: &dyn Memo,
+) -> Result<SimulationResult, Error> {
     check_request(req, model)?;
     let chunk = chunk_steps(model, req);
     match model.n_states() {
-        1 => run_n::<1, E>(model, analysis, req, exec, progress, chunk),
-        2 => run_n::<2, E>(model, analysis, req, exec, progress, chunk),
-        3 => run_n::<3, E>(model, analysis, req, exec, progress, chunk),
-        4 => run_n::<4, E>(model, analysis, req, exec, progress, chunk),
-        5 => run_n::<5, E>(model, analysis, req, exec, progress, chunk),
-        6 => run_n::<6, E>(model, analysis, req, exec, progress, chunk),
-        7 => run_n::<7, E>(model, analysis, req, exec, progress, chunk),
-        8 => run_n::<8, E>(model, analysis, req, exec, progress, chunk),
-        _ => run_n::<0, E>(model, analysis, req, exec, progress, chunk),
+        1 => run_n::<1, E>(model, analysis, req, exec, progress, memo, chunk),
+        2 => run_n::<2, E>(model, analysis, req, exec, progress, memo, chunk),
+        3 => run_n::<3, E>(model, analysis, req, exec, progress, memo, chunk),
+        4 => run_n::<4, E>(model, analysis, req, exec, progress, memo, chunk),
+        5 => run_n::<5, E>(model, analysis, req, exec, progress, memo, chunk),
+        6 => run_n::<6, E>(model, analysis, req, exec, progress, memo, chunk),
+        7 => run_n::<7, E>(model, analysis, req, exec, progress, memo, chunk),
+        8 => run_n::<8, E>(model, analysis, req, exec, progress, memo, chunk),
+        _ => run_n::<0, E>(model, analysis, req, exec, progress, memo, chunk),
     }
 }
 
@@ -468,6 +499,9 @@ struct Plan<'m> {
     x_solve: Vec<f64>,
     xi: Vec<f64>,
     tmp_n: Vec<f64>,
+    /// Whether the next step is the first of this run (from the start, or from a kept
+    /// state): its inputs are then evaluated whole.
+    fresh: bool,
 }
 
 impl<'m> Plan<'m> {
@@ -505,6 +539,7 @@ impl<'m> Plan<'m> {
             x_solve: vec![0.0; d.nm * n],
             xi: vec![0.0; n],
             tmp_n: vec![0.0; n],
+            fresh: true,
         }
     }
 
@@ -515,8 +550,9 @@ impl<'m> Plan<'m> {
         let dt = self.dt;
         let t_k = m.t0 + k as f64 * dt;
         // (1.11)–(1.15): A, uΔt, bΔt at t_{k−1}; Γ at t_k — the analysis' inputs.
-        let a_changed = k == 1 || !self.inp.a_fn.is_constant();
-        self.inp.at(m, k, k == 1)?;
+        let whole = std::mem::replace(&mut self.fresh, false);
+        let a_changed = whole || !self.inp.a_fn.is_constant();
+        self.inp.at(m, k, whole)?;
         if a_changed {
             self.inp.dense_a_into(&mut self.big_a);
         }
@@ -754,6 +790,26 @@ impl Block {
             x,
             f_const,
             rngs,
+        }
+    }
+
+    /// The block's state ([`crate::resume`]).
+    fn state(&self) -> BlockState {
+        BlockState {
+            y: bits(&self.y),
+            x: bits(&self.x),
+            // (2⁶⁴ words of one stream are beyond any run: a position is a u64.)
+            word_pos: self.rngs.iter().map(|r| r.get_word_pos() as u64).collect(),
+        }
+    }
+
+    /// The block as `kept`: a new block of the same runs (its constant model errors
+    /// drawn as they were), where the kept one had gone.
+    fn restore(&mut self, kept: &BlockState) {
+        self.y = values(&kept.y);
+        self.x = values(&kept.x);
+        for (r, &pos) in self.rngs.iter_mut().zip(&kept.word_pos) {
+            r.set_word_pos(u128::from(pos));
         }
     }
 
@@ -1080,6 +1136,32 @@ impl Rows {
         self.sum[s] += v;
         self.count[s] += 1;
     }
+    /// The rows' state ([`crate::resume`]).
+    fn state(&self) -> RowsState {
+        RowsState {
+            sum: bits(&self.sum),
+            count: self.count.clone(),
+            in_bucket: self.in_bucket,
+            t: bits(&self.t),
+            cols: self
+                .cols
+                .iter()
+                .map(|c| c.iter().map(|v| v.map(F)).collect())
+                .collect(),
+        }
+    }
+    /// The rows as `kept` (of as many series).
+    fn restore(&mut self, kept: RowsState) {
+        self.sum = values(&kept.sum);
+        self.count = kept.count;
+        self.in_bucket = kept.in_bucket;
+        self.t = values(&kept.t);
+        self.cols = kept
+            .cols
+            .into_iter()
+            .map(|c| c.into_iter().map(|v| v.map(|v| v.0)).collect())
+            .collect();
+    }
     fn end(&mut self, k: u64, t: f64) {
         self.in_bucket += 1;
         if self.in_bucket == self.bucket || k == self.steps {
@@ -1110,6 +1192,7 @@ fn run_n<const N: usize, E: Executor>(
     req: &SimulationRequest,
     exec: &E,
     progress: &mut dyn Progress,
+    memo: &dyn Memo,
     chunk_len: usize,
 ) -> Result<SimulationResult, Error> {
     let steps = analysis.steps;
@@ -1204,6 +1287,45 @@ fn run_n<const N: usize, E: Executor>(
     let mut chi = vec![0.0; chunk_len * n];
     let mut open = vec![0.0; chunk_len * n];
     let mut k0 = 1u64;
+
+    // An earlier run's state (a restart): its values, and on from the chunk after it.
+    let stamp = SimulationStamp::new(steps, (n, nm, d.nl), req.runs, req.seed, chunk_len);
+    let block_runs: Vec<usize> = blocks.iter().map(|b| b.runs).collect();
+    let series = n * T_SERIES + 2;
+    let earlier = memo
+        .recall(SIMULATION_KEY)
+        .and_then(|text| SimulationState::from_text(&text, stamp, &block_runs, series));
+    let mut resumed_from = None;
+    if let Some(s) = earlier {
+        let put = |dst: &mut [f64], src: &[F]| dst.copy_from_slice(&values(src));
+        put(&mut plan.y, &s.y);
+        put(&mut plan.big_r, &s.big_r);
+        put(&mut plan.p_y, &s.p_y);
+        put(&mut plan.chi, &s.chi);
+        for (b, kept) in blocks.iter_mut().zip(&s.blocks) {
+            b.restore(kept);
+        }
+        rows.restore(s.rows);
+        let avgs = |kept: &[(F, u64, u64)]| -> Vec<Avg> {
+            kept.iter()
+                .map(|&(sum, count, excluded)| Avg {
+                    sum: sum.0,
+                    count,
+                    excluded,
+                })
+                .collect()
+        };
+        mc = (avgs(&s.mc[0]), avgs(&s.mc[1]), avgs(&s.mc[2]));
+        (nees_sum, nees_count, nees_in) = (s.nees.0.0, s.nees.1, s.nees.2);
+        (nis_sum, nis_dof_sum, nis_count, nis_in) = (s.nis.0.0, s.nis.1.0, s.nis.2, s.nis.3);
+        put(&mut ratio_sum, &s.ratio_sum);
+        ratio_count = s.ratio_count;
+        ratio_in = s.ratio_in;
+        put(&mut bias_sum, &s.bias_sum);
+        k0 = s.k + 1;
+        resumed_from = Some(s.k);
+    }
+
     while k0 <= steps {
         let len = (steps - k0 + 1).min(chunk_len as u64) as usize;
         for s in 0..len {
@@ -1321,6 +1443,29 @@ fn run_n<const N: usize, E: Executor>(
         k0 += len as u64;
         if let ControlFlow::Break(()) = progress.report((k0 - 1) as f64 / steps as f64) {
             return Err(Error::Cancelled);
+        }
+        if k0 <= steps && memo.state_due() {
+            let avgs = |a: &[Avg]| -> Vec<(F, u64, u64)> {
+                a.iter().map(|a| (F(a.sum), a.count, a.excluded)).collect()
+            };
+            let state = SimulationState {
+                stamp,
+                k: k0 - 1,
+                y: bits(&plan.y),
+                big_r: bits(&plan.big_r),
+                p_y: bits(&plan.p_y),
+                chi: bits(&plan.chi),
+                blocks: blocks.iter().map(Block::state).collect(),
+                rows: rows.state(),
+                mc: [avgs(&mc.0), avgs(&mc.1), avgs(&mc.2)],
+                nees: (F(nees_sum), nees_count, nees_in),
+                nis: (F(nis_sum), F(nis_dof_sum), nis_count, nis_in),
+                ratio_sum: bits(&ratio_sum),
+                ratio_count: ratio_count.clone(),
+                ratio_in: ratio_in.clone(),
+                bias_sum: bits(&bias_sum),
+            };
+            memo.keep_state(SIMULATION_KEY, &state.to_text());
         }
     }
 
@@ -1453,7 +1598,10 @@ fn run_n<const N: usize, E: Executor>(
             nees: nees_tr,
             nis: nis_tr,
         },
-        timing: Timing::default(),
+        timing: Timing {
+            wall_ms: 0.0,
+            resumed_from_step: resumed_from,
+        },
         warnings,
     })
 }
@@ -1554,6 +1702,7 @@ mod tests {
                 &req,
                 &Sequential,
                 &mut crate::NoProgress,
+                &Forgetful,
                 chunk,
             )
             .unwrap();

@@ -2,40 +2,49 @@
 //! kept there ends with the result of an uninterrupted run, bit for bit (but for its
 //! timing): over the filter's transient and the frozen steady state, with a bound that
 //! overflows on the way, measurement schedules and a time-varying a(t) and Γ(t), with
-//! fixed-size and runtime-size loops. A state that does not belong to the run is
+//! fixed-size and runtime-size loops. So does a Monte Carlo, interrupted in its
+//! analysis or between its chunks of steps. A state that does not belong to the run is
 //! ignored.
 
 mod common;
 
 use kea_core::analysis::{run, run_resumable};
-use kea_core::exec::Memo;
-use kea_core::resume::STATE_KEY;
+use kea_core::exec::{Forgetful, Memo, Sequential};
+use kea_core::resume::{SIMULATION_KEY, STATE_KEY};
+use kea_core::simulation::{ModelError, SimulationRequest, Truth, simulate_resumable};
 use kea_core::validate::{CompiledModel, compile};
-use kea_core::{Error, NoProgress, model_from_value};
+use kea_core::{Error, NoProgress, Overrides, Progress, model_from_value};
 use serde_json::{Value, json};
+use std::collections::HashMap;
 use std::ops::ControlFlow;
 use std::sync::Mutex;
 
-/// Keeps the state at every report (the last one wins), and recalls what it was given.
+/// Keeps the states at every report (under each key, the last one wins), and recalls
+/// what it was given.
 struct Keeper {
-    given: Option<String>,
-    kept: Mutex<Option<String>>,
+    given: HashMap<String, String>,
+    kept: Mutex<HashMap<String, String>>,
     keep: bool,
 }
 
 impl Keeper {
     fn keeping() -> Keeper {
         Keeper {
-            given: None,
-            kept: Mutex::new(None),
+            given: HashMap::new(),
+            kept: Mutex::default(),
             keep: true,
         }
     }
 
+    /// Recalling an analysis's state.
     fn recalling(state: String) -> Keeper {
+        Keeper::recalling_all(HashMap::from([(STATE_KEY.to_string(), state)]))
+    }
+
+    fn recalling_all(states: HashMap<String, String>) -> Keeper {
         Keeper {
-            given: Some(state),
-            kept: Mutex::new(None),
+            given: states,
+            kept: Mutex::default(),
             keep: false,
         }
     }
@@ -43,15 +52,32 @@ impl Keeper {
 
 impl Memo for Keeper {
     fn recall(&self, key: &str) -> Option<String> {
-        assert_eq!(key, STATE_KEY);
-        self.given.clone()
+        assert!([STATE_KEY, SIMULATION_KEY].contains(&key), "{key}");
+        self.given.get(key).cloned()
     }
-    fn keep(&self, key: &str, value: &str) {
-        assert_eq!(key, STATE_KEY);
-        *self.kept.lock().unwrap() = Some(value.to_string());
+    fn keep(&self, key: &str, _: &str) {
+        panic!("{key} kept as a part, not as a state");
+    }
+    fn keep_state(&self, key: &str, value: &str) {
+        assert!([STATE_KEY, SIMULATION_KEY].contains(&key), "{key}");
+        let mut kept = self.kept.lock().unwrap();
+        kept.insert(key.to_string(), value.to_string());
     }
     fn state_due(&self) -> bool {
         self.keep
+    }
+}
+
+/// A progress that stops the run at its `stop`-th report (a crash there).
+fn stopping_at(stop: usize) -> impl Progress {
+    let mut seen = 0;
+    move |_: f64| {
+        seen += 1;
+        if seen == stop {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
     }
 }
 
@@ -80,24 +106,13 @@ fn reports(m: &CompiledModel) -> usize {
 /// The run interrupted at its `stop`-th report (a crash there); the state it kept.
 fn interrupted(m: &CompiledModel, stop: usize) -> String {
     let memo = Keeper::keeping();
-    let mut seen = 0;
-    let r = run_resumable(
-        m,
-        &mut |_: f64| {
-            seen += 1;
-            if seen == stop {
-                ControlFlow::Break(())
-            } else {
-                ControlFlow::Continue(())
-            }
-        },
-        &memo,
-    );
+    let r = run_resumable(m, &mut stopping_at(stop), &memo);
     assert!(
         matches!(r, Err(Error::Cancelled)),
         "interrupted at report {stop}"
     );
-    memo.kept.into_inner().unwrap().expect("a state was kept")
+    let mut kept = memo.kept.into_inner().unwrap();
+    kept.remove(STATE_KEY).expect("a state was kept")
 }
 
 /// Interrupted at several reports (the second, a middle one, the last) and resumed: the
@@ -237,4 +252,161 @@ fn a_run_whose_open_loop_covariance_overflows_resumes_exactly() {
         r.warnings
     );
     resumes_exactly(model);
+}
+
+/// The Monte Carlo `req` of `model` interrupted at several reports (one in its
+/// analysis, one in the middle, the last chunk's) and resumed from the states it kept:
+/// the uninterrupted result each time. Returns the steps of the runs' states (None:
+/// interrupted in the analysis).
+fn simulates_exactly(model: Value, req: &SimulationRequest) -> Vec<Option<u64>> {
+    let model = model_from_value(model).unwrap();
+    let set = Overrides::new();
+    let sim = |progress: &mut dyn Progress, memo: &dyn Memo| {
+        simulate_resumable(&model, &set, req, &Sequential, progress, memo)
+    };
+    let untimed = |r: &kea_core::simulation::SimulationResult| {
+        let mut v = serde_json::to_value(r).unwrap();
+        v.as_object_mut().unwrap().remove("timing");
+        v
+    };
+    let mut reports = Vec::new();
+    let whole = sim(
+        &mut |f: f64| {
+            reports.push(f);
+            ControlFlow::Continue(())
+        },
+        &Forgetful,
+    )
+    .unwrap();
+    let whole = untimed(&whole);
+    let n = reports.len();
+    // The analysis reports the first 5 % (its last, 5 %, after its loop).
+    let first_chunk = 1 + reports.iter().position(|&f| f > 0.05).unwrap();
+    assert!(
+        first_chunk >= 4 && n >= first_chunk + 4,
+        "{n} reports, the runs' first at {first_chunk}: too few to interrupt"
+    );
+    let mut at = Vec::new();
+    // (A state is kept at a report that lets the run go on: the first interruption
+    // is at the analysis loop's second report, after it kept one. The last report is
+    // the end's 100 %; the one before is the last chunk's.)
+    for stop in [
+        first_chunk - 2,
+        first_chunk + 1,
+        (first_chunk + n) / 2,
+        n - 1,
+    ] {
+        let memo = Keeper::keeping();
+        let r = sim(&mut stopping_at(stop), &memo);
+        assert!(
+            matches!(r, Err(Error::Cancelled)),
+            "interrupted at report {stop}"
+        );
+        let kept = memo.kept.into_inner().unwrap();
+        assert!(kept.contains_key(STATE_KEY), "the analysis's state");
+        let k = kept.get(SIMULATION_KEY).map(|s| {
+            let s: Value = serde_json::from_str(s).unwrap();
+            s["k"].as_u64().unwrap()
+        });
+        at.push(k);
+        let resumed = sim(&mut NoProgress, &Keeper::recalling_all(kept)).unwrap();
+        assert_eq!(
+            untimed(&resumed),
+            whole,
+            "resumed from the states of report {}",
+            stop - 1
+        );
+        assert_eq!(resumed.timing.resumed_from_step, k);
+    }
+    assert!(at[0].is_none(), "the first interruption is in the analysis");
+    assert!(at[1..].iter().all(Option::is_some), "{at:?}");
+    at
+}
+
+/// A time-varying a(t) and Γ(t), a measurement on a schedule, a constant model error
+/// drawn once per run (kept with the runs), 100 runs in four blocks.
+#[test]
+fn a_monte_carlo_resumes_exactly() {
+    let mut req = SimulationRequest::new(100, 7);
+    req.model_error = ModelError::Constant;
+    let at = simulates_exactly(
+        json!({
+            "time": {"t0": 0.0, "t_end": 4.0, "steps": 40_000},
+            "system": {"states": ["x", "v"], "a": [[0, 1], ["-4*(1 + 0.1*sin(t))", -0.3]],
+                       "b": [[0], [1]], "y0": [1, 0], "eta0": [0.5, 0.5], "phi": [0.4]},
+            "measurement": {"names": ["zx", "zv"], "c": [[1, 0], [0, 1]],
+                            "gamma": [["1 + 0.5*cos(t)", 0], [0, 1]], "psi": [0.2, 0.3],
+                            "schedule": [{"every": 3, "offset": 1}, {"unavailable": [[1, 2]]}]},
+            "options": {"trace_points": 30}
+        }),
+        &req,
+    );
+    assert!(at.len() == 4 && at[3] < Some(40_000), "{at:?}");
+}
+
+/// Nine states (the runs' loop of runtime size), the truth the mean (seed 000's
+/// reading), white model error, 40 runs.
+#[test]
+fn a_runtime_size_monte_carlo_resumes_exactly() {
+    let n = 9;
+    let a: Vec<Vec<f64>> = (0..n)
+        .map(|i| {
+            (0..n)
+                .map(|j| match j {
+                    _ if j == i => -0.5,
+                    _ if j == i + 1 => 1.0,
+                    _ => 0.0,
+                })
+                .collect()
+        })
+        .collect();
+    let mut req = SimulationRequest::new(40, 3);
+    req.truth = Truth::Mean;
+    simulates_exactly(
+        json!({
+            "time": {"t0": 0.0, "t_end": 2.0, "steps": 3000},
+            "system": {"states": (0..n).map(|i| format!("x{i}")).collect::<Vec<_>>(), "a": a,
+                       "b": vec![vec![1.0]; n], "y0": vec![1.0; n], "eta0": vec![0.5; n], "phi": [0.3]},
+            "measurement": {"names": ["z"], "c": [(0..n).map(|j| if j == 0 { 1.0 } else { 0.0 }).collect::<Vec<_>>()],
+                            "gamma": [[1]], "psi": [0.1]},
+            "options": {"trace_points": 25}
+        }),
+        &req,
+    );
+}
+
+/// The runs' state of another request (another seed) is not taken: the run starts over.
+#[test]
+fn a_monte_carlo_state_of_another_seed_is_ignored() {
+    let model = model_from_value(tracker(3000, 30.0)).unwrap();
+    let set = Overrides::new();
+    let (one, other) = (SimulationRequest::new(50, 1), SimulationRequest::new(50, 2));
+    let memo = Keeper::keeping();
+    let r = simulate_resumable(
+        &model,
+        &set,
+        &other,
+        &Sequential,
+        &mut stopping_at(8),
+        &memo,
+    );
+    assert!(matches!(r, Err(Error::Cancelled)));
+    let kept = memo.kept.into_inner().unwrap();
+    assert!(kept.contains_key(SIMULATION_KEY));
+    let resumed = simulate_resumable(
+        &model,
+        &set,
+        &one,
+        &Sequential,
+        &mut NoProgress,
+        &Keeper::recalling_all(kept),
+    )
+    .unwrap();
+    let fresh =
+        simulate_resumable(&model, &set, &one, &Sequential, &mut NoProgress, &Forgetful).unwrap();
+    assert_eq!(resumed.timing.resumed_from_step, None);
+    assert_eq!(
+        serde_json::to_value(&resumed.traces).unwrap(),
+        serde_json::to_value(&fresh.traces).unwrap()
+    );
 }

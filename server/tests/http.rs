@@ -675,6 +675,42 @@ fn an_analysis_resumes_after_a_crash_from_the_state_it_kept() {
     assert_eq!(without_timing(resumed), without_timing(whole));
 }
 
+/// A Monte Carlo job killed part way goes on after the restart from the runs' state it
+/// kept, and ends with a fresh run's result (but for the timing).
+#[test]
+fn a_monte_carlo_resumes_after_a_crash_from_the_state_it_kept() {
+    let dir = tmp();
+    let args = ["--workers", "1", "--state-every", "1"];
+    let steps = 600_000u64;
+    let body = json!({"kind": "simulation", "model": long_model(steps), "runs": 500, "seed": 5});
+    let submit = |s: &Server| {
+        let job = s.post("/v1/jobs", &body);
+        assert_eq!(job.status, 202, "{}", job.text);
+        job.json()["id"].as_str().unwrap().to_string()
+    };
+    let mut s = Server::start(dir.path(), &args);
+    let id = submit(&s);
+    let first = s.wait_job(&id, LONG, |j| j["progress"].as_f64().unwrap() >= 0.4);
+    assert_eq!(first["status"], "running", "{first}");
+    s.kill();
+
+    let s = Server::start(dir.path(), &args);
+    assert_eq!(s.wait_finished(&id, LONG)["status"], "succeeded");
+    let resumed = s.get(&format!("/v1/jobs/{id}/result")).json();
+    let from = resumed["timing"]["resumed_from_step"]
+        .as_u64()
+        .expect("resumed");
+    assert!(
+        from > steps / 10 && from < steps,
+        "resumed from step {from}"
+    );
+    let again = submit(&s);
+    assert_eq!(s.wait_finished(&again, LONG)["status"], "succeeded");
+    let whole = s.get(&format!("/v1/jobs/{again}/result")).json();
+    assert_eq!(whole["timing"].get("resumed_from_step"), None);
+    assert_eq!(without_timing(resumed), without_timing(whole));
+}
+
 /// A job the server dies running three times (as one that brings it down would)
 /// fails with a problem instead of running at every start; the next job runs.
 #[test]

@@ -89,9 +89,9 @@ pub struct Args {
     /// (2592000: 30 days) [default: kept until deleted with DELETE ?purge=true].
     #[arg(long, env = "KEA_KEEP_FINISHED", value_parser = at_least_one::<u64>)]
     pub keep_finished: Option<u64>,
-    /// Seconds between the states an analysis job keeps as it runs: a restart (a
-    /// crash, a shutdown) goes on from the last one, so it loses at most this much of
-    /// the job's work.
+    /// Seconds between the states an analysis or Monte Carlo job keeps as it runs: a
+    /// restart (a crash, a shutdown) goes on from the last one, so it loses at most
+    /// this much of the job's work.
     #[arg(long, env = "KEA_STATE_EVERY", default_value_t = 10, value_parser = at_least_one::<u64>)]
     pub state_every: u64,
     /// Log format: text or json (level via KEA_LOG, e.g. `info`, `debug`).

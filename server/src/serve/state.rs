@@ -31,7 +31,7 @@ pub struct Limits {
     /// How long a finished job is kept (then deleted with its result); `None`: until
     /// it is purged.
     pub keep_finished: Option<Duration>,
-    /// How often an analysis job keeps its step loop's state (what a restart loses).
+    /// How often an analysis or Monte Carlo job keeps its state (what a restart loses).
     pub state_every: Duration,
 }
 

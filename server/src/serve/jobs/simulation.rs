@@ -157,13 +157,21 @@ impl PreparedJob for Prepared {
         self: Box<Self>,
         progress: &mut dyn Progress,
         _stop: &(dyn Fn() -> bool + Sync),
-        _memo: &dyn kea_core::exec::Memo,
+        memo: &dyn kea_core::exec::Memo,
     ) -> Result<JobOutput, Error> {
         let start = Instant::now();
         let exec = Rayon::new(None).map_err(|e| Error::invalid("", e))?;
-        let mut result =
-            kea_core::simulation::simulate(&self.model, &self.set, &self.sim, &exec, progress)
-                .map_err(request::locate)?;
+        // The analysis's and the runs' states are kept in the job's memo as they go: a
+        // run after a restart goes on from the last ones kept (kea_core::resume).
+        let mut result = kea_core::simulation::simulate_resumable(
+            &self.model,
+            &self.set,
+            &self.sim,
+            &exec,
+            progress,
+            memo,
+        )
+        .map_err(request::locate)?;
         result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         let result_json = serde_json::to_string(&result)
             .map_err(|e| Error::invalid("", format!("result not serialisable: {e}")))?;

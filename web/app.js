@@ -8,7 +8,7 @@
 import { ModelEditor, modelProblem } from './editor.js';
 import { api } from './api.js';
 import { BrowserRunner, ServerRunner, WasmWorker, problemOf } from './runner.js';
-import { TraceChart, criteriaTable, duration, finalTable, fmt, scrollHint } from './results.js';
+import { TraceChart, criteriaTable, duration, finalTable, fmt, resumedText, scrollHint } from './results.js';
 import { mountTabs } from './tabs.js';
 import { ProgressText, modelErrorsText, runAnyway, runPart } from './views.js';
 
@@ -507,7 +507,7 @@ function showResult(r, where, elapsed, current) {
     `computed in ${duration(r.timing.wall_ms)} on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`,
     // A server job a restart interrupted went on from the state it had kept: the time
     // above is from there.
-    r.timing.resumed_from_step ? `resumed from step ${r.timing.resumed_from_step.toLocaleString('en')} after a server restart` : null,
+    resumedText(r.timing),
   ].filter(Boolean);
   $('summary').textContent = parts.join(' · ');
   $('summary').dataset.where = where;

@@ -67,6 +67,15 @@ export function duration(ms) {
   return `${Math.floor(min / 60)} h${min % 60 ? ` ${min % 60} min` : ''}`;
 }
 
+/**
+ * What a result's `timing` says of a server restart: a job it interrupted went on from
+ * the state it had kept (its time is then from there). Null for a run from the start.
+ */
+export function resumedText(timing) {
+  const k = timing?.resumed_from_step;
+  return k ? `resumed from step ${k.toLocaleString('en')} after a server restart` : null;
+}
+
 /** A time stamp (RFC 3339) as "2026-11-24 14:05:09" in the browser's time zone. */
 export function when(iso) {
   const d = new Date(iso);

@@ -7,7 +7,7 @@
 import uPlot from './vendor/uplot/uPlot.esm.js';
 import { MAX_SAFE, numberProblem, toNumber } from './numbers.js';
 import { valueAxis } from './plot.js';
-import { noTraces } from './results.js';
+import { noTraces, resumedText } from './results.js';
 import { KeptFields, RunBar, RunView, checkModel, duration, el, field, fmt, input, markControls, recheckControl, requestErrors, select, wasmCall } from './views.js';
 
 const SETS = ['bound', 'covariance', 'monte_carlo'];
@@ -151,7 +151,10 @@ export class SimulationView extends RunView {
         `R = ${q.runs.toLocaleString('en')} runs, seed ${q.seed}, truth ${q.truth}, model error ${q.model_error}`,
         `D = ${r.steps.toLocaleString('en')} steps, Δt = ${fmt(r.dt)}, t ∈ [${fmt(r.t0)}, ${fmt(r.t_end)}]`,
         `${duration(r.timing.wall_ms)} on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`,
-      ].join(' · '),
+        resumedText(r.timing),
+      ]
+        .filter(Boolean)
+        .join(' · '),
     });
     const warnings = el('ul', { class: 'mc-warnings' }, ...r.warnings.map((w) => el('li', { text: w })));
     const previous = this.stateSelect.value;

@@ -50,8 +50,8 @@ const tracker = () => {
 
 const row = (id) => `#jobs-table tr[data-job="${id}"]`;
 
-/** Open the job's row and wait for its tab's result; returns the downloaded result JSON. */
-async function openJob(id, { result, run, download }) {
+/** Job `id` opened from the Server tab: its result (`#result`) shown, its run button (`#run`) ready. */
+async function showJob(id, { result, run }) {
   await page.click('#tab-jobs');
   await page.click(`${row(id)} .job-open`);
   await page.waitForFunction(
@@ -59,6 +59,11 @@ async function openJob(id, { result, run, download }) {
     [result, run],
     { timeout: 30000 },
   );
+}
+
+/** Open the job's row and wait for its tab's result; returns the downloaded result JSON. */
+async function openJob(id, { result, run, download }) {
+  await showJob(id, { result, run });
   const [file] = await Promise.all([page.waitForEvent('download'), page.click(`#${download}`)]);
   return JSON.parse(readFileSync(await file.path(), 'utf8'));
 }
@@ -184,21 +189,25 @@ test('a server that deletes finished jobs itself says when, in the help', async 
   assert.deepEqual(errors, []);
 });
 
-test('an analysis a server restart interrupted says from which step it went on', async () => {
-  const id = await submit({ kind: 'analysis', model: tracker() });
-  assert.equal((await finished(id)).status, 'succeeded');
-  // (A restart's result, as the server gives it: the same but for its timing.)
-  await page.route(`**/v1/jobs/${id}/result`, async (route) => {
-    const r = await route.fetch();
-    const body = await r.json();
-    body.timing.resumed_from_step = 123456;
-    await route.fulfill({ response: r, json: body });
-  });
+test('a result a server restart interrupted says from which step it went on', async () => {
   await page.click('#tab-jobs');
   await page.selectOption('#jobs-filter', ''); // (all: a test before chose one status)
-  await page.click(`${row(id)} .job-open`);
-  await page.waitForFunction((job) => document.getElementById('status').textContent === `Server job ${job}, opened from the Server tab.`, id, { timeout: 30000 });
-  assert.match(await page.textContent('#summary'), /computed in .* on the server · resumed from step 123,456 after a server restart/);
-  await page.unroute(`**/v1/jobs/${id}/result`);
+  for (const [request, where, summary] of [
+    [{ kind: 'analysis', model: tracker() }, { result: 'results', run: 'run' }, '#summary'],
+    [{ kind: 'simulation', model: tracker(), runs: 20 }, { result: 'mc-result', run: 'mc-run' }, '#mc-summary'],
+  ]) {
+    const id = await submit(request);
+    assert.equal((await finished(id)).status, 'succeeded');
+    // (A restart's result, as the server gives it: the same but for its timing.)
+    await page.route(`**/v1/jobs/${id}/result`, async (route) => {
+      const r = await route.fetch();
+      const body = await r.json();
+      body.timing.resumed_from_step = 123456;
+      await route.fulfill({ response: r, json: body });
+    });
+    await showJob(id, where);
+    assert.match(await page.textContent(summary), / on the server · resumed from step 123,456 after a server restart/, request.kind);
+    await page.unroute(`**/v1/jobs/${id}/result`);
+  }
   assert.deepEqual(consoleErrors, []);
 });

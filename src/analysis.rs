@@ -12,9 +12,9 @@ use crate::inputs::{Inputs, time_err};
 use crate::lanes::{Lanes, Scalar};
 use crate::linalg::{SparseRows, arr, arr_mut, cov_rel_diff, mat, predict_in_place, predict_work};
 use crate::result::*;
-use crate::resume::{F, LoopState, STATE_KEY, bits, values};
+use crate::resume::{F, LoopState, SELECTION_KEY, STATE_KEY, bits, values};
 use crate::riccati::{Prepared, SequentialJoseph};
-use crate::steps::select_steps;
+use crate::steps::{Selected, select_steps};
 use crate::validate::{CompiledModel, StepPlan};
 use crate::{Progress, riccati};
 use std::collections::BTreeMap;
@@ -119,8 +119,8 @@ pub fn run(model: &CompiledModel, progress: &mut dyn Progress) -> Result<Analysi
 /// [`run`], keeping the step loop's state in `memo` when it asks for it
 /// ([`Memo::state_due`]), and going on from a state an earlier run of the same model
 /// kept there ([`crate::resume`]): the result is the one an uninterrupted run gives
-/// (but for `timing`). A `"steps": "auto"` selection is made again (its trial runs
-/// are not kept).
+/// (but for `timing`). A `"steps": "auto"` selection is kept in `memo` once made, and
+/// taken from there by a run after a restart instead of made again.
 pub fn run_resumable(
     model: &CompiledModel,
     progress: &mut dyn Progress,
@@ -133,7 +133,17 @@ pub fn run_resumable(
             initial_steps,
             max_steps,
         } => {
-            let s = select_steps(model, tolerance, initial_steps, max_steps, progress)?;
+            let kept = memo
+                .recall(SELECTION_KEY)
+                .and_then(|text| Selected::from_text(&text, tolerance, max_steps));
+            let s = match kept {
+                Some(s) => s,
+                None => {
+                    let s = select_steps(model, tolerance, initial_steps, max_steps, progress)?;
+                    memo.keep(SELECTION_KEY, &s.to_text());
+                    s
+                }
+            };
             (s.chosen, Some(s.selection))
         }
     };

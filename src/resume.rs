@@ -171,6 +171,10 @@ impl LoopState {
     }
 }
 
+/// The [`crate::exec::Memo`] key of a `"steps": "auto"` selection (kept once made:
+/// `steps::Selected`, as JSON).
+pub const SELECTION_KEY: &str = "steps-selection";
+
 /// The [`crate::exec::Memo`] key of a Monte Carlo's state.
 pub const SIMULATION_KEY: &str = "simulation-state";
 

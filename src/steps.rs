@@ -9,10 +9,29 @@ use crate::error::Error;
 use crate::expr::TimeMatrix;
 use crate::result::{StepSelection, StepTrial};
 use crate::validate::CompiledModel;
+use serde::{Deserialize, Serialize};
 
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Selected {
     pub chosen: u64,
     pub selection: StepSelection,
+}
+
+impl Selected {
+    /// The selection as a [`crate::exec::Memo`] value (its differences are finite:
+    /// JSON gives them back exactly).
+    pub(crate) fn to_text(&self) -> String {
+        serde_json::to_string(self).expect("a selection serialises")
+    }
+
+    /// The selection in `text` if it was made with this tolerance and cap.
+    pub(crate) fn from_text(text: &str, tolerance: f64, max_steps: u64) -> Option<Selected> {
+        let s: Selected = serde_json::from_str(text).ok()?;
+        let ours = s.selection.tolerance.to_bits() == tolerance.to_bits()
+            && s.selection.max_steps == max_steps
+            && s.chosen <= max_steps;
+        ours.then_some(s)
+    }
 }
 
 /// One Euler step k of the mean (3.3) on the grid t0 + iΔt, from t_{k−1}:

@@ -10,7 +10,7 @@ mod common;
 
 use kea_core::analysis::{run, run_resumable};
 use kea_core::exec::{Forgetful, Memo, Sequential};
-use kea_core::resume::{SIMULATION_KEY, STATE_KEY};
+use kea_core::resume::{SELECTION_KEY, SIMULATION_KEY, STATE_KEY};
 use kea_core::simulation::{ModelError, SimulationRequest, Truth, simulate_resumable};
 use kea_core::validate::{CompiledModel, compile};
 use kea_core::{Error, NoProgress, Overrides, Progress, model_from_value};
@@ -52,11 +52,16 @@ impl Keeper {
 
 impl Memo for Keeper {
     fn recall(&self, key: &str) -> Option<String> {
-        assert!([STATE_KEY, SIMULATION_KEY].contains(&key), "{key}");
+        assert!(
+            [STATE_KEY, SIMULATION_KEY, SELECTION_KEY].contains(&key),
+            "{key}"
+        );
         self.given.get(key).cloned()
     }
-    fn keep(&self, key: &str, _: &str) {
-        panic!("{key} kept as a part, not as a state");
+    fn keep(&self, key: &str, value: &str) {
+        assert_eq!(key, SELECTION_KEY, "a state kept as a part");
+        let mut kept = self.kept.lock().unwrap();
+        kept.insert(key.to_string(), value.to_string());
     }
     fn keep_state(&self, key: &str, value: &str) {
         assert!([STATE_KEY, SIMULATION_KEY].contains(&key), "{key}");
@@ -409,4 +414,63 @@ fn a_monte_carlo_state_of_another_seed_is_ignored() {
         serde_json::to_value(&resumed.traces).unwrap(),
         serde_json::to_value(&fresh.traces).unwrap()
     );
+}
+
+/// `"steps": "auto"`: the selection is kept once made; a run interrupted in its final
+/// analysis takes it on resuming instead of running its trials again (which report 0),
+/// and gives the uninterrupted result. A selection of another tolerance is not taken.
+#[test]
+fn an_auto_steps_run_takes_its_kept_selection() {
+    // (An oscillating mean: Euler's error in it halves as D doubles.)
+    let mut model = tracker(0, 10.0);
+    model["system"]["a"] = json!([[0, 1], [-1, -0.2]]);
+    model["time"]["steps"] = json!("auto");
+    model["time"]["auto"] =
+        json!({"tolerance": 1e-4, "initial_steps": 1000, "max_steps": 4_096_000});
+    let m = compiled(model.clone());
+    let mut trial_reports = 0;
+    let whole = run(&m, &mut |f: f64| {
+        trial_reports += usize::from(f == 0.0);
+        ControlFlow::Continue(())
+    })
+    .unwrap();
+    let history = &whole.step_selection.as_ref().unwrap().history;
+    assert!(history.len() >= 3, "{history:?}");
+    assert!(trial_reports >= 3, "{trial_reports} trial reports");
+    let n = reports(&m);
+    let memo = Keeper::keeping();
+    let r = run_resumable(&m, &mut stopping_at(n - 2), &memo);
+    assert!(matches!(r, Err(Error::Cancelled)));
+    let kept = memo.kept.into_inner().unwrap();
+    assert!(kept.contains_key(SELECTION_KEY) && kept.contains_key(STATE_KEY));
+    let mut zero_reports = 0;
+    let resumed = run_resumable(
+        &m,
+        &mut |f: f64| {
+            zero_reports += usize::from(f == 0.0);
+            ControlFlow::Continue(())
+        },
+        &Keeper::recalling_all(kept.clone()),
+    )
+    .unwrap();
+    assert_eq!(zero_reports, 0, "the trials were run again");
+    assert_eq!(untimed(&resumed), untimed(&whole));
+    assert!(resumed.timing.resumed_from_step.is_some());
+
+    // The selection alone, of another tolerance: made again.
+    model["time"]["auto"]["tolerance"] = json!(2e-6);
+    let other = compiled(model);
+    let selection = HashMap::from([(SELECTION_KEY.to_string(), kept[SELECTION_KEY].clone())]);
+    let mut zero_reports = 0;
+    let r = run_resumable(
+        &other,
+        &mut |f: f64| {
+            zero_reports += usize::from(f == 0.0);
+            ControlFlow::Continue(())
+        },
+        &Keeper::recalling_all(selection),
+    )
+    .unwrap();
+    assert!(zero_reports >= 3, "the selection was made again");
+    assert_eq!(untimed(&r), untimed(&run(&other, &mut NoProgress).unwrap()));
 }

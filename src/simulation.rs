@@ -45,6 +45,18 @@ pub const CHUNK_WORK: f64 = 16.0 * crate::analysis::WORK_BETWEEN_REPORTS;
 const MAX_BLOCKS: usize = 64;
 /// At least this many runs per block.
 const MIN_BLOCK_RUNS: usize = 32;
+/// The most values (R × (2N + 1): each run's Y, X and stream position) a Monte Carlo's
+/// kept state may hold for its runs, ≈ 80 MB of JSON: a run with more keeps none and
+/// starts over after a restart. (Such a run is short: with R = 100 000 runs, the most,
+/// it has N > 20, so at most 2 300 steps under [`MAX_WORK`].)
+pub const MAX_STATE_VALUES: usize = 1 << 22;
+
+/// Whether a Monte Carlo of `runs` runs of an N-state model keeps its state
+/// ([`MAX_STATE_VALUES`]).
+pub fn keeps_state(runs: u64, n: usize) -> bool {
+    (runs as f64) * (2 * n + 1) as f64 <= MAX_STATE_VALUES as f64
+}
+
 /// Two-sided probability of the χ² acceptance bands.
 pub const BAND_PROBABILITY: f64 = 0.95;
 
@@ -1444,7 +1456,7 @@ fn run_n<const N: usize, E: Executor>(
         if let ControlFlow::Break(()) = progress.report((k0 - 1) as f64 / steps as f64) {
             return Err(Error::Cancelled);
         }
-        if k0 <= steps && memo.state_due() {
+        if k0 <= steps && keeps_state(req.runs, n) && memo.state_due() {
             let avgs = |a: &[Avg]| -> Vec<(F, u64, u64)> {
                 a.iter().map(|a| (F(a.sum), a.count, a.excluded)).collect()
             };
@@ -1683,6 +1695,15 @@ pub fn traces_csv(r: &SimulationResult) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_runs_state_is_kept_up_to_its_bound() {
+        assert!(keeps_state(100_000, 20)); // 4.1e6 values
+        assert!(!keeps_state(100_000, 21));
+        assert!(keeps_state(MAX_RUNS, 8));
+        assert!(keeps_state(1, 2_097_151));
+        assert!(!keeps_state(1, 2_097_152));
+    }
 
     /// A chunk's length changes no bit of the result: chunks of 1, 7 and 256 steps.
     #[test]

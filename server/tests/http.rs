@@ -643,52 +643,19 @@ fn a_job_survives_a_crash_and_finishes_after_restart() {
     assert_eq!(s.wait_finished(&queued, LONG)["status"], "succeeded");
 }
 
-/// An analysis job killed part way goes on after the restart from the state it kept
-/// (`--state-every 1`: every second): its result says from which step, and is the one
-/// an uninterrupted run of the same request gives, but for the timing.
-#[test]
-fn an_analysis_resumes_after_a_crash_from_the_state_it_kept() {
+/// The job `body` (of `steps` steps), killed part way, goes on after the restart from
+/// the state it kept (`--state-every 1`: every second): its result says from which
+/// step, and is the one a fresh run of the same request gives, but for the timing.
+fn resumes_after_a_crash(body: Value, steps: u64) {
     let dir = tmp();
     let args = ["--workers", "1", "--state-every", "1"];
-    let steps = 40_000_000u64;
-    let mut s = Server::start(dir.path(), &args);
-    assert_eq!(s.get("/v1/limits").json()["server"]["state_every_s"], 1);
-    let id = s.submit_analysis(long_model(steps));
-    let first = s.wait_job(&id, LONG, |j| j["progress"].as_f64().unwrap() >= 0.4);
-    assert_eq!(first["status"], "running", "{first}");
-    s.kill();
-
-    let s = Server::start(dir.path(), &args);
-    assert_eq!(s.wait_finished(&id, LONG)["status"], "succeeded");
-    let resumed = s.get(&format!("/v1/jobs/{id}/result")).json();
-    let from = resumed["timing"]["resumed_from_step"]
-        .as_u64()
-        .expect("resumed");
-    assert!(
-        from > steps / 10 && from < steps,
-        "resumed from step {from}"
-    );
-    let again = s.submit_analysis(long_model(steps));
-    assert_eq!(s.wait_finished(&again, LONG)["status"], "succeeded");
-    let whole = s.get(&format!("/v1/jobs/{again}/result")).json();
-    assert_eq!(whole["timing"].get("resumed_from_step"), None);
-    assert_eq!(without_timing(resumed), without_timing(whole));
-}
-
-/// A Monte Carlo job killed part way goes on after the restart from the runs' state it
-/// kept, and ends with a fresh run's result (but for the timing).
-#[test]
-fn a_monte_carlo_resumes_after_a_crash_from_the_state_it_kept() {
-    let dir = tmp();
-    let args = ["--workers", "1", "--state-every", "1"];
-    let steps = 600_000u64;
-    let body = json!({"kind": "simulation", "model": long_model(steps), "runs": 500, "seed": 5});
     let submit = |s: &Server| {
         let job = s.post("/v1/jobs", &body);
         assert_eq!(job.status, 202, "{}", job.text);
         job.json()["id"].as_str().unwrap().to_string()
     };
     let mut s = Server::start(dir.path(), &args);
+    assert_eq!(s.get("/v1/limits").json()["server"]["state_every_s"], 1);
     let id = submit(&s);
     let first = s.wait_job(&id, LONG, |j| j["progress"].as_f64().unwrap() >= 0.4);
     assert_eq!(first["status"], "running", "{first}");
@@ -709,6 +676,24 @@ fn a_monte_carlo_resumes_after_a_crash_from_the_state_it_kept() {
     let whole = s.get(&format!("/v1/jobs/{again}/result")).json();
     assert_eq!(whole["timing"].get("resumed_from_step"), None);
     assert_eq!(without_timing(resumed), without_timing(whole));
+}
+
+/// An analysis: its step loop's state.
+#[test]
+fn an_analysis_resumes_after_a_crash_from_the_state_it_kept() {
+    let steps = 40_000_000;
+    resumes_after_a_crash(
+        json!({"kind": "analysis", "model": long_model(steps)}),
+        steps,
+    );
+}
+
+/// A Monte Carlo: its runs' state, kept between chunks.
+#[test]
+fn a_monte_carlo_resumes_after_a_crash_from_the_state_it_kept() {
+    let steps = 600_000;
+    let body = json!({"kind": "simulation", "model": long_model(steps), "runs": 500, "seed": 5});
+    resumes_after_a_crash(body, steps);
 }
 
 /// A job the server dies running three times (as one that brings it down would)

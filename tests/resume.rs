@@ -14,6 +14,8 @@ use kea_core::resume::{SELECTION_KEY, SIMULATION_KEY, STATE_KEY};
 use kea_core::simulation::{ModelError, SimulationRequest, Truth, simulate_resumable};
 use kea_core::validate::{CompiledModel, compile};
 use kea_core::{Error, NoProgress, Overrides, Progress, model_from_value};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use serde_json::{Value, json};
 use std::collections::HashMap;
 use std::ops::ControlFlow;
@@ -259,11 +261,15 @@ fn a_run_whose_open_loop_covariance_overflows_resumes_exactly() {
     resumes_exactly(model);
 }
 
-/// The Monte Carlo `req` of `model` interrupted at several reports (one in its
-/// analysis, one in the middle, the last chunk's) and resumed from the states it kept:
-/// the uninterrupted result each time. Returns the steps of the runs' states (None:
-/// interrupted in the analysis).
-fn simulates_exactly(model: Value, req: &SimulationRequest) -> Vec<Option<u64>> {
+/// The Monte Carlo `req` of `model` interrupted at each report `stops` names, given
+/// the number of the runs' first report and of all, and resumed from the states it
+/// kept: the uninterrupted result each time. Returns the steps of the runs' states
+/// (None: interrupted in the analysis).
+fn simulates_exactly(
+    model: Value,
+    req: &SimulationRequest,
+    stops: impl FnOnce(usize, usize) -> Vec<usize>,
+) -> Vec<Option<u64>> {
     let model = model_from_value(model).unwrap();
     let set = Overrides::new();
     let sim = |progress: &mut dyn Progress, memo: &dyn Memo| {
@@ -284,23 +290,10 @@ fn simulates_exactly(model: Value, req: &SimulationRequest) -> Vec<Option<u64>> 
     )
     .unwrap();
     let whole = untimed(&whole);
-    let n = reports.len();
     // The analysis reports the first 5 % (its last, 5 %, after its loop).
     let first_chunk = 1 + reports.iter().position(|&f| f > 0.05).unwrap();
-    assert!(
-        first_chunk >= 4 && n >= first_chunk + 4,
-        "{n} reports, the runs' first at {first_chunk}: too few to interrupt"
-    );
     let mut at = Vec::new();
-    // (A state is kept at a report that lets the run go on: the first interruption
-    // is at the analysis loop's second report, after it kept one. The last report is
-    // the end's 100 %; the one before is the last chunk's.)
-    for stop in [
-        first_chunk - 2,
-        first_chunk + 1,
-        (first_chunk + n) / 2,
-        n - 1,
-    ] {
+    for stop in stops(first_chunk, reports.len()) {
         let memo = Keeper::keeping();
         let r = sim(&mut stopping_at(stop), &memo);
         assert!(
@@ -308,7 +301,6 @@ fn simulates_exactly(model: Value, req: &SimulationRequest) -> Vec<Option<u64>> 
             "interrupted at report {stop}"
         );
         let kept = memo.kept.into_inner().unwrap();
-        assert!(kept.contains_key(STATE_KEY), "the analysis's state");
         let k = kept.get(SIMULATION_KEY).map(|s| {
             let s: Value = serde_json::from_str(s).unwrap();
             s["k"].as_u64().unwrap()
@@ -323,9 +315,30 @@ fn simulates_exactly(model: Value, req: &SimulationRequest) -> Vec<Option<u64>> 
         );
         assert_eq!(resumed.timing.resumed_from_step, k);
     }
+    at
+}
+
+/// Interruptions in the analysis, in the runs' first chunks, in their middle and in
+/// their last chunk. (A state is kept at a report that lets the run go on: the first
+/// interruption is at the analysis loop's second report, after it kept one. The last
+/// report is the end's 100 %; the one before is the last chunk's.)
+fn spread(first_chunk: usize, n: usize) -> Vec<usize> {
+    assert!(
+        first_chunk >= 4 && n >= first_chunk + 4,
+        "{n} reports, the runs' first at {first_chunk}: too few to interrupt"
+    );
+    vec![
+        first_chunk - 2,
+        first_chunk + 1,
+        (first_chunk + n) / 2,
+        n - 1,
+    ]
+}
+
+/// Of [`spread`]'s interruptions, the first is in the analysis, the others in the runs.
+fn spread_at(at: &[Option<u64>]) {
     assert!(at[0].is_none(), "the first interruption is in the analysis");
     assert!(at[1..].iter().all(Option::is_some), "{at:?}");
-    at
 }
 
 /// A time-varying a(t) and Γ(t), a measurement on a schedule, a constant model error
@@ -345,8 +358,10 @@ fn a_monte_carlo_resumes_exactly() {
             "options": {"trace_points": 30}
         }),
         &req,
+        spread,
     );
-    assert!(at.len() == 4 && at[3] < Some(40_000), "{at:?}");
+    spread_at(&at);
+    assert!(at[3] < Some(40_000), "{at:?}");
 }
 
 /// Nine states (the runs' loop of runtime size), the truth the mean (seed 000's
@@ -367,7 +382,7 @@ fn a_runtime_size_monte_carlo_resumes_exactly() {
         .collect();
     let mut req = SimulationRequest::new(40, 3);
     req.truth = Truth::Mean;
-    simulates_exactly(
+    let at = simulates_exactly(
         json!({
             "time": {"t0": 0.0, "t_end": 2.0, "steps": 3000},
             "system": {"states": (0..n).map(|i| format!("x{i}")).collect::<Vec<_>>(), "a": a,
@@ -377,7 +392,9 @@ fn a_runtime_size_monte_carlo_resumes_exactly() {
             "options": {"trace_points": 25}
         }),
         &req,
+        spread,
     );
+    spread_at(&at);
 }
 
 /// The runs' state of another request (another seed) is not taken: the run starts over.
@@ -473,4 +490,40 @@ fn an_auto_steps_run_takes_its_kept_selection() {
     .unwrap();
     assert!(zero_reports >= 3, "the selection was made again");
     assert_eq!(untimed(&r), untimed(&run(&other, &mut NoProgress).unwrap()));
+}
+
+/// Every preset (the seed's g form, schedules, six states, paired and unpaired states)
+/// analysed and simulated, each interrupted at a report drawn from a seeded stream (so
+/// the same on every run) and resumed: the uninterrupted result.
+#[test]
+fn every_preset_resumes_exactly_at_a_drawn_report() {
+    let mut rng = ChaCha8Rng::seed_from_u64(28);
+    for name in kea_core::presets::names() {
+        let mut model = common::preset_value(name);
+        model["time"]["steps"] = json!(200_000);
+        model["options"]["trace_points"] = json!(200);
+        let m = compiled(model.clone());
+        let whole = untimed(&run(&m, &mut NoProgress).unwrap());
+        let n = reports(&m);
+        assert!(n >= 4, "{name}: {n} reports");
+        let stop = rng.random_range(2..n);
+        let state = interrupted(&m, stop);
+        let resumed = run_resumable(&m, &mut NoProgress, &Keeper::recalling(state)).unwrap();
+        assert_eq!(
+            untimed(&resumed),
+            whole,
+            "{name}: the analysis interrupted at report {stop} of {n}"
+        );
+
+        model["time"]["steps"] = json!(20_000);
+        let mut draw = |first_chunk: usize, n: usize| {
+            assert!(
+                n >= first_chunk + 3,
+                "{name}: {n} reports, the runs' first at {first_chunk}"
+            );
+            vec![rng.random_range(first_chunk..n)]
+        };
+        let at = simulates_exactly(model, &SimulationRequest::new(40, 11), &mut draw);
+        assert!(at[0].is_some(), "{name}: interrupted in the runs");
+    }
 }

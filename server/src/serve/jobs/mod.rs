@@ -32,8 +32,9 @@ pub trait PreparedJob: Send {
     /// Run to completion, reporting progress; `Error::Cancelled` when progress said stop.
     /// `stop` says the same as progress's answer, from any thread: for computations
     /// running beside others, which do not report (a synthesis's analyses). `memo`
-    /// keeps finished parts for a run of the same job after a restart, and holds those
-    /// of an earlier run (a synthesis keeps its analyses; the other kinds start over).
+    /// keeps finished parts and states for a run of the same job after a restart, and
+    /// holds those of an earlier run (a synthesis keeps its analyses, an analysis its
+    /// step loop's state, a Monte Carlo its runs' state: `kea_core::resume`).
     fn run(
         self: Box<Self>,
         progress: &mut dyn Progress,

@@ -189,7 +189,6 @@ pub(crate) struct SimulationStamp {
     pub steps: u64,
     pub n: usize,
     pub nm: usize,
-    pub nl: usize,
     pub runs: u64,
     pub seed: u64,
     pub chunk: usize,
@@ -198,7 +197,7 @@ pub(crate) struct SimulationStamp {
 impl SimulationStamp {
     pub(crate) fn new(
         steps: u64,
-        (n, nm, nl): (usize, usize, usize),
+        (n, nm): (usize, usize),
         runs: u64,
         seed: u64,
         chunk: usize,
@@ -208,7 +207,6 @@ impl SimulationStamp {
             steps,
             n,
             nm,
-            nl,
             runs,
             seed,
             chunk,

@@ -1301,7 +1301,8 @@ fn run_n<const N: usize, E: Executor>(
     let mut k0 = 1u64;
 
     // An earlier run's state (a restart): its values, and on from the chunk after it.
-    let stamp = SimulationStamp::new(steps, (n, nm, d.nl), req.runs, req.seed, chunk_len);
+    let stamp = SimulationStamp::new(steps, (n, nm), req.runs, req.seed, chunk_len);
+    let keeps = keeps_state(req.runs, n);
     let block_runs: Vec<usize> = blocks.iter().map(|b| b.runs).collect();
     let series = n * T_SERIES + 2;
     let earlier = memo
@@ -1456,7 +1457,7 @@ fn run_n<const N: usize, E: Executor>(
         if let ControlFlow::Break(()) = progress.report((k0 - 1) as f64 / steps as f64) {
             return Err(Error::Cancelled);
         }
-        if k0 <= steps && keeps_state(req.runs, n) && memo.state_due() {
+        if keeps && k0 <= steps && memo.state_due() {
             let avgs = |a: &[Avg]| -> Vec<(F, u64, u64)> {
                 a.iter().map(|a| (F(a.sum), a.count, a.excluded)).collect()
             };

@@ -696,6 +696,35 @@ fn a_monte_carlo_resumes_after_a_crash_from_the_state_it_kept() {
     resumes_after_a_crash(body, steps);
 }
 
+/// A job's kept state is taken only by the kea executable that kept it: after an
+/// upgrade (here, a copy of kea: another file) the job starts over, and its result is
+/// the new executable's alone.
+#[test]
+fn a_job_kept_by_another_kea_executable_starts_over() {
+    let dir = tmp();
+    let args = ["--workers", "1", "--state-every", "1"];
+    let steps = 40_000_000;
+    let mut s = Server::start(dir.path(), &args);
+    let id = s.submit_analysis(long_model(steps));
+    let first = s.wait_job(&id, LONG, |j| j["progress"].as_f64().unwrap() >= 0.4);
+    assert_eq!(first["status"], "running", "{first}");
+    s.kill();
+
+    let other = tmp();
+    let upgraded = other.path().join("kea");
+    std::fs::copy(common::KEA, &upgraded).expect("copy kea");
+    let s = Server::start_binary(&upgraded, dir.path(), &args);
+    assert_eq!(s.wait_finished(&id, LONG)["status"], "succeeded");
+    let result = s.get(&format!("/v1/jobs/{id}/result")).json();
+    assert_eq!(
+        result["timing"].get("resumed_from_step"),
+        None,
+        "{}",
+        result["timing"]
+    );
+    assert_eq!(result["steps"], steps);
+}
+
 /// A job the server dies running three times (as one that brings it down would)
 /// fails with a problem instead of running at every start; the next job runs.
 #[test]

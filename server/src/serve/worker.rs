@@ -26,6 +26,10 @@ use tokio::sync::watch;
 /// [`PERSIST_EVERY`] (one transaction each, not one per part: a synthesis may finish
 /// hundreds of analyses a second) and at a shutdown. A crash loses at most the last
 /// batch; a job's end drops them all ([`Store::finish_job`]).
+///
+/// What an earlier run kept is taken only if the same kea executable kept it
+/// ([`BUILD_KEY`]): after an upgrade a job starts over, so that its result comes from
+/// one build, not from the old one's parts and states and the new one's rest.
 struct StoreMemo<'a> {
     store: &'a dyn Store,
     job: &'a str,
@@ -38,22 +42,39 @@ struct StoreMemo<'a> {
 }
 
 impl<'a> StoreMemo<'a> {
-    fn new(store: &'a dyn Store, job: &'a str, state_every: Duration) -> Self {
-        let earlier = store.checkpoints(job).unwrap_or_else(|e| {
+    fn new(store: &'a dyn Store, job: &'a str, state_every: Duration, build: &str) -> Self {
+        let mut earlier = store.checkpoints(job).unwrap_or_else(|e| {
             tracing::warn!(error = %e, "cannot read the job's checkpoints: it starts over");
             HashMap::new()
         });
+        let kept_by = earlier.remove(BUILD_KEY);
         if !earlier.is_empty() {
-            tracing::info!(
-                kept = earlier.len(),
-                "resuming from an earlier run's checkpoints"
-            );
+            if kept_by.as_deref() == Some(build) {
+                tracing::info!(
+                    kept = earlier.len(),
+                    "resuming from an earlier run's checkpoints"
+                );
+            } else {
+                tracing::warn!(
+                    kept = earlier.len(),
+                    kept_by = kept_by
+                        .as_deref()
+                        .unwrap_or("a kea before builds were recorded"),
+                    this = build,
+                    "the job's checkpoints were kept by another kea executable: it starts over"
+                );
+                earlier.clear();
+            }
         }
         StoreMemo {
             store,
             job,
             earlier,
-            pending: Mutex::new((Vec::new(), Instant::now())),
+            // (Written with the first batch: a job that keeps nothing writes nothing.)
+            pending: Mutex::new((
+                vec![(BUILD_KEY.to_string(), build.to_string())],
+                Instant::now(),
+            )),
             state_at: Mutex::new(Instant::now()),
             state_every,
         }
@@ -118,6 +139,30 @@ impl Memo for StoreMemo<'_> {
     }
 }
 
+/// The checkpoint that names the kea executable that kept a job's other checkpoints.
+const BUILD_KEY: &str = "kea-build";
+
+/// This kea executable: its version, and its file's size and modification time (read
+/// once, at start). A rebuilt or upgraded kea differs; the version alone where the
+/// file cannot be read.
+fn this_build() -> String {
+    let version = env!("CARGO_PKG_VERSION");
+    let file = std::env::current_exe().and_then(std::fs::metadata);
+    match file.and_then(|m| Ok((m.len(), m.modified()?))) {
+        Ok((len, modified)) => {
+            let since = modified
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap_or_default();
+            format!(
+                "{version} {len} bytes, modified {}.{:09}",
+                since.as_secs(),
+                since.subsec_nanos()
+            )
+        }
+        Err(_) => version.to_string(),
+    }
+}
+
 /// A job's state as seen live (between store writes).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Snapshot {
@@ -178,6 +223,8 @@ pub struct Pool {
     job_time_limit: Duration,
     /// How often an analysis or Monte Carlo job keeps its state ([`StoreMemo`]).
     state_every: Duration,
+    /// This kea executable ([`this_build`]), named with what a job keeps.
+    build: String,
     /// Live jobs by id. Claims, submissions and cancellations take this lock so a
     /// cancellation never slips between "claimed in the store" and "known here".
     live: Mutex<HashMap<String, Arc<LiveJob>>>,
@@ -237,6 +284,7 @@ impl Pool {
             registry,
             job_time_limit,
             state_every,
+            build: this_build(),
             live: Mutex::new(HashMap::new()),
             wake: Mutex::new(0),
             cond: Condvar::new(),
@@ -413,7 +461,7 @@ impl Pool {
             let request: serde_json::Value = serde_json::from_str(&job.request_json)
                 .map_err(|e| Error::invalid("", format!("stored request unreadable: {e}")))?;
             let prepared = kind.prepare(&request)?;
-            let memo = StoreMemo::new(&*self.store, &job.id, self.state_every);
+            let memo = StoreMemo::new(&*self.store, &job.id, self.state_every, &self.build);
             let mut last_persist = Instant::now();
             let mut progress = |fraction: f64| {
                 // Never backwards, whatever order the core's parts report in.

@@ -64,7 +64,12 @@ impl Server {
     /// Start `kea serve` on 127.0.0.1:0 with `data_dir` and extra arguments; waits
     /// for the "listening on" line.
     pub fn start(data_dir: &Path, args: &[&str]) -> Server {
-        let mut cmd = Command::new(KEA);
+        Server::start_binary(Path::new(KEA), data_dir, args)
+    }
+
+    /// [`Server::start`] with the kea executable at `kea`.
+    pub fn start_binary(kea: &Path, data_dir: &Path, args: &[&str]) -> Server {
+        let mut cmd = Command::new(kea);
         cmd.arg("serve")
             .arg("--addr")
             .arg("127.0.0.1:0")

@@ -3,6 +3,8 @@
 //! decimated), and the documented cost of time-dependent expressions, which the
 //! model's expression limits rest on (README "The model format", `expr::MAX_TIME_*`).
 
+mod common;
+
 use kea_core::simulation::{Sequential, SimulationRequest, simulate};
 use kea_core::{Model, NoProgress, Overrides, model_from_value};
 use serde_json::{Value, json};
@@ -70,17 +72,7 @@ fn model(a: Vec<Vec<Value>>, steps: u64) -> Model {
 
 /// A time-varying 3-state chain over `steps` steps.
 fn chain(steps: u64) -> Model {
-    let a = (0..3)
-        .map(|i| {
-            (0..3)
-                .map(|j| match j {
-                    _ if j == i => json!(format!("-0.5 + 0.2*sin(t + {i})")),
-                    _ if j == i + 1 => json!(1.0),
-                    _ => json!(0.0),
-                })
-                .collect()
-        })
-        .collect();
+    let a = common::chain_a(3, |i| json!(format!("-0.5 + 0.2*sin(t + {i})")), json!(1.0));
     model(a, steps)
 }
 

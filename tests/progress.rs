@@ -2,6 +2,8 @@
 //! a model whose steps are costly reports (and can be cancelled) every few steps, well
 //! before the end, in the analysis, the Monte Carlo and a synthesis's batch.
 
+mod common;
+
 use kea_core::simulation::{self, SimulationRequest};
 use kea_core::synthesis;
 use kea_core::{Error, Model, Overrides};
@@ -11,17 +13,7 @@ use std::ops::ControlFlow;
 /// A chain of `n` states whose a(t) varies with t (every step costs about N³ units of
 /// work, ≈ 1 ms at N = 100), over `steps` steps, with a parameter `psi`.
 fn costly(n: usize, steps: u64) -> Model {
-    let a: Vec<Vec<serde_json::Value>> = (0..n)
-        .map(|i| {
-            (0..n)
-                .map(|j| match j {
-                    _ if j == i => json!("-1 - 0.1*sin(t)"),
-                    _ if j == i + 1 => json!(0.5),
-                    _ => json!(0),
-                })
-                .collect()
-        })
-        .collect();
+    let a = common::chain_a(n, |_| json!("-1 - 0.1*sin(t)"), json!(0.5));
     let mut c = vec![0.0; n];
     c[0] = 1.0;
     kea_core::model_from_value(json!({

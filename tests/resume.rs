@@ -199,21 +199,7 @@ fn a_time_varying_scheduled_run_resumes_exactly() {
 #[test]
 fn a_runtime_size_run_resumes_exactly() {
     let n = 14;
-    let a: Vec<Vec<f64>> = (0..n)
-        .map(|i| {
-            (0..n)
-                .map(|j| {
-                    if j == i {
-                        -0.5
-                    } else if j == i + 1 {
-                        1.0
-                    } else {
-                        0.0
-                    }
-                })
-                .collect()
-        })
-        .collect();
+    let a = common::chain_a(n, |_| json!(-0.5), json!(1.0));
     let c: Vec<Vec<f64>> = (0..2)
         .map(|r| (0..n).map(|j| if j == r { 1.0 } else { 0.0 }).collect())
         .collect();
@@ -369,17 +355,7 @@ fn a_monte_carlo_resumes_exactly() {
 #[test]
 fn a_runtime_size_monte_carlo_resumes_exactly() {
     let n = 9;
-    let a: Vec<Vec<f64>> = (0..n)
-        .map(|i| {
-            (0..n)
-                .map(|j| match j {
-                    _ if j == i => -0.5,
-                    _ if j == i + 1 => 1.0,
-                    _ => 0.0,
-                })
-                .collect()
-        })
-        .collect();
+    let a = common::chain_a(n, |_| json!(-0.5), json!(1.0));
     let mut req = SimulationRequest::new(40, 3);
     req.truth = Truth::Mean;
     let at = simulates_exactly(

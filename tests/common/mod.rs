@@ -16,6 +16,26 @@ pub fn assert_error_at(e: &Error, path: &str, fragment: &str) {
     );
 }
 
+/// The `a` of an N-state chain: `diagonal(i)` in row i's diagonal, `above` just right
+/// of it, 0 elsewhere.
+pub fn chain_a(
+    n: usize,
+    diagonal: impl Fn(usize) -> serde_json::Value,
+    above: serde_json::Value,
+) -> Vec<Vec<serde_json::Value>> {
+    (0..n)
+        .map(|i| {
+            (0..n)
+                .map(|j| match j {
+                    _ if j == i => diagonal(i),
+                    _ if j == i + 1 => above.clone(),
+                    _ => serde_json::json!(0.0),
+                })
+                .collect()
+        })
+        .collect()
+}
+
 /// A preset's model as JSON, to modify before parsing.
 pub fn preset_value(name: &str) -> serde_json::Value {
     serde_json::from_str(kea_core::presets::get_json(name).expect("a preset"))

@@ -12,7 +12,7 @@ use crate::inputs::{Inputs, time_err};
 use crate::lanes::{Lanes, Scalar};
 use crate::linalg::{SparseRows, arr, arr_mut, cov_rel_diff, mat, predict_in_place, predict_work};
 use crate::result::*;
-use crate::resume::{F, LoopState, SELECTION_KEY, STATE_KEY, bits, values};
+use crate::resume::{F, LoopState, SELECTION_KEY, STATE_KEY, bits, put, values};
 use crate::riccati::{Prepared, SequentialJoseph};
 use crate::steps::{Selected, select_steps};
 use crate::validate::{CompiledModel, StepPlan};
@@ -606,7 +606,6 @@ impl<'m, const N: usize> Engine<'m, N> {
             .flatten()
             .and_then(|text| LoopState::from_text(&text, self.steps, (n, nm, py_len), &dec));
         if let Some(s) = earlier {
-            let put = |dst: &mut [f64], src: &[F]| dst.copy_from_slice(&values(src));
             put(&mut y, &s.y);
             put(&mut y_max, &s.y_max);
             put(&mut ydot_max, &s.ydot_max);

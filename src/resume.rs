@@ -39,6 +39,13 @@ pub(crate) fn bits(v: &[f64]) -> Vec<F> {
     v.iter().map(|&x| F(x)).collect()
 }
 
+/// `dst` set to the values of `src`'s bits (of its length).
+pub(crate) fn put(dst: &mut [f64], src: &[F]) {
+    for (d, s) in dst.iter_mut().zip(src) {
+        *d = s.0;
+    }
+}
+
 /// Bits as values.
 pub(crate) fn values(v: &[F]) -> Vec<f64> {
     v.iter().map(|x| x.0).collect()

@@ -63,7 +63,7 @@ pub const BAND_PROBABILITY: f64 = 0.95;
 pub use crate::exec::{Executor, Sequential};
 use crate::exec::{Forgetful, Memo};
 use crate::resume::{
-    BlockState, F, RowsState, SIMULATION_KEY, SimulationStamp, SimulationState, bits, values,
+    BlockState, F, RowsState, SIMULATION_KEY, SimulationStamp, SimulationState, bits, put, values,
 };
 
 /// What the filter is compared with (METHOD §1.8).
@@ -1310,7 +1310,6 @@ fn run_n<const N: usize, E: Executor>(
         .and_then(|text| SimulationState::from_text(&text, stamp, &block_runs, series));
     let mut resumed_from = None;
     if let Some(s) = earlier {
-        let put = |dst: &mut [f64], src: &[F]| dst.copy_from_slice(&values(src));
         put(&mut plan.y, &s.y);
         put(&mut plan.big_r, &s.big_r);
         put(&mut plan.p_y, &s.p_y);

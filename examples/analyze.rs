@@ -17,7 +17,7 @@ fn main() {
     match kea_core::analyze(&model, &set, &mut kea_core::NoProgress) {
         Ok(mut r) => {
             r.timing.wall_ms = t.elapsed().as_secs_f64() * 1e3;
-            print!("{}", kea_core::report::criteria_table(&r));
+            print!("{}", kea_core::analysis::report::criteria_table(&r));
         }
         Err(e) => eprintln!("{e}"),
     }

@@ -34,7 +34,7 @@ impl fmt::Display for FieldError {
 /// identifier, else `parent["key"]` (JSON-quoted), so that a key with a dot, a space or
 /// a bracket in it (`params["a.b"]`) does not read as a path of its own.
 pub fn member_path(parent: &str, key: &str) -> String {
-    match (crate::validate::is_identifier(key), parent.is_empty()) {
+    match (crate::text::is_identifier(key), parent.is_empty()) {
         (true, true) => key.to_string(),
         (true, false) => format!("{parent}.{key}"),
         (false, _) => format!(
@@ -78,10 +78,7 @@ impl Error {
                 ..
             } => vec![FieldError::new(
                 path.clone(),
-                format!(
-                    "{message} (at step {step}, t = {})",
-                    crate::report::short(*t)
-                ),
+                format!("{message} (at step {step}, t = {})", crate::text::short(*t)),
             )],
             Error::Cancelled => vec![FieldError::new("", "cancelled")],
         }
@@ -144,13 +141,13 @@ impl fmt::Display for Error {
                     write!(
                         f,
                         "{message} (at step {step}, t = {})",
-                        crate::report::short(*t)
+                        crate::text::short(*t)
                     )
                 } else {
                     write!(
                         f,
                         "{path}: {message} (at step {step}, t = {})",
-                        crate::report::short(*t)
+                        crate::text::short(*t)
                     )
                 }
             }
@@ -257,7 +254,7 @@ pub fn plain_serde_error(e: FieldError, hints: &[(&str, &str)]) -> FieldError {
         };
         let got = got
             .parse()
-            .map_or(format!("{got} entries"), crate::validate::entries);
+            .map_or(format!("{got} entries"), crate::text::entries);
         return FieldError::new(path, format!("expected {expected}, got {got}"));
     }
     FieldError::new(path, message)
@@ -331,6 +328,30 @@ fn got_kind(got: &str) -> String {
             g => g.into(),
         }
     }
+}
+
+/// The most field errors one response lists (then one line says how many more).
+pub const MAX_REPORTED_ERRORS: usize = 100;
+
+/// The entry that ends an error list cut at [`MAX_REPORTED_ERRORS`], at the top level
+/// (`""`): it stands for `omitted` errors left out. (The server caps its own lists with
+/// the same entry, and reads the count back with [`omitted_count`].)
+pub fn omitted_entry(omitted: usize) -> FieldError {
+    FieldError::new(
+        "",
+        format!("… and {omitted} more errors (only the first {MAX_REPORTED_ERRORS} are listed)"),
+    )
+}
+
+/// How many errors an entry of [`omitted_entry`]'s form (at any path) stands for;
+/// `None` for an ordinary error.
+pub fn omitted_count(e: &FieldError) -> Option<usize> {
+    let rest = e.message.strip_prefix("… and ")?;
+    let (count, tail) = rest.split_once(' ')?;
+    if tail != format!("more errors (only the first {MAX_REPORTED_ERRORS} are listed)") {
+        return None;
+    }
+    count.parse().ok()
 }
 
 #[cfg(test)]

@@ -5,7 +5,7 @@
 
 mod common;
 
-use kea_core::simulation::{Sequential, SimulationRequest, simulate};
+use kea_core::monte_carlo::{Sequential, SimulationRequest, simulate};
 use kea_core::{Model, NoProgress, Overrides, model_from_value};
 use serde_json::{Value, json};
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -136,7 +136,7 @@ fn expressions_at_the_model_limits_take_the_documented_memory() {
     let cost = |count: usize, chars: usize| {
         let run = |m: &Model| {
             let (held, peak, _) = measured(|| {
-                let c = kea_core::validate::compile(m, &set).unwrap();
+                let c = kea_core::model::compile(m, &set).unwrap();
                 kea_core::analysis::run(&c, &mut NoProgress).unwrap();
                 c
             });

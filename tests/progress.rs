@@ -4,7 +4,7 @@
 
 mod common;
 
-use kea_core::simulation::{self, SimulationRequest};
+use kea_core::monte_carlo::{self, SimulationRequest};
 use kea_core::synthesis;
 use kea_core::{Error, Model, Overrides};
 use serde_json::json;
@@ -70,11 +70,11 @@ fn a_costly_monte_carlo_reports_within_a_chunk_of_steps_and_stops_when_told() {
     let model = costly(100, 64);
     let req = SimulationRequest::new(8, 1);
     let simulate = |p: &mut dyn FnMut(f64) -> ControlFlow<()>| {
-        simulation::simulate(
+        monte_carlo::simulate(
             &model,
             &Overrides::new(),
             &req,
-            &simulation::Sequential,
+            &monte_carlo::Sequential,
             &mut { p },
         )
         .map(|_| ())

@@ -222,14 +222,14 @@ fn doubling_algorithm_matches_scipy_dare() {
                 }
             }
         }
-        let r_inf = kea_core::riccati::dare_doubling(
+        let r_inf = kea_core::numerics::riccati::dare_doubling(
             &flat(&a),
             &c_nz,
             &flat(&matrix(&m["Q"])),
             &flat(&matrix(&m["R"])),
             n,
             nm,
-            kea_core::riccati::MAX_DOUBLINGS,
+            kea_core::numerics::riccati::MAX_DOUBLINGS,
         )
         .unwrap_or_else(|e| panic!("{name}: doubling failed ({e:?})"));
         let rows: Vec<Vec<f64>> = r_inf.chunks(n).map(|r| r.to_vec()).collect();

@@ -8,11 +8,12 @@
 
 mod common;
 
+use kea_core::analysis::{SELECTION_KEY, STATE_KEY};
 use kea_core::analysis::{run, run_resumable};
 use kea_core::exec::{Forgetful, Memo, Sequential};
-use kea_core::resume::{SELECTION_KEY, SIMULATION_KEY, STATE_KEY};
-use kea_core::simulation::{ModelError, SimulationRequest, Truth, simulate_resumable};
-use kea_core::validate::{CompiledModel, compile};
+use kea_core::model::compile::{CompiledModel, compile};
+use kea_core::monte_carlo::STATE_KEY as SIMULATION_KEY;
+use kea_core::monte_carlo::{ModelError, SimulationRequest, Truth, simulate_resumable};
 use kea_core::{Error, NoProgress, Overrides, Progress, model_from_value};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -89,7 +90,7 @@ fn stopping_at(stop: usize) -> impl Progress {
 }
 
 /// The result's JSON without its timing.
-fn untimed(r: &kea_core::result::AnalysisResult) -> Value {
+fn untimed(r: &kea_core::analysis::result::AnalysisResult) -> Value {
     let mut v = serde_json::to_value(r).unwrap();
     v.as_object_mut().unwrap().remove("timing");
     v
@@ -261,7 +262,7 @@ fn simulates_exactly(
     let sim = |progress: &mut dyn Progress, memo: &dyn Memo| {
         simulate_resumable(&model, &set, req, &Sequential, progress, memo)
     };
-    let untimed = |r: &kea_core::simulation::SimulationResult| {
+    let untimed = |r: &kea_core::monte_carlo::SimulationResult| {
         let mut v = serde_json::to_value(r).unwrap();
         v.as_object_mut().unwrap().remove("timing");
         v

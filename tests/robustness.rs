@@ -11,7 +11,7 @@
 
 mod common;
 
-use kea_core::result::AnalysisResult;
+use kea_core::analysis::result::AnalysisResult;
 use kea_core::{Error, NoProgress, Overrides, analyze, model_from_value};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -224,7 +224,7 @@ fn a_measurement_noise_variance_that_underflows_to_zero_is_an_error() {
 #[test]
 fn a_simulated_process_that_outgrows_double_precision_stops_the_run() {
     use kea_core::exec::Sequential;
-    use kea_core::simulation::{SimulationRequest, simulate, traces_csv};
+    use kea_core::monte_carlo::{SimulationRequest, simulate, traces_csv};
     let mut v = common::preset_value("cv-tracker");
     v["system"]["a"] = json!([[0, 1], [0, 10]]);
     v["time"] = json!({"t0": 0, "t_end": 100, "steps": 1000});
@@ -263,7 +263,7 @@ fn a_simulated_process_that_outgrows_double_precision_stops_the_run() {
 #[test]
 fn a_simulation_without_measurements_says_why_nis_is_undefined() {
     use kea_core::exec::Sequential;
-    use kea_core::simulation::{SimulationRequest, simulate};
+    use kea_core::monte_carlo::{SimulationRequest, simulate};
     let mut v = scalar();
     v["measurement"]["schedule"] = json!([{"when": -1}]);
     let m = model_from_value(v).unwrap();
@@ -707,7 +707,7 @@ fn the_traces_csv_writes_extreme_values_in_exponent_form() {
     v["system"]["y0"] = json!([1e200]);
     v["system"]["eta0"] = json!([1e-150]);
     let r = run(v).unwrap();
-    let csv = kea_core::report::traces_csv(&r);
+    let csv = kea_core::analysis::report::traces_csv(&r);
     let mut lines = csv.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let y = header

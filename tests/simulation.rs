@@ -7,7 +7,7 @@
 //! a false alarm is at most 1 %.
 
 use kea_core::model::{Schedule, Steps, Value};
-use kea_core::simulation::{
+use kea_core::monte_carlo::{
     Executor, ModelError, Sequential, SimulationRequest, SimulationResult, Truth, Verdict, simulate,
 };
 use kea_core::{Model, NoProgress, Overrides};
@@ -403,7 +403,7 @@ fn requests_are_validated_with_field_paths() {
 /// previous implementation, is off by 1.7e-7 relative at dof = 0.5.)
 #[test]
 fn chi2_band_quantiles_match_scipy() {
-    use kea_core::simulation::chi2_band;
+    use kea_core::monte_carlo::chi2_band;
     for (dof, lo, hi) in [
         (0.5, 5.273_202_591_259_991e-7, 3.433_235_299_960_771),
         (1.0, 0.000_982_069_117_175_255_5, 5.023_886_187_314_888),
@@ -458,7 +458,7 @@ fn normal_samples_take_libm_bits_whatever_the_features() {
 fn the_traces_csv_reads_back_to_the_results_traces() {
     let m = helicopter(400);
     let r = sim(&m, &request(20, 3, Truth::Process));
-    let text = kea_core::simulation::traces_csv(&r);
+    let text = kea_core::monte_carlo::traces_csv(&r);
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     assert_eq!(header[0], "t");

@@ -541,14 +541,14 @@ fn distinct_time_expressions_are_limited_and_reported_once() {
 #[test]
 fn work_estimates_count_every_step_not_only_n_cubed() {
     // steps × (N³ + 16N² + 200): a one-state step is not free.
-    assert_eq!(kea_core::step_cost(1), 217.0);
-    assert_eq!(kea_core::step_cost(10), 2800.0);
+    assert_eq!(kea_core::analysis::work::step_cost(1), 217.0);
+    assert_eq!(kea_core::analysis::work::step_cost(10), 2800.0);
     let m = model_from_value(chain(
         10,
         |i, j| if i == j { "-1".into() } else { "0".into() },
     ))
     .unwrap();
-    let w = kea_core::estimate_work(&m, &Overrides::new()).unwrap();
+    let w = kea_core::analysis::work::estimate_work(&m, &Overrides::new()).unwrap();
     assert_eq!((w.steps, w.states, w.work), (50, 10, 50.0 * 2800.0));
 }
 
@@ -558,11 +558,12 @@ fn work_estimates_count_every_step_not_only_n_cubed() {
 /// smaller (every state measured, or a dense a), it stays.
 #[test]
 fn work_estimates_count_a_sparse_a_and_few_measurements() {
-    use kea_core::cost::{AnalysisOnce, Work, analysis_work};
+    use kea_core::analysis::work::{AnalysisOnce, analysis_work};
+    use kea_core::work::Work;
     // The steps' part (the once part: cost.rs's own test).
     let work = |m: &Value| {
         let m = model_from_value(m.clone()).unwrap();
-        let compiled = kea_core::validate::compile(&m, &Overrides::new()).unwrap();
+        let compiled = kea_core::model::compile(&m, &Overrides::new()).unwrap();
         let w = analysis_work(&compiled, Some(&m));
         let once = AnalysisOnce::of(&compiled, Some(&m)).units();
         Work {
@@ -597,10 +598,18 @@ fn work_estimates_count_a_sparse_a_and_few_measurements() {
     let mut all = chain(n, bidiagonal);
     all["options"] = json!({"trace_points": 0});
     let all = work(&all);
-    assert_eq!(all.units, 50.0 * kea_core::step_cost(n), "{}", all.explain);
+    assert_eq!(
+        all.units,
+        50.0 * kea_core::analysis::work::step_cost(n),
+        "{}",
+        all.explain
+    );
     // A dense a, measured once: N³ too (2(N + N²)N + N² is larger).
     one["system"]["a"] = json!(vec![vec![0.5; n]; n]);
-    assert_eq!(work(&one).units, 50.0 * kea_core::step_cost(n));
+    assert_eq!(
+        work(&one).units,
+        50.0 * kea_core::analysis::work::step_cost(n)
+    );
 }
 
 #[test]

@@ -29,6 +29,14 @@ function asError(e) {
   return { kind: 'internal', title: String(e && e.message ? e.message : e), errors: [] };
 }
 
+// The worker's ops that run (or estimate) one of the core's kinds, and the kind.
+const KINDS = {
+  synthesize: 'synthesis',
+  synthesis_work: 'synthesis',
+  simulate: 'simulation',
+  simulation_work: 'simulation',
+};
+
 self.onmessage = async (event) => {
   const { id, op } = event.data;
   try {
@@ -55,8 +63,8 @@ self.onmessage = async (event) => {
         value = JSON.parse(kea.analysis_work(event.data.model, event.data.set ?? ''));
         break;
       case 'synthesis_work':
-      case 'simulation_work':
-        value = JSON.parse(kea[op](event.data.request));
+      case 'simulation_work': // the core's work(kind, request), as for a server job of that kind
+        value = JSON.parse(kea.work(KINDS[op], event.data.request));
         break;
       case 'check':
         value = JSON.parse(kea.check(event.data.model, event.data.set ?? ''));
@@ -76,9 +84,10 @@ self.onmessage = async (event) => {
       }
       case 'synthesize':
       case 'simulate': {
-        // Synthesis and Monte Carlo (web/synthesis.js, web/simulation.js): one request JSON.
+        // Synthesis and Monte Carlo (web/synthesis.js, web/simulation.js): one request
+        // JSON, run by the core's run(kind, request) as a server job of that kind is.
         let last = 0;
-        const text = kea[op](event.data.request, (fraction) => {
+        const text = kea.run(KINDS[op], event.data.request, (fraction) => {
           const now = performance.now();
           if (now - last > 50) {
             last = now;

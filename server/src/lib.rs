@@ -62,8 +62,23 @@ pub struct Cli {
     pub command: Option<Command>,
 }
 
+/// The core's SIMD ceiling from the environment, for comparing the builds:
+/// `KEA_NO_SIMD` (set to anything) the portable baseline, `KEA_NO_AVX512` at most AVX2
+/// + FMA. The results are the same bits whichever runs (`kea_core::cpu`).
+pub fn cpu_limit_from_env() {
+    let set = |var: &str| std::env::var_os(var).is_some();
+    kea_core::cpu::set_limit(if set("KEA_NO_SIMD") {
+        kea_core::cpu::Limit::Baseline
+    } else if set("KEA_NO_AVX512") {
+        kea_core::cpu::Limit::Avx2
+    } else {
+        kea_core::cpu::Limit::Widest
+    });
+}
+
 impl Cli {
     pub fn run(self) -> ExitCode {
+        cpu_limit_from_env();
         match self.command {
             Some(command) => command.run(),
             None => {

@@ -77,72 +77,130 @@ pub fn check_json(text: &[u8]) -> Result<(), JsValue> {
 #[derive(Serialize)]
 struct WorkOut {
     #[serde(flatten)]
-    work: kea_core::cost::Work,
-    /// [`kea_core::cost::DEFAULT_MAX_WORK`]: what `kea serve` refuses by default.
+    work: kea_core::work::Work,
+    /// [`kea_core::work::DEFAULT_MAX_WORK`]: what `kea serve` refuses by default.
     limit: f64,
 }
 
-fn work_json(work: kea_core::cost::Work) -> String {
+fn work_json(work: kea_core::work::Work) -> String {
     let out = WorkOut {
         work,
-        limit: kea_core::cost::DEFAULT_MAX_WORK,
+        limit: kea_core::work::DEFAULT_MAX_WORK,
     };
     serde_json::to_string(&out).expect("work serialises")
 }
 
-/// The estimated work of [`analyze`] on the same input, the server's estimate
-/// (`{units, explain, path, limit}`, `limit` being the server's default `--max-work`),
-/// so the page can say so before it runs for hours. Throws the model's errors.
-#[wasm_bindgen]
-pub fn analysis_work(model_json: &str, set_json: &str) -> Result<String, JsValue> {
-    let model = kea_core::model_from_json(model_json).map_err(|e| to_js(&e))?;
-    let set = overrides(set_json).map_err(|e| to_js(&e))?;
-    let compiled = kea_core::validate::compile(&model, &set).map_err(|e| to_js(&e))?;
-    Ok(work_json(kea_core::cost::analysis_work(
-        &compiled,
-        Some(&model),
-    )))
+/// A request (JSON text) of the kind `kind` read and compiled by the core
+/// ([`kea_core::kind`]), as the server's job of that kind reads it.
+fn prepare(kind: &str, request_json: &str) -> Result<kea_core::kind::Prepared, Error> {
+    let value = kea_core::parse_json(request_json.as_bytes())
+        .map_err(|e| Error::invalid("", format!("not valid JSON: {e}")))?;
+    kea_core::kind::prepare(kind, value)
 }
 
-/// The estimated work of [`synthesize`] on the same request, as [`analysis_work`] gives it.
+/// The estimated work of [`run`] on the same kind and request, the server's estimate
+/// (`{units, explain, path, limit}`, `limit` being the server's default `--max-work`),
+/// so the page can say so before it runs for hours. Throws the request's errors.
+#[wasm_bindgen]
+pub fn work(kind: &str, request_json: &str) -> Result<String, JsValue> {
+    let prepared = prepare(kind, request_json).map_err(|e| to_js(&e))?;
+    Ok(work_json(prepared.work()))
+}
+
+/// Run a request of the kind `kind` (`analysis`, `simulation`, `synthesis`: the
+/// server's job kinds, with the same request JSON) with the core's `Sequential`
+/// executor; the result is bit-identical to the server's. `progress(fraction)` is
+/// called after about every millisecond of work; if it returns `false` the run stops
+/// and this throws a `cancelled` error. Errors carry the request's paths
+/// (`model.system.a[0][0]`, `runs`, `mode.bisect.high`). Returns the result JSON, with
+/// `timing.wall_ms` measured here (the core has no clock).
+#[wasm_bindgen]
+pub fn run(kind: &str, request_json: &str, progress: &js_sys::Function) -> Result<String, JsValue> {
+    run_as(kind, request_json, progress).map_err(|e| to_js(&e))
+}
+
+fn run_as(kind: &str, request_json: &str, progress: &js_sys::Function) -> Result<String, Error> {
+    let start = js_sys::Date::now();
+    let prepared = prepare(kind, request_json)?;
+    let mut report = js_progress(progress);
+    let mut outcome = prepared.run(
+        &kea_core::exec::Sequential,
+        &mut report,
+        &kea_core::exec::Forgetful,
+    )?;
+    outcome.timing().wall_ms = js_sys::Date::now() - start;
+    Ok(outcome.to_json())
+}
+
+/// The analysis request of a model and its overrides (JSON texts; an empty `set` is
+/// none).
+fn analysis_request(model_json: &str, set_json: &str) -> Result<String, Error> {
+    let set = overrides(set_json)?;
+    let set = serde_json::to_string(&set).expect("overrides serialise");
+    Ok(format!(r#"{{"model": {model_json}, "set": {set}}}"#))
+}
+
+/// A request's error as the model's: `model.x` is `x` (the editor's paths).
+fn of_model(e: Error) -> Error {
+    let strip = |path: String| match path.strip_prefix("model") {
+        Some("") => String::new(),
+        Some(rest) if rest.starts_with('.') => rest[1..].to_string(),
+        Some(rest) if rest.starts_with('[') => rest.to_string(),
+        _ => path,
+    };
+    match e {
+        Error::Invalid(v) => Error::Invalid(
+            v.into_iter()
+                .map(|f| FieldError::new(strip(f.path), f.message))
+                .collect(),
+        ),
+        Error::Numerical {
+            step,
+            t,
+            path,
+            message,
+        } => Error::Numerical {
+            step,
+            t,
+            path: strip(path),
+            message,
+        },
+        other => other,
+    }
+}
+
+/// [`work`] of a synthesis request (an alias kept for older pages).
 #[wasm_bindgen]
 pub fn synthesis_work(request_json: &str) -> Result<String, JsValue> {
-    let request = kea_core::synthesis::request_from_json(request_json).map_err(|e| to_js(&e))?;
-    let work = kea_core::cost::synthesis_work(&request).map_err(|e| to_js(&e))?;
-    Ok(work_json(work))
+    work("synthesis", request_json)
 }
 
-/// The estimated work of [`simulate`] on the same request, as [`analysis_work`] gives it.
+/// [`work`] of a Monte Carlo request (an alias kept for older pages).
 #[wasm_bindgen]
 pub fn simulation_work(request_json: &str) -> Result<String, JsValue> {
-    let (model, set, request) = simulation_input(request_json).map_err(|e| to_js(&e))?;
-    let compiled =
-        kea_core::validate::compile(&model, &set).map_err(|e| to_js(&model_located(e)))?;
-    kea_core::simulation::check_request(&request, &compiled).map_err(|e| to_js(&e))?;
-    Ok(work_json(kea_core::cost::simulation_work(
-        &compiled,
-        Some(&model),
-        &request,
-    )))
+    work("simulation", request_json)
 }
 
-/// Run the analysis. `progress(fraction)` is called after about every millisecond of
-/// work (every few thousand steps of a small model, every step of a large one); if it
-/// returns `false` the run stops and this throws a `cancelled` error. Returns the
-/// result JSON, with `timing.wall_ms` measured here (the core has no clock).
+/// [`work`] of the analysis of a model with overrides, its errors at the model's
+/// own paths (`system.a[1][2]`).
+#[wasm_bindgen]
+pub fn analysis_work(model_json: &str, set_json: &str) -> Result<String, JsValue> {
+    let request = analysis_request(model_json, set_json).map_err(|e| to_js(&e))?;
+    let prepared = prepare("analysis", &request).map_err(|e| to_js(&of_model(e)))?;
+    Ok(work_json(prepared.work()))
+}
+
+/// [`run`] of the analysis of a model with overrides, its errors at the model's own
+/// paths (`system.a[1][2]`), for the editor's cells.
 #[wasm_bindgen]
 pub fn analyze(
     model_json: &str,
     set_json: &str,
     progress: &js_sys::Function,
 ) -> Result<String, JsValue> {
-    let start = js_sys::Date::now();
-    let model = kea_core::model_from_json(model_json).map_err(|e| to_js(&e))?;
-    let set = overrides(set_json).map_err(|e| to_js(&e))?;
-    let mut report = js_progress(progress);
-    let mut result = kea_core::analyze(&model, &set, &mut report).map_err(|e| to_js(&e))?;
-    result.timing.wall_ms = js_sys::Date::now() - start;
-    serde_json::to_string(&result).map_err(|e| JsValue::from_str(&e.to_string()))
+    analysis_request(model_json, set_json)
+        .and_then(|request| run_as("analysis", &request, progress))
+        .map_err(|e| to_js(&of_model(e)))
 }
 
 /// A progress callback as the core's `Progress`: `progress(fraction)` returning
@@ -155,106 +213,17 @@ fn js_progress(progress: &js_sys::Function) -> impl FnMut(f64) -> ControlFlow<()
     }
 }
 
-/// Run a synthesis request (`{model, set?, target, mode}`, docs/synthesis.md) with the
-/// core's `Sequential` executor. Errors carry the request's paths (`model.system.a[0][0]`,
-/// `mode.bisect.high`, `target.state`). Returns the result JSON, `timing.wall_ms` measured here.
-#[wasm_bindgen]
-pub fn synthesize(request_json: &str, progress: &js_sys::Function) -> Result<String, JsValue> {
-    let start = js_sys::Date::now();
-    let request = kea_core::synthesis::request_from_json(request_json).map_err(|e| to_js(&e))?;
-    let mut report = js_progress(progress);
-    let mut result =
-        kea_core::synthesis::synthesize(&request, &kea_core::exec::Sequential, &mut report)
-            .map_err(|e| to_js(&e))?;
-    result.timing.wall_ms = js_sys::Date::now() - start;
-    serde_json::to_string(&result).map_err(|e| JsValue::from_str(&e.to_string()))
-}
-
-/// A Monte Carlo request as the server's job kind `simulation` takes it: the model, its
-/// overrides, and the core's `SimulationRequest` members beside them.
-#[derive(serde::Deserialize)]
-struct SimulateIn {
-    model: serde_json::Value,
-    #[serde(default)]
-    set: Overrides,
-    #[serde(flatten)]
-    request: serde_json::Map<String, serde_json::Value>,
-}
-
-/// Run a Monte Carlo simulation (`{model, set?, runs, seed?, truth?, model_error?,
-/// trace_points?}`, docs/monte-carlo.md) with the core's `Sequential` executor; the
-/// result is bit-identical to the server's for the same seed. Model errors are at
-/// `model.…`, the simulation's at `runs`, `seed`, …, as on the server.
-#[wasm_bindgen]
-pub fn simulate(request_json: &str, progress: &js_sys::Function) -> Result<String, JsValue> {
-    let start = js_sys::Date::now();
-    let (model, set, request) = simulation_input(request_json).map_err(|e| to_js(&e))?;
-    // Locate the errors as the server does: the model's under `model.`, then the run's own.
-    let compiled =
-        kea_core::validate::compile(&model, &set).map_err(|e| to_js(&model_located(e)))?;
-    kea_core::simulation::check_request(&request, &compiled).map_err(|e| to_js(&e))?;
-    let mut report = js_progress(progress);
-    let mut result = kea_core::simulation::simulate(
-        &model,
-        &set,
-        &request,
-        &kea_core::exec::Sequential,
-        &mut report,
-    )
-    .map_err(|e| to_js(&model_located(e)))?;
-    result.timing.wall_ms = js_sys::Date::now() - start;
-    serde_json::to_string(&result).map_err(|e| JsValue::from_str(&e.to_string()))
-}
-
-/// A Monte Carlo request's parts: the model (its errors under `model.`), its
-/// overrides and the simulation's own members.
-fn simulation_input(
-    request_json: &str,
-) -> Result<
-    (
-        kea_core::Model,
-        Overrides,
-        kea_core::simulation::SimulationRequest,
-    ),
-    Error,
-> {
-    let value = kea_core::parse_json(request_json.as_bytes())
-        .map_err(|e| Error::invalid("", format!("not valid JSON: {e}")))?;
-    let input: SimulateIn = kea_core::from_value_at(value, &[])?;
-    let model = kea_core::model_from_value(input.model).map_err(|e| e.with_prefix("model"))?;
-    let request = kea_core::from_value_at(serde_json::Value::Object(input.request), &[])?;
-    Ok((model, input.set, request))
-}
-
-/// Prefix a model's error paths with `model.` (those under `set` stay).
-fn model_located(e: Error) -> Error {
-    match e {
-        Error::Invalid(v) => Error::Invalid(
-            v.into_iter()
-                .flat_map(|f| {
-                    if f.path == "set" || f.path.starts_with("set.") {
-                        vec![f]
-                    } else {
-                        Error::Invalid(vec![f]).with_prefix("model").field_errors()
-                    }
-                })
-                .collect(),
-        ),
-        other => other.with_prefix("model"),
-    }
-}
-
 /// The traces of a Monte Carlo result (as returned by [`simulate`]) as CSV, same as the CLI's.
 #[wasm_bindgen]
 pub fn simulation_csv(result_json: &str) -> Result<String, JsValue> {
-    let result: kea_core::simulation::SimulationResult = serde_json::from_str(result_json)
+    let result: kea_core::monte_carlo::SimulationResult = serde_json::from_str(result_json)
         .map_err(|e| {
             to_js(&Error::invalid(
                 "",
                 format!("not a kea simulation result: {e}"),
             ))
         })?;
-    Ok(kea_core::simulation::traces_csv(&result))
+    Ok(kea_core::monte_carlo::traces_csv(&result))
 }
 
 /// The traces of a result (as returned by [`analyze`]) as CSV, same as the CLI's.
@@ -262,7 +231,7 @@ pub fn simulation_csv(result_json: &str) -> Result<String, JsValue> {
 pub fn traces_csv(result_json: &str) -> Result<String, JsValue> {
     let result: kea_core::AnalysisResult = serde_json::from_str(result_json)
         .map_err(|e| to_js(&Error::invalid("", format!("not a kea result: {e}"))))?;
-    Ok(kea_core::report::traces_csv(&result))
+    Ok(kea_core::analysis::report::traces_csv(&result))
 }
 
 /// Name, title, description and sizes of every preset, as JSON.
@@ -331,11 +300,11 @@ mod tests {
         let out: serde_json::Value =
             serde_json::from_str(&analysis_work(model, "").unwrap()).unwrap();
         let parsed = kea_core::model_from_json(model).unwrap();
-        let compiled = kea_core::validate::compile(&parsed, &Overrides::new()).unwrap();
-        let expected = kea_core::cost::analysis_work(&compiled, Some(&parsed));
+        let compiled = kea_core::model::compile(&parsed, &Overrides::new()).unwrap();
+        let expected = kea_core::analysis::work::analysis_work(&compiled, Some(&parsed));
         assert_eq!(out["units"], expected.units);
         assert_eq!(out["explain"], expected.explain);
-        assert_eq!(out["limit"], kea_core::cost::DEFAULT_MAX_WORK);
+        assert_eq!(out["limit"], kea_core::work::DEFAULT_MAX_WORK);
         let request = format!(r#"{{"model": {model}, "runs": 10}}"#);
         let sim: serde_json::Value =
             serde_json::from_str(&simulation_work(&request).unwrap()).unwrap();

@@ -3,7 +3,6 @@
 use crate::Run;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Instant;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -26,7 +25,7 @@ pub struct Args {
 
 impl Run for Args {
     fn run(self) -> ExitCode {
-        let model = match super::load_model(&self.model) {
+        let model = match super::read_json(&self.model) {
             Ok(m) => m,
             Err(code) => return code,
         };
@@ -34,34 +33,14 @@ impl Run for Args {
             Ok(s) => s,
             Err(code) => return code,
         };
-        if let Err(code) = self
-            .limit
-            .check(crate::serve::jobs::analysis::work(&model, &set))
-        {
-            return code;
-        }
-        let csv = match super::Csv::open(self.csv.as_deref(), &self.model, self.json) {
-            Ok(c) => c,
-            Err(code) => return code,
+        let request = serde_json::json!({ "model": model, "set": set });
+        let run = super::KindRun {
+            kind: "analysis",
+            input: &self.model,
+            json: self.json,
+            csv: self.csv.as_deref(),
+            limit: &self.limit,
         };
-        let start = Instant::now();
-        let mut bar = super::Bar::new("analysis");
-        let result = kea_core::analyze(&model, &set, &mut bar);
-        bar.finish();
-        let mut result = match result {
-            Ok(r) => r,
-            Err(e) => return super::report_error(&e),
-        };
-        result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        match super::print_run(
-            &result,
-            self.json,
-            csv,
-            kea_core::report::traces_csv,
-            kea_core::report::criteria_table,
-        ) {
-            Ok(()) => ExitCode::SUCCESS,
-            Err(code) => code,
-        }
+        run.run(request, &kea_core::exec::Sequential)
     }
 }

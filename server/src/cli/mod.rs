@@ -6,8 +6,8 @@ pub mod presets;
 pub mod simulate;
 pub mod synthesize;
 
-use crate::serve::jobs::Work;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use kea_core::work::Work;
 use std::io::Write;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
@@ -300,6 +300,95 @@ pub fn print_run<T: serde::Serialize>(
     }
 }
 
+/// A command that runs one of the core's kinds on a request it made of its arguments
+/// ([`kea_core::kind`]): the request is read and compiled once, its work held to
+/// `--max-work`, then it runs with the progress bar and prints its text, JSON or CSV.
+/// The model is a file here, not a request's member: its errors are at the file's
+/// own paths (`system.a[0][1]`, not `model.system.a[0][1]`).
+pub struct KindRun<'a> {
+    pub kind: &'static str,
+    /// The model argument (a file, `-` or `preset:NAME`), for `--csv`'s checks.
+    pub input: &'a str,
+    pub json: bool,
+    pub csv: Option<&'a Path>,
+    pub limit: &'a WorkLimit,
+}
+
+impl KindRun<'_> {
+    pub fn run<E: kea_core::exec::Executor>(
+        &self,
+        request: serde_json::Value,
+        exec: &E,
+    ) -> ExitCode {
+        let prepared = match kea_core::kind::prepare(self.kind, request) {
+            Ok(p) => p,
+            Err(e) => return report_error(&of_model_file(e)),
+        };
+        if let Err(code) = self.limit.check(Ok(prepared.work())) {
+            return code;
+        }
+        let csv = match Csv::open(self.csv, self.input, self.json) {
+            Ok(c) => c,
+            Err(code) => return code,
+        };
+        let start = Instant::now();
+        let mut bar = Bar::new(self.kind);
+        let outcome = prepared.run(exec, &mut bar, &kea_core::exec::Forgetful);
+        bar.finish();
+        let mut outcome = match outcome {
+            Ok(o) => o,
+            Err(e) => return report_error(&of_model_file(e)),
+        };
+        outcome.timing().wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        let text_on_stdout = !matches!(csv, Some(Csv::Stdout));
+        let printed = (|| {
+            if let Some(csv) = csv {
+                csv.write(&outcome.csv().unwrap_or_default())?;
+            }
+            if self.json {
+                print_text(&format!("{}\n", outcome.to_json_pretty()))
+            } else if text_on_stdout {
+                print_text(&outcome.text())
+            } else {
+                Ok(())
+            }
+        })();
+        match printed {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(code) => code,
+        }
+    }
+}
+
+/// A request's error as the model file's: `model.x` is `x` (`model` the root).
+fn of_model_file(e: kea_core::Error) -> kea_core::Error {
+    let strip = |path: String| match path.strip_prefix("model") {
+        Some("") => String::new(),
+        Some(rest) if rest.starts_with('.') => rest[1..].to_string(),
+        Some(rest) if rest.starts_with('[') => rest.to_string(),
+        _ => path,
+    };
+    match e {
+        kea_core::Error::Invalid(v) => kea_core::Error::Invalid(
+            v.into_iter()
+                .map(|f| kea_core::FieldError::new(strip(f.path), f.message))
+                .collect(),
+        ),
+        kea_core::Error::Numerical {
+            step,
+            t,
+            path,
+            message,
+        } => kea_core::Error::Numerical {
+            step,
+            t,
+            path: strip(path),
+            message,
+        },
+        other => other,
+    }
+}
+
 /// Parse one `--set name=value` argument.
 pub fn parse_override(arg: &str) -> Result<(String, f64), String> {
     let (name, value) = arg
@@ -351,8 +440,8 @@ pub fn overrides(set: &[(String, f64)]) -> Result<kea_core::Overrides, ExitCode>
         if let Some(before) = out.insert(name.clone(), *value) {
             eprintln!(
                 "--set {name} is given twice ({name}={}, then {name}={}): give each param once",
-                kea_core::report::short(before),
-                kea_core::report::short(*value)
+                kea_core::text::short(before),
+                kea_core::text::short(*value)
             );
             return Err(ExitCode::from(EXIT_INVALID));
         }
@@ -368,7 +457,7 @@ pub struct WorkLimit {
     /// of one core (the server's estimate, openapi.yaml "Work": for an analysis, steps
     /// × (N³ + 16N² + 200 + what varying inputs and expressions in t cost)), so the
     /// default is ≈ 17 minutes; `--max-work inf` lifts the limit.
-    #[arg(long, env = "KEA_MAX_WORK", default_value_t = kea_core::cost::DEFAULT_MAX_WORK, value_name = "UNITS",
+    #[arg(long, env = "KEA_MAX_WORK", default_value_t = kea_core::work::DEFAULT_MAX_WORK, value_name = "UNITS",
           value_parser = parse_limit)]
     pub max_work: f64,
 }
@@ -457,7 +546,7 @@ mod tests {
         let Some(crate::Command::Serve(args)) = cli.command else {
             panic!("not the serve command: {cli:?}");
         };
-        assert_eq!(args.max_work, kea_core::cost::DEFAULT_MAX_WORK);
+        assert_eq!(args.max_work, kea_core::work::DEFAULT_MAX_WORK);
     }
 
     #[test]

@@ -115,7 +115,7 @@ impl Run for Args {
                     if let Some(before) = set.get(name) {
                         eprintln!(
                             "--set {name}={} and the request's set.{name} = {before} both give {name}: give it once (drop one of them)",
-                            kea_core::report::short(*value)
+                            kea_core::text::short(*value)
                         );
                         return ExitCode::from(super::EXIT_INVALID);
                     }
@@ -137,7 +137,7 @@ impl Run for Args {
             }
         };
         let work = synthesis::validate(&request)
-            .and_then(|()| crate::serve::jobs::synthesis::work(&request));
+            .and_then(|()| kea_core::synthesis::work::synthesis_work(&request));
         if let Err(code) = self.limit.check(work) {
             return code;
         }

@@ -1,7 +1,7 @@
 //! Handlers for health, presets, stored models and synchronous analysis. Each parses,
 //! calls the core (or the store), maps the error, and answers.
 
-use super::jobs::{PreparedJob, Work};
+use super::jobs::{self, PreparedJob, Work};
 use super::problem::{Problem, kind};
 use super::request::{self, JsonBody};
 use super::state::AppState;
@@ -26,7 +26,8 @@ pub async fn health() -> Json<Value> {
 /// (its `kea serve` options, as started) and the model's, the Monte Carlo's and the
 /// synthesis's fixed ones — so a script or the web UI can check a request first.
 pub async fn limits(State(state): State<AppState>) -> Json<Value> {
-    use kea_core::{expr, simulation, synthesis, validate};
+    use kea_core::model::limits;
+    use kea_core::{expr, monte_carlo, synthesis};
     let l = &state.config.limits;
     Json(json!({
         "server": {
@@ -44,19 +45,19 @@ pub async fn limits(State(state): State<AppState>) -> Json<Value> {
             "max_page": request::MAX_PAGE,
         },
         "model": {
-            "max_states": validate::MAX_STATES,
-            "max_sources": validate::MAX_SOURCES,
-            "max_steps": validate::MAX_STEPS,
-            "max_trace_points": validate::MAX_TRACE_POINTS,
-            "max_trace_values": validate::MAX_TRACE_VALUES,
+            "max_states": limits::MAX_STATES,
+            "max_sources": limits::MAX_SOURCES,
+            "max_steps": limits::MAX_STEPS,
+            "max_trace_points": limits::MAX_TRACE_POINTS,
+            "max_trace_values": limits::MAX_TRACE_VALUES,
             "max_expression_chars": expr::MAX_EXPRESSION_CHARS,
             "max_time_expressions": expr::MAX_TIME_EXPRESSIONS,
             "max_time_expression_chars": expr::MAX_TIME_EXPRESSION_CHARS,
-            "max_reported_errors": validate::MAX_REPORTED_ERRORS,
+            "max_reported_errors": kea_core::error::MAX_REPORTED_ERRORS,
         },
         "simulation": {
-            "max_runs": simulation::MAX_RUNS,
-            "max_work": simulation::MAX_WORK,
+            "max_runs": monte_carlo::MAX_RUNS,
+            "max_work": monte_carlo::MAX_WORK,
         },
         "synthesis": {
             "max_points": synthesis::MAX_POINTS,
@@ -265,7 +266,7 @@ pub fn in_stored_model(err: kea_core::Error, id: Option<&str>) -> kea_core::Erro
     }
 }
 
-/// Validate and compile a request of the job kind `kind` (registered) on a blocking
+/// Read and compile a request of the job kind `kind` (a known one) on a blocking
 /// thread: a large model takes long enough to stall the async workers, and every
 /// other request (`/healthz` too) with them. `stored`: the `model_id` it gave.
 pub async fn prepare(
@@ -273,18 +274,13 @@ pub async fn prepare(
     kind: &str,
     request: Value,
     stored: Option<&str>,
-) -> Result<Box<dyn PreparedJob>, Problem> {
-    let registry = state.registry.clone();
+) -> Result<PreparedJob, Problem> {
+    let _ = state;
     let kind = kind.to_string();
-    tokio::task::spawn_blocking(move || {
-        registry
-            .get(&kind)
-            .expect("a registered job kind")
-            .prepare(&request)
-    })
-    .await
-    .map_err(Problem::internal)?
-    .map_err(|e| Problem::from_core(in_stored_model(e, stored)))
+    tokio::task::spawn_blocking(move || jobs::prepare(&kind, request))
+        .await
+        .map_err(Problem::internal)?
+        .map_err(|e| Problem::from_core(in_stored_model(e, stored)))
 }
 
 /// Refuse work above `limit`; `advice` says what to do instead.

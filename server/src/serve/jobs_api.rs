@@ -64,7 +64,7 @@ pub async fn submit(
     JsonBody(body, _): JsonBody,
 ) -> Result<Response, Problem> {
     let mut obj = request::object(body)?;
-    let names = state.registry.names().join(", ");
+    let names = super::jobs::names().join(", ");
     let kind_name = match obj.remove("kind") {
         Some(Value::String(k)) => k,
         Some(other) => {
@@ -83,7 +83,7 @@ pub async fn submit(
             )]));
         }
     };
-    if state.registry.get(&kind_name).is_none() {
+    if super::jobs::find(&kind_name).is_none() {
         return Err(Problem::invalid(vec![FieldError::new(
             "kind",
             format!("unknown job kind `{kind_name}`; known: {names}"),

@@ -205,10 +205,8 @@ fn serve(args: Args) -> Result<(), Failure> {
     let store: Arc<dyn store::Store> = Arc::new(
         store::sqlite::SqliteStore::open(&args.data_dir).map_err(|e| failure(e.to_string()))?,
     );
-    let registry = jobs::registry();
     let pool = worker::Pool::start(
         store.clone(),
-        registry.clone(),
         workers,
         config.limits.job_time,
         config.limits.state_every,
@@ -223,7 +221,6 @@ fn serve(args: Args) -> Result<(), Failure> {
         config: Arc::new(config.clone()),
         store,
         pool: pool.clone(),
-        registry,
         sync_permits: Arc::new(Semaphore::new(workers)),
         shutdown: shutdown_rx,
     };

@@ -135,9 +135,9 @@ impl Problem {
 }
 
 /// The most errors a problem lists: the core's cap, so every error list reads alike.
-pub const MAX_ERRORS: usize = kea_core::validate::MAX_REPORTED_ERRORS;
+pub const MAX_ERRORS: usize = kea_core::error::MAX_REPORTED_ERRORS;
 
-pub use kea_core::validate::{omitted_count, omitted_entry};
+pub use kea_core::error::{omitted_count, omitted_entry};
 
 /// Errors from several sources (the server's own checks, the core's already-cut
 /// list) as one list of at most [`MAX_ERRORS`], with one entry at the top level for

@@ -370,16 +370,16 @@ pub fn overrides(set: Option<&Value>) -> Result<Overrides, Vec<FieldError>> {
 pub fn compile(
     model: &kea_core::Model,
     set: &Overrides,
-) -> Result<kea_core::validate::CompiledModel, kea_core::Error> {
-    match kea_core::validate::compile(model, set) {
+) -> Result<kea_core::model::compile::CompiledModel, kea_core::Error> {
+    match kea_core::model::compile(model, set) {
         Err(kea_core::Error::Invalid(mut errors))
             if !set.is_empty()
                 && !errors.iter().any(|e| e.path.starts_with("set"))
-                && kea_core::validate::compile(model, &Overrides::new()).is_ok() =>
+                && kea_core::model::compile(model, &Overrides::new()).is_ok() =>
         {
             let values: Vec<String> = set
                 .iter()
-                .map(|(k, v)| format!("{k} = {}", kea_core::validate::num(*v)))
+                .map(|(k, v)| format!("{k} = {}", kea_core::text::num(*v)))
                 .collect();
             errors.push(FieldError::new(
                 "set",

@@ -1,6 +1,5 @@
 //! The configuration and the state shared by every handler.
 
-use super::jobs::Registry;
 use super::problem::Problem;
 use super::store::Store;
 use super::worker::Pool;
@@ -66,7 +65,6 @@ pub struct AppState {
     pub config: Arc<Config>,
     pub store: Arc<dyn Store>,
     pub pool: Arc<Pool>,
-    pub registry: Registry,
     /// Bounds the synchronous analyses running at once (they share the cores).
     pub sync_permits: Arc<Semaphore>,
     /// Becomes true when the server shuts down (ends event streams).

@@ -5,7 +5,6 @@
 //! was running when the process died is re-queued on start, and a graceful shutdown
 //! lets running jobs finish for a grace period, then re-queues them.
 
-use super::jobs::Registry;
 use super::problem::{Problem, kind};
 use super::store::{Enqueued, GiveUp, JobRecord, JobStatus, Outcome, Requeued, Store, now_rfc3339};
 use axum::http::StatusCode;
@@ -219,7 +218,6 @@ const POLL_EVERY: Duration = Duration::from_secs(1);
 
 pub struct Pool {
     store: Arc<dyn Store>,
-    registry: Registry,
     job_time_limit: Duration,
     /// How often an analysis or Monte Carlo job keeps its state ([`StoreMemo`]).
     state_every: Duration,
@@ -247,7 +245,6 @@ impl Pool {
     /// Re-queue jobs a previous process left running, then start `workers` threads.
     pub fn start(
         store: Arc<dyn Store>,
-        registry: Registry,
         workers: usize,
         job_time_limit: Duration,
         state_every: Duration,
@@ -281,7 +278,6 @@ impl Pool {
         }
         let pool = Arc::new(Pool {
             store,
-            registry,
             job_time_limit,
             state_every,
             build: this_build(),
@@ -455,12 +451,9 @@ impl Pool {
         let started = Instant::now();
         let stop = Cell::new(None::<Stop>);
         let result = std::panic::catch_unwind(AssertUnwindSafe(|| {
-            let kind = self.registry.get(&job.kind).ok_or_else(|| {
-                Error::invalid("kind", format!("unknown job kind `{}`", job.kind))
-            })?;
             let request: serde_json::Value = serde_json::from_str(&job.request_json)
                 .map_err(|e| Error::invalid("", format!("stored request unreadable: {e}")))?;
-            let prepared = kind.prepare(&request)?;
+            let prepared = super::jobs::prepare(&job.kind, request)?;
             let memo = StoreMemo::new(&*self.store, &job.id, self.state_every, &self.build);
             let mut last_persist = Instant::now();
             let mut progress = |fraction: f64| {

@@ -1,50 +1,20 @@
-//! Job kinds: what a job computes, independent of queues, storage and HTTP.
-//!
-//! A kind parses a self-contained request (the `model_id` already resolved to
-//! `model`) into a [`PreparedJob`], which estimates its work and runs on a worker
-//! thread with progress and cancellation. The kinds are `analysis`, `simulation`
-//! (Monte Carlo) and `synthesis`; adding one is one module implementing [`JobKind`]
-//! plus one line in [`registry`].
+//! Job kinds: what a job computes, independent of queues, storage and HTTP — the
+//! core's kinds ([`kea_core::kind`]), each run here on a rayon pool. A request (the
+//! `model_id` already resolved to `model`) is read and compiled by its kind into a
+//! [`PreparedJob`], which estimates its work and runs on a worker thread with progress
+//! and cancellation. A new kind is the core's: nothing here changes.
 
-pub mod analysis;
-pub mod simulation;
-pub mod synthesis;
-
-pub use kea_core::cost;
+use crate::parallel::Rayon;
 use kea_core::exec::Memo;
 use kea_core::{Error, Progress};
 use serde_json::Value;
-use std::sync::Arc;
+use std::time::Instant;
 
-/// One kind of computation a job can run.
-pub trait JobKind: Send + Sync + 'static {
-    /// The `kind` member of a job request, e.g. `"analysis"`.
-    fn name(&self) -> &'static str;
-    /// Validate a request (the job body without `kind`) and prepare the work.
-    /// Errors carry paths into the request body (`model.system.a[0][1]`, `set.q`).
-    fn prepare(&self, request: &Value) -> Result<Box<dyn PreparedJob>, Error>;
-}
+/// A work estimate, in units of about a nanosecond of one core ([`kea_core::work`]).
+pub use kea_core::work::Work;
 
 /// A validated request, ready to run.
-pub trait PreparedJob: Send {
-    /// The estimated work, used to choose sync vs job and to refuse the absurd.
-    fn work(&self) -> Work;
-    /// Run to completion, reporting progress; `Error::Cancelled` when progress said stop.
-    /// `stop` says the same as progress's answer, from any thread: for computations
-    /// running beside others, which do not report (a synthesis's analyses). `memo`
-    /// keeps finished parts and states for a run of the same job after a restart, and
-    /// holds those of an earlier run (a synthesis keeps its analyses, an analysis its
-    /// step loop's state, a Monte Carlo its runs' state: `kea_core::resume`).
-    fn run(
-        self: Box<Self>,
-        progress: &mut dyn Progress,
-        stop: &(dyn Fn() -> bool + Sync),
-        memo: &dyn Memo,
-    ) -> Result<JobOutput, Error>;
-}
-
-/// A work estimate, in units of about a nanosecond of one core ([`cost`]).
-pub use kea_core::cost::Work;
+pub struct PreparedJob(kea_core::kind::Prepared);
 
 /// What a finished job produced.
 pub struct JobOutput {
@@ -54,33 +24,49 @@ pub struct JobOutput {
     pub traces_csv: Option<String>,
 }
 
-/// The job kinds this server runs.
-#[derive(Clone)]
-pub struct Registry {
-    kinds: Arc<Vec<Box<dyn JobKind>>>,
+/// Read and compile a request (the job body without `kind`) of the kind `kind` (a
+/// name or an alias). Errors carry paths into the request body
+/// (`model.system.a[0][1]`, `set.q`).
+pub fn prepare(kind: &str, request: Value) -> Result<PreparedJob, Error> {
+    kea_core::kind::prepare(kind, request).map(PreparedJob)
 }
 
-/// Every kind, in the order they are listed in errors.
-pub fn registry() -> Registry {
-    Registry {
-        kinds: Arc::new(vec![
-            Box::new(analysis::Analysis),
-            Box::new(simulation::Simulation),
-            Box::new(synthesis::Synthesis),
-            // A new kind is one more line here.
-        ]),
-    }
+/// The kind a request's `kind` names, as its name; `None` for none.
+pub fn find(kind: &str) -> Option<&'static str> {
+    kea_core::kind::find(kind)
 }
 
-impl Registry {
-    pub fn get(&self, name: &str) -> Option<&dyn JobKind> {
-        self.kinds
-            .iter()
-            .find(|k| k.name() == name)
-            .map(|k| k.as_ref())
+/// Every kind's name, in the order errors list them.
+pub fn names() -> &'static [&'static str] {
+    kea_core::kind::NAMES
+}
+
+impl PreparedJob {
+    /// The estimated work, used to choose sync vs job and to refuse the absurd.
+    pub fn work(&self) -> Work {
+        self.0.work()
     }
 
-    pub fn names(&self) -> Vec<&'static str> {
-        self.kinds.iter().map(|k| k.name()).collect()
+    /// Run to completion on every core, reporting progress; `Error::Cancelled` when
+    /// progress said stop. `stop` says the same as progress's answer, from any thread:
+    /// for computations running beside others, which do not report (a synthesis's
+    /// analyses). `memo` keeps finished parts and states for a run of the same job
+    /// after a restart, and holds those of an earlier run (`kea_core::resume`).
+    pub fn run(
+        self,
+        progress: &mut dyn Progress,
+        stop: &(dyn Fn() -> bool + Sync),
+        memo: &dyn Memo,
+    ) -> Result<JobOutput, Error> {
+        let start = Instant::now();
+        let exec = Rayon::new(None)
+            .map_err(|e| Error::invalid("", e))?
+            .stopping_when(stop);
+        let mut outcome = self.0.run(&exec, progress, memo)?;
+        outcome.timing().wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(JobOutput {
+            result_json: outcome.to_json(),
+            traces_csv: outcome.csv(),
+        })
     }
 }

@@ -13,8 +13,7 @@
 use exmex::{BinOp, MakeOperators, Operator};
 use std::str::FromStr;
 
-/// Time points per evaluation.
-pub const LANES: usize = 16;
+pub use super::LANES;
 
 /// LANES values of one expression node.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -195,8 +194,8 @@ pub struct BlockOps;
 impl MakeOperators<Block> for BlockOps {
     fn make<'a>() -> Vec<Operator<'a, Block>> {
         // sin and cos: all lanes at once, as libm's bits (`trig`)
-        let sin = |a: Block| Block(crate::trig::sin_lanes(a.0));
-        let cos = |a: Block| Block(crate::trig::cos_lanes(a.0));
+        let sin = |a: Block| Block(crate::expr::trig::sin_lanes(a.0));
+        let cos = |a: Block| Block(crate::expr::trig::cos_lanes(a.0));
         operators!(Block, block_un, block_bin, block_k, sin, cos)
     }
 }

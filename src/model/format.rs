@@ -1,7 +1,7 @@
 //! The model format: what a user submits (JSON, serde), before validation.
 //!
 //! Every matrix entry is a [`Value`]: a number or an expression string in `t` and the
-//! model's `params`. Validation (`crate::validate`) turns a [`Model`] into a
+//! model's `params`. Validation (`crate::model::compile`) turns a [`Model`] into a
 //! `CompiledModel` or a list of errors naming the exact field path.
 
 use serde::{Deserialize, Serialize};
@@ -10,55 +10,7 @@ use std::collections::BTreeMap;
 /// The version of the model format this build reads and writes.
 pub const MODEL_FORMAT_VERSION: u32 = 1;
 
-/// A matrix or vector entry: a number, or an expression in `t` and the params.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-#[serde(untagged)]
-pub enum Value {
-    Number(f64),
-    Expr(String),
-}
-
-/// By hand rather than serde's untagged derive, whose error for anything else is
-/// "data did not match any variant of untagged enum Value".
-impl<'de> Deserialize<'de> for Value {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V;
-        impl serde::de::Visitor<'_> for V {
-            type Value = Value;
-            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                f.write_str("a number or an expression string (like \"0.3*sin(2*t)\")")
-            }
-            fn visit_f64<E>(self, x: f64) -> Result<Value, E> {
-                Ok(Value::Number(x))
-            }
-            fn visit_i64<E>(self, x: i64) -> Result<Value, E> {
-                Ok(Value::Number(x as f64))
-            }
-            fn visit_u64<E>(self, x: u64) -> Result<Value, E> {
-                Ok(Value::Number(x as f64))
-            }
-            fn visit_str<E>(self, s: &str) -> Result<Value, E> {
-                Ok(Value::Expr(s.to_string()))
-            }
-            fn visit_string<E>(self, s: String) -> Result<Value, E> {
-                Ok(Value::Expr(s))
-            }
-        }
-        d.deserialize_any(V)
-    }
-}
-
-impl From<f64> for Value {
-    fn from(x: f64) -> Self {
-        Value::Number(x)
-    }
-}
-
-impl From<&str> for Value {
-    fn from(s: &str) -> Self {
-        Value::Expr(s.to_string())
-    }
-}
+pub use crate::expr::Value;
 
 /// A complete model (METHOD §1.1): dynamic system, measurements, criteria, options.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -131,12 +83,12 @@ impl<'de> Deserialize<'de> for Steps {
                 })
             }
             fn visit_f64<E: Error>(self, x: f64) -> Result<Steps, E> {
-                if x >= 0.0 && x.fract() == 0.0 && x <= crate::validate::MAX_STEPS as f64 {
+                if x >= 0.0 && x.fract() == 0.0 && x <= crate::model::limits::MAX_STEPS as f64 {
                     Ok(Steps::Fixed(x as u64))
                 } else if x.fract() == 0.0 && x > 0.0 {
                     Err(E::custom(format!(
                         "{x:e} steps is more than the limit of {}",
-                        crate::validate::MAX_STEPS
+                        crate::model::limits::MAX_STEPS
                     )))
                 } else {
                     Err(E::custom(format!(

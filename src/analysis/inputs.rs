@@ -4,8 +4,8 @@
 
 use crate::error::Error;
 use crate::expr::TimeMatrix;
-use crate::linalg::{SparseRows, mul, mul_abt_sym};
-use crate::validate::{CompiledModel, MeasurementNoise};
+use crate::model::compile::{CompiledModel, MeasurementNoise};
+use crate::numerics::linalg::{SparseRows, mul, mul_abt_sym};
 
 /// The model's inputs at a step — A = I + aΔt (1.11), B = bΔt W (bΔt)ᵀ (1.15),
 /// uΔt, Rv = Γ V Γᵀ, and the bound's |A|, |bΔt| φ (3.16), ζ = |Γ| ψ (3.17) — at
@@ -197,11 +197,11 @@ impl Inputs {
         let (i, l, x) = largest_term(&self.bd, nl, &m.phi);
         let what = format!(
             "{what}; its largest term |bΔt| φ is {} (state \"{}\": b = {}, Δt = {}, φ = {})",
-            crate::report::short(x),
+            crate::text::short(x),
             m.states[i],
-            crate::report::short(self.b_fn.values[i * nl + l]),
-            crate::report::short(dt),
-            crate::report::short(m.phi[l]),
+            crate::text::short(self.b_fn.values[i * nl + l]),
+            crate::text::short(dt),
+            crate::text::short(m.phi[l]),
         );
         overflow(&format!("system.b[{i}][{l}]"), &what, m, k, dt)
     }
@@ -223,10 +223,10 @@ impl Inputs {
         };
         let what = format!(
             "{what}; its largest term |Γ| ψ is {} (measurement \"{}\": {gamma} = {}, ψ = {})",
-            crate::report::short(x),
+            crate::text::short(x),
             m.measurements[j],
-            crate::report::short(self.gamma[j * ms + l]),
-            crate::report::short(m.psi[l]),
+            crate::text::short(self.gamma[j * ms + l]),
+            crate::text::short(m.psi[l]),
         );
         overflow(&path, &what, m, k, self.dt)
     }

@@ -3,49 +3,13 @@
 
 use crate::Overrides;
 use crate::error::{Error, FieldError, member_path};
+use crate::error::{MAX_REPORTED_ERRORS, omitted_entry};
 use crate::expr::{ExprBudget, TimeMatrix, TimeMatrixBuilder, compile_const};
+use crate::model::limits::*;
 use crate::model::{MODEL_FORMAT_VERSION, Model, Steps, Value};
+use crate::text::{entries, is_identifier, num};
 use std::collections::BTreeMap;
 
-/// Largest accepted number of steps D (beyond this a run would take hours).
-pub const MAX_STEPS: u64 = 100_000_000;
-/// Largest accepted state dimension N.
-pub const MAX_STATES: usize = 200;
-/// Largest accepted number of noise sources: L (columns of b) and M (of gamma or g).
-pub const MAX_SOURCES: usize = 200;
-/// Largest accepted number of trace rows.
-pub const MAX_TRACE_POINTS: usize = 100_000;
-/// Largest number of values (rows × series) the traces of one result may hold:
-/// ≈ 32 MB in memory and ≈ 40 MB of JSON. The default 1000 rows fit every N ≤ 200.
-pub const MAX_TRACE_VALUES: usize = 2_000_000;
-
-/// The most trace rows a result with `series` series may have.
-pub fn max_trace_rows(series: usize) -> usize {
-    (MAX_TRACE_VALUES / series.max(1)).min(MAX_TRACE_POINTS)
-}
-/// The most field errors one response lists (then one line says how many more).
-pub const MAX_REPORTED_ERRORS: usize = 100;
-
-/// The entry that ends an error list cut at [`MAX_REPORTED_ERRORS`], at the top level
-/// (`""`): it stands for `omitted` errors left out. (The server caps its own lists with
-/// the same entry, and reads the count back with [`omitted_count`].)
-pub fn omitted_entry(omitted: usize) -> FieldError {
-    FieldError::new(
-        "",
-        format!("… and {omitted} more errors (only the first {MAX_REPORTED_ERRORS} are listed)"),
-    )
-}
-
-/// How many errors an entry of [`omitted_entry`]'s form (at any path) stands for;
-/// `None` for an ordinary error.
-pub fn omitted_count(e: &FieldError) -> Option<usize> {
-    let rest = e.message.strip_prefix("… and ")?;
-    let (count, tail) = rest.split_once(' ')?;
-    if tail != format!("more errors (only the first {MAX_REPORTED_ERRORS} are listed)") {
-        return None;
-    }
-    count.parse().ok()
-}
 /// Weights must sum to 1 within this.
 const WEIGHT_TOL: f64 = 1e-9;
 
@@ -86,7 +50,7 @@ pub struct CompiledModel {
     pub v: Vec<f64>,
     pub psi: Vec<f64>,
     /// Measurement availability; None = every measurement at every step.
-    pub schedule: Option<crate::schedule::Schedules>,
+    pub schedule: Option<crate::model::schedule::Schedules>,
     /// For each state, its paired measurement (METHOD §1.1).
     pub pair_of_state: Vec<Option<usize>>,
     /// Weights per criterion (N each); None = equal over the states where defined.
@@ -544,7 +508,7 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
     let schedule = meas
         .schedule
         .as_ref()
-        .and_then(|s| crate::schedule::compile(s, nm, &params, t0, &mut exprs, &mut errs.0));
+        .and_then(|s| crate::model::schedule::compile(s, nm, &params, t0, &mut exprs, &mut errs.0));
 
     // --- pairs (METHOD §1.1)
     let mut pair_of_state: Vec<Option<usize>> = vec![None; n];
@@ -750,13 +714,6 @@ fn blind_measurements(
             ));
         }
     }
-}
-
-/// A name an expression can use (and a key `error::member_path` writes unquoted).
-pub(crate) fn is_identifier(s: &str) -> bool {
-    let mut it = s.chars();
-    matches!(it.next(), Some(c) if c.is_alphabetic() || c == '_')
-        && it.all(|c| c.is_alphanumeric() || c == '_')
 }
 
 /// A character that shows as nothing: a name of them looks empty, and one inside a
@@ -1091,16 +1048,6 @@ fn semi_definite_by_cholesky(m: &[f64], dim: usize) -> bool {
     scaled.cholesky().is_some()
 }
 
-/// A number for a message: plain in [1e-4, 1e15), else in exponent form (never 300
-/// digits). (Also the report's, for times.)
-pub fn num(x: f64) -> String {
-    if x == 0.0 || (1e-4..1e15).contains(&x.abs()) {
-        format!("{x}")
-    } else {
-        format!("{x:e}")
-    }
-}
-
 fn leaf(path: &str) -> &str {
     path.rsplit('.').next().unwrap_or(path)
 }
@@ -1152,15 +1099,6 @@ fn weights(
         ok = false;
     }
     ok.then(|| w.to_vec())
-}
-
-/// "1 entry", "3 entries": a count of a list's entries, for messages.
-pub(crate) fn entries(n: usize) -> String {
-    if n == 1 {
-        "1 entry".into()
-    } else {
-        format!("{n} entries")
-    }
 }
 
 #[cfg(test)]

@@ -90,7 +90,7 @@ pub fn compile(
             base,
             format!(
                 "has {}, expected one per measurement ({nm}); use null for always",
-                crate::validate::entries(sched.len())
+                crate::text::entries(sched.len())
             ),
         ));
         return None;

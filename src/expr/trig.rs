@@ -1,7 +1,7 @@
 //! sin and cos of [`LANES`] arguments at once, bit for bit as the `libm` crate's.
 //!
 //! A time-varying model entry such as `"-0.5 + 0.2*sin(t + 3)"` is evaluated
-//! [`LANES`] steps at a time ([`crate::expr_block`]), and `libm::sin` lane by lane was
+//! [`LANES`] steps at a time ([`crate::expr::block`]), and `libm::sin` lane by lane was
 //! 9 % of the seed's Table 1 workload: a call per lane, each branching on its
 //! argument's range. Here every lane goes through the same straight-line code — the
 //! argument reduction of every range `libm` distinguishes below 2²⁰·π/2 and both
@@ -14,7 +14,7 @@
 // The constants as libm (and msun before it) writes them, digit for digit.
 #![allow(clippy::excessive_precision, clippy::approx_constant)]
 
-use crate::expr_block::LANES;
+use crate::expr::LANES;
 
 const EPS: f64 = 2.2204460492503131e-16;
 const TO_INT: f64 = 1.5 / EPS;
@@ -99,16 +99,17 @@ enum Simd {
     Baseline,
 }
 
-/// The widest build this CPU runs (detected once), unless `KEA_NO_SIMD` (the
-/// baseline) or `KEA_NO_AVX512` (at most AVX2) is set, as for the engine's loops.
+/// The widest build this CPU runs (detected once, at the first use), within the
+/// ceiling a shell set ([`crate::cpu::limit`]), as for the engine's loops.
 #[cfg(target_arch = "x86_64")]
 fn simd() -> Simd {
+    use crate::cpu::Limit;
     static BUILD: std::sync::OnceLock<Simd> = std::sync::OnceLock::new();
     *BUILD.get_or_init(|| {
-        let off = |var: &str| std::env::var_os(var).is_some();
-        if off("KEA_NO_SIMD") || !std::arch::is_x86_feature_detected!("avx2") {
+        let limit = crate::cpu::limit();
+        if limit == Limit::Baseline || !std::arch::is_x86_feature_detected!("avx2") {
             Simd::Baseline
-        } else if !off("KEA_NO_AVX512") && std::arch::is_x86_feature_detected!("avx512f") {
+        } else if limit == Limit::Widest && std::arch::is_x86_feature_detected!("avx512f") {
             Simd::Avx512
         } else {
             Simd::Avx2

@@ -3,7 +3,22 @@
 //! its minimum and maximum over the bucket on them, in the order they occurred. So a
 //! spike that lasts one step survives decimation. Memory is O(rows), not O(steps).
 
-use crate::resume::{DecimatorState, F, bits, values};
+use crate::resume::{F, bits, values};
+use serde::{Deserialize, Serialize};
+
+/// The trace decimator's state ([`crate::numerics::decimate::Decimator`]).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub(crate) struct DecimatorState {
+    pub min: Vec<F>,
+    pub min_at: Vec<u32>,
+    pub max: Vec<F>,
+    pub max_at: Vec<u32>,
+    pub in_bucket: u64,
+    pub first_t: F,
+    pub last_t: F,
+    pub t: Vec<F>,
+    pub columns: Vec<Vec<Option<F>>>,
+}
 
 /// Decimates `series` parallel series sampled at steps 1..=steps.
 #[derive(Clone, Debug)]

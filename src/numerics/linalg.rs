@@ -2,7 +2,7 @@
 //! vectorises them and, when called with a compile-time dimension, unrolls them.
 //! No allocation; callers own the buffers.
 
-use crate::lanes::Lanes;
+use crate::numerics::lanes::Lanes;
 
 /// c (r×p) = a (r×k) · b (k×p).
 #[inline(always)]
@@ -656,7 +656,7 @@ mod tests {
     /// bits, and both equal A R Aᵀ + B written plainly.
     #[test]
     fn prediction_by_diagonals_equals_the_transposing_path_and_the_plain_product() {
-        use crate::lanes::Scalar;
+        use crate::numerics::lanes::Scalar;
         use nalgebra::DMatrix;
         let n = 14;
         let f = |i: usize, j: usize, s: f64| ((i * 31 + j * 17) as f64 * 0.37 + s).sin();
@@ -741,7 +741,7 @@ mod tests {
     /// pattern with holes and signed zeros among the values.
     #[test]
     fn matrix_vector_product_by_diagonals_equals_the_row_loop() {
-        use crate::lanes::Scalar;
+        use crate::numerics::lanes::Scalar;
         let n = 11;
         let pattern: Vec<(usize, usize)> = (0..n)
             .flat_map(|i| {
@@ -795,7 +795,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn avx2_mul_vec(m: &SparseRows, y: &mut [f64], x: &[f64], n: usize) {
-        m.mul_vec::<crate::lanes::Avx2>(y, x, n);
+        m.mul_vec::<crate::numerics::lanes::Avx2>(y, x, n);
     }
 
     #[test]

@@ -5,10 +5,10 @@
 //! does not grow with D.
 
 use crate::Progress;
+use crate::analysis::result::{StepSelection, StepTrial};
 use crate::error::Error;
 use crate::expr::TimeMatrix;
-use crate::result::{StepSelection, StepTrial};
-use crate::validate::CompiledModel;
+use crate::model::compile::CompiledModel;
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

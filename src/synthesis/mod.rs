@@ -15,13 +15,16 @@
 //! analyses) is independent of the number of threads. The core has no clock: it
 //! counts analyses, the adapters fill `timing.wall_ms`.
 
+use crate::analysis::result::{AnalysisResult, Timing};
 use crate::exec::{Executor, Forgetful, Memo};
 use crate::model::Model;
-use crate::result::{AnalysisResult, Timing};
 use crate::{Error, FieldError, Overrides, Progress};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
+
+pub mod kind;
+pub mod work;
 
 /// Largest number of points a seed search or a grid may have.
 pub const MAX_POINTS: usize = 10_000;
@@ -350,8 +353,13 @@ pub fn request_from_json(text: &str) -> Result<SynthesisRequest, Error> {
 
 /// Check a request without running it; every problem found, at its path.
 pub fn validate(req: &SynthesisRequest) -> Result<(), Error> {
+    validated(req).map(drop)
+}
+
+/// [`validate`], giving the request's model compiled (with its `set`).
+pub fn validated(req: &SynthesisRequest) -> Result<crate::model::CompiledModel, Error> {
     let mut errs: Vec<FieldError> = Vec::new();
-    let compiled = crate::validate::compile(&req.model, &req.set);
+    let compiled = crate::model::compile::compile(&req.model, &req.set);
     if let Err(e) = &compiled {
         errs.extend(locate_model_errors(e.clone()).field_errors());
     }
@@ -409,7 +417,7 @@ pub fn validate(req: &SynthesisRequest) -> Result<(), Error> {
                 path,
                 format!(
                     "the model is invalid with {name} = {}: {first}",
-                    crate::validate::num(value)
+                    crate::text::num(value)
                 ),
             ));
         }
@@ -522,7 +530,7 @@ pub fn validate(req: &SynthesisRequest) -> Result<(), Error> {
             let expected = || {
                 format!(
                     "expected a finite number ≥ {} (bisection is on a log scale, among normal doubles)",
-                    crate::validate::num(f64::MIN_POSITIVE)
+                    crate::text::num(f64::MIN_POSITIVE)
                 )
             };
             let low_ok = b.low.is_finite() && b.low >= f64::MIN_POSITIVE;
@@ -610,10 +618,9 @@ pub fn validate(req: &SynthesisRequest) -> Result<(), Error> {
             }
         }
     }
-    if errs.is_empty() {
-        Ok(())
-    } else {
-        Err(Error::Invalid(errs))
+    match compiled {
+        Ok(c) if errs.is_empty() => Ok(c),
+        _ => Err(Error::Invalid(errs)),
     }
 }
 
@@ -799,14 +806,14 @@ struct Ctx<'a> {
     total: u64,
     done: u64,
     steps: u64,
-    /// The work estimate of one analysis ([`crate::cost`]), which sizes the parts of
+    /// The work estimate of one analysis ([`crate::work`]), which sizes the parts of
     /// a batch between progress reports.
     analysis_work: f64,
 }
 
-/// The work (units of [`crate::cost`]) a batch's part gives each thread between two
+/// The work (units of [`crate::work`]) a batch's part gives each thread between two
 /// progress reports: as a Monte Carlo chunk's, ≈ 17 ms of one core.
-const PART_WORK: f64 = crate::simulation::CHUNK_WORK;
+const PART_WORK: f64 = crate::progress::WORK_BETWEEN_PARTS;
 
 /// Points of a batch analysed between two progress reports: `threads` points
 /// (one each) at least, more while each thread's share stays within [`PART_WORK`].
@@ -814,7 +821,7 @@ const PART_WORK: f64 = crate::simulation::CHUNK_WORK;
 /// parts, or, where the executor can say so ([`Executor::stop_requested`]), by each
 /// analysis within about a millisecond of its work.
 fn part_points(analysis_work: f64, threads: usize) -> usize {
-    let each = crate::cost::fitting(PART_WORK, analysis_work, 1_000_000);
+    let each = crate::work::fitting(PART_WORK, analysis_work, 1_000_000);
     threads.max(1).saturating_mul(each as usize)
 }
 
@@ -997,7 +1004,7 @@ fn best_of<'a>(points: impl Iterator<Item = &'a Point> + Clone, range: &str) -> 
         Some(best) => {
             format!(
                 " (the best is {}): widen the {range} or lower the target.",
-                crate::report::cell(Some(best))
+                crate::text::cell(Some(best))
             )
         }
         None => {
@@ -1015,7 +1022,7 @@ fn best_of<'a>(points: impl Iterator<Item = &'a Point> + Clone, range: &str) -> 
 fn describe(params: &[(String, f64)]) -> String {
     params
         .iter()
-        .map(|(k, v)| format!("{k} = {}", crate::validate::num(*v)))
+        .map(|(k, v)| format!("{k} = {}", crate::text::num(*v)))
         .collect::<Vec<_>>()
         .join(", ")
 }
@@ -1030,7 +1037,7 @@ fn fmt_params(p: &BTreeMap<String, f64>) -> String {
 /// A number in what a synthesis reports (notes, summaries, the bisection's
 /// findings): rounded to 6 decimals or 5 significant digits, for reading. Where a
 /// point's parameters must be quoted exactly — the point an analysis failed at
-/// ([`describe`]) — [`crate::validate::num`] is used instead.
+/// ([`describe`]) — [`crate::text::num`] is used instead.
 fn fmt_num(x: f64) -> String {
     if x != 0.0 && (x.abs() < 1e-3 || x.abs() >= 1e6) {
         format!("{x:.4e}")
@@ -1055,9 +1062,9 @@ fn crit_name(t: &Target) -> String {
     }
 }
 
-/// A criterion's value as the analysis table writes it ([`crate::report::cell`]).
+/// A criterion's value as the analysis table writes it ([`crate::text::cell`]).
 fn fmt_value(v: Option<f64>) -> String {
-    v.map_or("undefined".into(), |v| crate::report::cell(Some(v)))
+    v.map_or("undefined".into(), |v| crate::text::cell(Some(v)))
 }
 
 // ---------------------------------------------------------------- the modes
@@ -1081,7 +1088,20 @@ pub fn synthesize_resuming<E: Executor>(
     progress: &mut dyn Progress,
     memo: &dyn Memo,
 ) -> Result<SynthesisResult, Error> {
-    validate(req)?;
+    let compiled = validated(req)?;
+    let analysis_work = crate::analysis::work::analysis_work(&compiled, Some(&req.model)).units;
+    synthesize_validated(req, analysis_work, exec, progress, memo)
+}
+
+/// [`synthesize_resuming`] of a request [`validated`] already, whose one analysis has
+/// the work estimate `analysis_work` (units of [`crate::work`]).
+pub fn synthesize_validated<E: Executor>(
+    req: &SynthesisRequest,
+    analysis_work: f64,
+    exec: &E,
+    progress: &mut dyn Progress,
+    memo: &dyn Memo,
+) -> Result<SynthesisResult, Error> {
     let state_index = req
         .target
         .state
@@ -1098,9 +1118,7 @@ pub fn synthesize_resuming<E: Executor>(
         total: planned_analyses(req),
         done: 0,
         steps: 0,
-        analysis_work: crate::validate::compile(&req.model, &req.set).map_or(f64::NAN, |c| {
-            crate::cost::analysis_work(&c, Some(&req.model)).units
-        }),
+        analysis_work,
     };
     let (status, message, answer, verification, details) = match &req.mode {
         Mode::SeedSearch(s) => seed_search(&mut ctx, exec, s, progress)?,
@@ -1280,7 +1298,7 @@ fn bisect<E: Executor>(
     let probes = ctx.batch(exec, xs.iter().map(|&x| at(x)).collect(), progress)?;
     let mut evals: Vec<(f64, Point)> = xs.iter().copied().zip(probes).collect();
     let crit = crit_name(ctx.target);
-    let thr = crate::validate::num(ctx.target.threshold); // (for messages: 1e308 not in 309 digits)
+    let thr = crate::text::num(ctx.target.threshold); // (for messages: 1e308 not in 309 digits)
     let out = |evals: &[(f64, Point)], side, bracket, iterations| {
         Details::Bisect(BisectOut {
             param: name.clone(),
@@ -1509,7 +1527,7 @@ fn grid<E: Executor>(
     }
     let qualifying = cells.iter().filter(|c| c.point.meets).count();
     let crit = crit_name(ctx.target);
-    let thr = crate::validate::num(ctx.target.threshold); // (for messages)
+    let thr = crate::text::num(ctx.target.threshold); // (for messages)
     let cheapest = g.cost_order.as_ref().and_then(|order| {
         cells
             .iter()
@@ -1586,8 +1604,8 @@ fn grid<E: Executor>(
 pub fn render_text(r: &SynthesisResult) -> String {
     let mut s = String::new();
     // Cells of three criteria, each as the analysis table writes it.
-    let f = crate::report::cell;
-    const W: usize = 3 * crate::report::CELL + 8;
+    let f = crate::text::cell;
+    const W: usize = 3 * crate::text::CELL + 8;
     match &r.details {
         Details::Grid(g) => {
             let rows = &g.params[0];

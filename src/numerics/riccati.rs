@@ -96,8 +96,8 @@ pub fn dare_doubling(
     Err(NoStationary::NotSettled)
 }
 
-use crate::lanes::Lanes;
-use crate::linalg::{SparseRows, mat_mut, mirror, predict_cov, predict_work};
+use crate::numerics::lanes::Lanes;
+use crate::numerics::linalg::{SparseRows, mat_mut, mirror, predict_cov, predict_work};
 
 /// The measurement covariance Rv has a negative pivot beyond rounding: it is not
 /// positive semi-definite.
@@ -889,7 +889,7 @@ fn update_slices<L: Lanes>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::lanes::Scalar;
+    use crate::numerics::lanes::Scalar;
     use nalgebra::DMatrix;
 
     /// One step with A = I and B = 0 (so r = R_prev), unit measurement rows

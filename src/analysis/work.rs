@@ -1,4 +1,4 @@
-//! The work estimate: a cost model of the core's steps, in units of about a
+//! The analysis's work estimate: a cost model of the core's steps, in units of about a
 //! nanosecond of one core. The server's limits (`--sync-work-limit`, `--max-work`),
 //! the command line's `--max-work` and the web page (before a run in the browser)
 //! compare it ([`analysis_work`], [`simulation_work`], [`synthesis_work`]), and the core spaces its progress
@@ -10,7 +10,7 @@
 //! An analysis step costs (units ≈ ns; N states, n measurements, L = columns of b,
 //! M = columns of Γ or g):
 //!
-//! - the engine, whatever varies: N³ + 16N² + 200 ([`crate::step_cost`]), N³ replaced
+//! - the engine, whatever varies: N³ + 16N² + 200 ([`crate::analysis::work::step_cost`]), N³ replaced
 //!   by 2(N + nnz(a))N + nN² where that is smaller ([`sparse_engine`]);
 //! - b(t) varying: re-forming B = bΔt W (bΔt)ᵀ, N·L²/4 (bΔt W, a vectorised product)
 //!   + N(N+1)/2·L (the symmetric product's dot products, ≈ 1 ns a term) + 2NL;
@@ -43,21 +43,12 @@
 //! [`simulation_run_step`]); estimated 1.07–2.4 times the CPU time of the presets and of
 //! N = 10, L = M = 200 with 2 to 1000 runs.
 
-use crate::model::Value;
-use crate::schedule::Availability;
-use crate::simulation::{ModelError, SimulationRequest};
-use crate::synthesis::SynthesisRequest;
-use crate::validate::{CompiledModel, MeasurementNoise};
-use crate::{Error, Model};
+use crate::expr::Value;
+use crate::model::compile::{CompiledModel, MeasurementNoise};
+use crate::model::schedule::Availability;
+use crate::work::Work;
+use crate::{Error, Model, Overrides};
 use std::collections::HashSet;
-
-/// How many items of `each` units fit in `budget` units: 1 to `max` (1 also where
-/// `each` exceeds the budget, or is NaN). What spaces the progress reports, the Monte
-/// Carlo's chunks and a synthesis batch's parts.
-pub fn fitting(budget: f64, each: f64, max: u64) -> u64 {
-    let n = budget / each;
-    if n >= 1.0 { (n as u64).min(max) } else { 1 }
-}
 
 /// The cost of the expressions in t of a model, per step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -236,7 +227,7 @@ impl AnalysisStep {
             .filter(|&k| compiled.a.values[k] != 0.0 || compiled.a.varies(k))
             .count();
         let n_meas = compiled.n_measurements();
-        let dense = crate::step_cost(states);
+        let dense = crate::analysis::work::step_cost(states);
         let sparse = sparse_engine(states, nnz_a, n_meas);
         let cube = n * n * n;
         AnalysisStep {
@@ -289,90 +280,6 @@ impl AnalysisStep {
     }
 }
 
-/// The Monte Carlo plan's step, computed once for all runs (src/simulation.rs, `Plan`):
-/// the inputs and expressions as in the analysis, and a dense Riccati step with the
-/// open-loop covariance, 2N³ + 4N²n + 2Nn² + n³, plus 300 of bookkeeping.
-/// Measured: N = 1 330 ns against 303; N = 6, n = 4 1.56 µs against 1.56; N = 30,
-/// n = 5 44 µs against 74; N = 100, n = 5 1.5 ms against 2.2.
-pub fn simulation_plan_step(compiled: &CompiledModel, model: Option<&Model>) -> f64 {
-    let step = AnalysisStep::of(compiled, model);
-    let n = compiled.n_states() as f64;
-    let nm = compiled.n_measurements() as f64;
-    step.inputs
-        + step.expressions.units()
-        + 2.0 * n * n * n
-        + 4.0 * n * n * nm
-        + 2.0 * n * nm * nm
-        + nm * nm * nm
-        + 300.0
-}
-
-/// One run's step (src/simulation.rs, `Block::advance`): the normal draws (≈ 5 ns
-/// each) times the lower-triangular square roots of W and V (L(L+1)/2 and M(M+1)/2
-/// sequential terms, ≈ 1 ns each), and the products over the runs, vectorised (≈ 0.5
-/// ns a term): A Y and A X, bΔt F, Γ Φ, C, the gain, the errors, NEES and NIS. F is
-/// drawn at every step for a white model error only.
-/// Measured (ns): N = 1 22 against 17; N = 6, n = 4 88 against 113; N = 10,
-/// L = M = 20 768 against 927; N = 30, L = M = n = 5 473 against 620; N = 10,
-/// L = M = 200 40 400 against 42 000.
-pub fn simulation_run_step(compiled: &CompiledModel, model_error: ModelError) -> f64 {
-    let n = compiled.n_states();
-    let nm = compiled.n_measurements();
-    let l = match model_error {
-        ModelError::White => compiled.b.cols as f64,
-        ModelError::Constant => 0.0,
-    };
-    let ms = compiled.noise.sources() as f64;
-    let pattern = |m: &crate::expr::TimeMatrix, diag: bool| {
-        (0..m.rows * m.cols)
-            .filter(|&i| (diag && i / m.cols == i % m.cols) || m.values[i] != 0.0 || m.varies(i))
-            .count()
-    };
-    let nnz_gamma = match &compiled.noise {
-        MeasurementNoise::Gamma(g) => pattern(g, false),
-        MeasurementNoise::SeedG(_) => nm * compiled.noise.sources(),
-    };
-    let nnz_c = compiled.c.iter().filter(|c| **c != 0.0).count();
-    let products = 2 * pattern(&compiled.a, true)
-        + pattern(&compiled.b, false)
-        + nnz_gamma
-        + nnz_c
-        + n * nm
-        + 3 * n
-        + n * (n + 1) / 2
-        + nm * (nm + 1) / 2;
-    6.0 + 5.0 * (l + ms) + (l * (l + 1.0) + ms * (ms + 1.0)) / 2.0 + 0.5 * products as f64
-}
-
-/// What a run costs once: its initial state and, for a constant model error, F.
-pub fn simulation_run_start(compiled: &CompiledModel, model_error: ModelError) -> f64 {
-    let n = compiled.n_states() as f64;
-    let l = compiled.b.cols as f64;
-    let f = match model_error {
-        ModelError::White => 0.0,
-        ModelError::Constant => 5.0 * l + l * (l + 1.0) / 2.0,
-    };
-    100.0 + 5.0 * n + f
-}
-
-/// The estimated work at which a run is refused by default: `kea serve --max-work` and
-/// the command line's `--max-work` (≈ 17 minutes of one core). The web page asks before
-/// it runs more than this in the browser.
-pub const DEFAULT_MAX_WORK: f64 = 1e12;
-
-/// A run's estimated work, in units of about a nanosecond of one core: what the
-/// limits compare.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct Work {
-    pub units: f64,
-    /// How it was computed, for messages (e.g. "D = 1000 steps × 272 (N³ + 16N² + 200 =
-    /// 272 (N = 2))").
-    pub explain: String,
-    /// The request member that drives it, for an error's path: `model.time.steps`
-    /// (an analysis), `runs` (a simulation), `mode` (a synthesis).
-    pub path: String,
-}
-
 /// The work of analysing a compiled model (`model`: its expressions' texts, see
 /// [`Expressions::of`]): D (for `"auto"` the cap) × the step's cost.
 pub fn analysis_work(compiled: &CompiledModel, model: Option<&Model>) -> Work {
@@ -400,13 +307,13 @@ pub fn analysis_work(compiled: &CompiledModel, model: Option<&Model>) -> Work {
 /// step): 40 000 distinct constant texts `p*k` 1.0 s, 2000 in t 42 ms a synthesis point.
 pub const PARSE_UNITS: f64 = 25_000.0;
 
-/// Units of one doubling of [`crate::riccati::dare_doubling`] (an LU, two solves and
+/// Units of one doubling of [`crate::numerics::riccati::dare_doubling`] (an LU, two solves and
 /// four products of N × N matrices), per N³: measured 1.5 at N = 200.
 pub const DOUBLING_UNITS_PER_CUBE: f64 = 2.0;
 
 /// What an analysis costs once, besides its steps: its expressions' parses (every
 /// analysis compiles the model: a synthesis point too) and, for a time-invariant
-/// model, the doublings of the stationary solution ([`crate::riccati::doublings_for`]).
+/// model, the doublings of the stationary solution ([`crate::numerics::riccati::doublings_for`]).
 /// Without them a model of many expressions, or N = 200 with few steps, ran 100 to
 /// 1000 times its estimate.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -424,7 +331,7 @@ impl AnalysisOnce {
             n: compiled.n_states(),
             parses: model.map_or(0, expression_texts),
             doublings: if compiled.is_time_invariant() {
-                crate::riccati::doublings_for(compiled.max_steps())
+                crate::numerics::riccati::doublings_for(compiled.max_steps())
             } else {
                 0
             },
@@ -487,48 +394,44 @@ fn expression_texts(model: &Model) -> usize {
         + distinct(whens.filter_map(|s| s.when.as_ref()))
 }
 
-/// The work of a Monte Carlo simulation `sim` on a compiled model (`model`: its
-/// expressions' texts): the analysis it starts with, then per step the plan (the
-/// inputs and a dense Riccati step, [`simulation_plan_step`]) and every run's step
-/// ([`simulation_run_step`]).
-pub fn simulation_work(
-    compiled: &CompiledModel,
-    model: Option<&Model>,
-    sim: &SimulationRequest,
-) -> Work {
-    let analysis = analysis_work(compiled, model);
-    let steps = compiled.max_steps();
-    let plan = simulation_plan_step(compiled, model);
-    let run = simulation_run_step(compiled, sim.model_error);
-    let per_run_once = simulation_run_start(compiled, sim.model_error);
-    let runs = sim.runs as f64;
-    Work {
-        units: analysis.units + steps as f64 * (plan + runs * run) + runs * per_run_once,
-        explain: format!(
-            "the analysis {:.3e} + D = {steps} steps × (the plan {plan:.0} + runs R = {} × {run:.0} per run)",
-            analysis.units, sim.runs
-        ),
-        path: "runs".into(),
-    }
+/// How much work an analysis is, before running it (for limits and scheduling).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct WorkEstimate {
+    /// Steps D (for `"auto"`: the cap, the worst case).
+    pub steps: u64,
+    /// State dimension N.
+    pub states: usize,
+    /// steps × [`step_cost`]`(N)`.
+    pub work: f64,
 }
 
-/// The work of a synthesis: at most its planned analyses
-/// ([`crate::synthesis::planned_analyses`]), each the analysis' estimate. Compiles the
-/// model (its errors at the model's own paths).
-pub fn synthesis_work(request: &SynthesisRequest) -> Result<Work, Error> {
-    let analyses = crate::synthesis::planned_analyses(request);
-    let compiled = crate::validate::compile(&request.model, &request.set)?;
-    let one = analysis_work(&compiled, Some(&request.model));
-    Ok(Work {
-        units: one.units * analyses as f64,
-        explain: format!("at most {analyses} analyses × {}", one.explain),
-        path: "mode".into(),
+/// The cost of one analysis step of an N-state model, N³ + 16 N² + 200: the Riccati
+/// recursion's N³ multiply-adds, plus what every step pays per state (criteria, the
+/// bound, the traces) and per step whatever N is. One unit is ≈ 1 ns on the reference
+/// machine (measured, time-invariant chain, shortcut off: N = 1 195 ns per step against
+/// 217 units, N = 3 572 against 371, N = 10 2 576 against 2 800, N = 30 29 µs
+/// against 41 600); a bare N³ counted a one-state step as 1 unit, 200 times too little.
+pub fn step_cost(n: usize) -> f64 {
+    let n = n as f64;
+    n * n * n + 16.0 * n * n + 200.0
+}
+
+/// Estimate the work of a model without running it. Validates the model.
+pub fn estimate_work(model: &Model, set: &Overrides) -> Result<WorkEstimate, Error> {
+    let compiled = crate::model::compile(model, set)?;
+    let n = compiled.n_states();
+    let steps = compiled.max_steps();
+    Ok(WorkEstimate {
+        steps,
+        states: n,
+        work: steps as f64 * step_cost(n),
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::work::fitting;
 
     /// A chain of 100 powers was estimated at 997 units a step (its characters)
     /// against 6.5 µs; its calls now count 6000, near pow's ≈ 56 ns a call.
@@ -557,7 +460,7 @@ mod tests {
 
     fn model(json: serde_json::Value) -> (Model, CompiledModel) {
         let m = crate::model_from_value(json).unwrap();
-        let c = crate::validate::compile(&m, &Overrides::new()).unwrap();
+        let c = crate::model::compile::compile(&m, &Overrides::new()).unwrap();
         (m, c)
     }
 
@@ -580,7 +483,7 @@ mod tests {
         let step = AnalysisStep::of(&c, Some(&m));
         assert_eq!(step.inputs, 0.0);
         assert_eq!(step.expressions, Expressions::default());
-        assert_eq!(step.units(), crate::step_cost(2));
+        assert_eq!(step.units(), crate::analysis::work::step_cost(2));
     }
 
     #[test]
@@ -639,7 +542,8 @@ mod tests {
     #[test]
     fn an_analysis_costs_its_parses_and_doublings_once() {
         assert_eq!(
-            [1, 2, 3, 1000, 1024, 1025, 1_000_000, u64::MAX].map(crate::riccati::doublings_for),
+            [1, 2, 3, 1000, 1024, 1025, 1_000_000, u64::MAX]
+                .map(crate::numerics::riccati::doublings_for),
             [4, 5, 6, 14, 14, 15, 24, 68]
         );
         let (m, c) = model(two_states(
@@ -652,7 +556,7 @@ mod tests {
         let doubling = 2.0 * 8.0 + 1000.0;
         assert_eq!(
             work.units,
-            1000.0 * crate::step_cost(2) + PARSE_UNITS + 14.0 * doubling
+            1000.0 * crate::analysis::work::step_cost(2) + PARSE_UNITS + 14.0 * doubling
         );
         assert!(
             work.explain.ends_with(&format!(

@@ -1,37 +1,8 @@
 //! Plain-text and CSV renderings of a result, shared by the CLI, the server and wasm.
 
-use crate::result::{AnalysisResult, CriteriaSet};
-use crate::validate::num;
+use crate::analysis::result::{AnalysisResult, CriteriaSet};
+use crate::text::{CELL, cell, csv_text, num, short};
 use std::fmt::Write;
-
-/// Width of the table's number columns.
-pub const CELL: usize = 10;
-
-/// A number for a column of [`CELL`] characters: four decimals, or the exponent form
-/// where those would not fit or would show fewer than two significant digits; `—`
-/// where there is no finite value. Every text table of kea writes its numbers so.
-pub fn cell(x: Option<f64>) -> String {
-    let Some(v) = x.filter(|v| v.is_finite()) else {
-        return "—".to_string();
-    };
-    let fixed = format!("{v:.4}");
-    if (v == 0.0 || v.abs() >= 1e-3) && fixed.len() <= CELL {
-        return fixed;
-    }
-    // (A three-digit exponent leaves room for three decimals.)
-    let exp = format!("{v:.4e}");
-    if exp.len() <= CELL {
-        exp
-    } else {
-        format!("{v:.3e}")
-    }
-}
-
-/// A time for reading: 12 significant digits, so t0 + kΔt's rounding does not show
-/// (15.600000000000001 → 15.6), in exponent form where plain would be long (1e-300).
-pub fn short(t: f64) -> String {
-    crate::validate::num(format!("{t:.11e}").parse().unwrap_or(t))
-}
 
 /// The seed's layout: per state and weighted, bound and covariance side by side.
 pub fn criteria_table(r: &AnalysisResult) -> String {
@@ -201,25 +172,6 @@ pub fn traces_csv(r: &AnalysisResult) -> String {
         }))
     });
     csv_text(header, rows)
-}
-
-/// Records as CSV text (RFC 4180: a field holding a comma, a quote or a line break —
-/// a state may be named so — is quoted).
-pub fn csv_text<R, F>(header: F, rows: impl Iterator<Item = R>) -> String
-where
-    R: IntoIterator<Item = String>,
-    F: IntoIterator<Item = String>,
-{
-    let mut w = csv::WriterBuilder::new()
-        .terminator(csv::Terminator::Any(b'\n'))
-        .from_writer(Vec::new());
-    // (Writing to a Vec cannot fail: the results are ignored.)
-    let _ = w.write_record(header);
-    for row in rows {
-        let _ = w.write_record(row);
-    }
-    let bytes = w.into_inner().unwrap_or_default();
-    String::from_utf8(bytes).unwrap_or_default()
 }
 
 #[cfg(test)]

@@ -5,30 +5,33 @@
 //! The per-step kernel is generic over a compile-time state dimension `N` (1..=12) so
 //! the compiler unrolls and vectorises it; `N = 0` is the runtime-sized fallback.
 
-use crate::decimate::Decimator;
+use crate::Progress;
+use crate::analysis::inputs::{Inputs, time_err};
+use crate::analysis::result::*;
+use crate::analysis::steps::{Selected, select_steps};
 use crate::error::Error;
 use crate::exec::Memo;
-use crate::inputs::{Inputs, time_err};
-use crate::lanes::{Lanes, Scalar};
-use crate::linalg::{SparseRows, arr, arr_mut, cov_rel_diff, mat, predict_in_place, predict_work};
-use crate::result::*;
-use crate::resume::{F, LoopState, SELECTION_KEY, STATE_KEY, bits, put, values};
-use crate::riccati::{Prepared, SequentialJoseph};
-use crate::steps::{Selected, select_steps};
-use crate::validate::{CompiledModel, StepPlan};
-use crate::{Progress, riccati};
+use crate::model::compile::{CompiledModel, StepPlan};
+use crate::numerics::decimate::Decimator;
+use crate::numerics::lanes::{Lanes, Scalar};
+use crate::numerics::linalg::{
+    SparseRows, arr, arr_mut, cov_rel_diff, mat, predict_in_place, predict_work,
+};
+use crate::numerics::riccati;
+use crate::numerics::riccati::{Prepared, SequentialJoseph};
+use crate::resume::{F, bits, put, values};
+use state::LoopState;
+pub use state::{SELECTION_KEY, STATE_KEY};
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
 
-/// The work ([`crate::cost`]'s units, about 1 ns of one core each) between two progress
-/// reports, which are also the callers' only chance to cancel, stop at a time limit or
-/// shut down: ≈ 1 ms, so even a step costing ten times its estimate is stopped within
-/// tens of milliseconds, while a report (an indirect call, a few atomic loads and a
-/// clock read in the server) stays far below 0.1 % of the work between two.
-pub const WORK_BETWEEN_REPORTS: f64 = (1u64 << 20) as f64;
-
-/// At most this many steps between progress reports, however cheap the steps.
-pub const MAX_STEPS_BETWEEN_REPORTS: u64 = 1 << 14;
+pub mod inputs;
+pub mod kind;
+pub mod report;
+pub mod result;
+mod state;
+pub mod steps;
+pub mod work;
 
 /// How the warnings about the bound set alone begin (its overflow, its growth far
 /// beyond the covariance's interval): they say nothing of the covariance set's
@@ -54,13 +57,13 @@ pub(crate) struct Checkpoints {
 impl Checkpoints {
     /// Reports for steps k = 1, 2, … of `step_work` units each.
     pub(crate) fn new(step_work: f64) -> Checkpoints {
-        let every = steps_between_reports(step_work);
+        let every = crate::progress::steps_between_reports(step_work);
         Checkpoints { next: every, every }
     }
 
-    /// Reports for the analysis's steps of `model` ([`crate::cost::AnalysisStep`]).
+    /// Reports for the analysis's steps of `model` ([`crate::analysis::work::AnalysisStep`]).
     pub(crate) fn analysis(model: &CompiledModel) -> Checkpoints {
-        Checkpoints::new(crate::cost::AnalysisStep::of(model, None).units())
+        Checkpoints::new(crate::analysis::work::AnalysisStep::of(model, None).units())
     }
 
     /// At the step k (called for every k = 1, 2, … in turn), reports `fraction()` done
@@ -98,12 +101,6 @@ impl Checkpoints {
         self.next = (k / self.every + 1) * self.every;
         self
     }
-}
-
-/// How many steps of `step_work` units make [`WORK_BETWEEN_REPORTS`] (1 to
-/// [`MAX_STEPS_BETWEEN_REPORTS`]).
-pub fn steps_between_reports(step_work: f64) -> u64 {
-    crate::cost::fitting(WORK_BETWEEN_REPORTS, step_work, MAX_STEPS_BETWEEN_REPORTS)
 }
 
 /// The shortcut freezes the Riccati recursion once r_k is this close (relative) to
@@ -169,7 +166,7 @@ fn unconverged(s: &StepSelection) -> Option<String> {
         .filter_map(|h| h.difference.map(|d| (h.steps, d)))
         .collect();
     let chosen = s.history.last().map_or(s.max_steps, |h| h.steps);
-    let limit = crate::validate::MAX_STEPS;
+    let limit = crate::model::limits::MAX_STEPS;
     let (measured, advice) = match measured.as_slice() {
         [.., (_, before), (d, diff)] if diff >= before => (
             format!(
@@ -263,18 +260,18 @@ enum Build {
     Baseline,
 }
 
-/// The widest build this CPU runs, unless `KEA_NO_SIMD` (the baseline) or
-/// `KEA_NO_AVX512` (at most AVX2) is set: the switches let the tests compare the
-/// builds.
+/// The widest build this CPU runs, within the ceiling a shell set
+/// ([`crate::cpu::limit`]: the tests compare the builds).
 #[cfg(target_arch = "x86_64")]
 fn build() -> Build {
-    let off = |var: &str| std::env::var_os(var).is_some();
-    if off("KEA_NO_SIMD")
+    use crate::cpu::Limit;
+    let limit = crate::cpu::limit();
+    if limit == Limit::Baseline
         || !(std::arch::is_x86_feature_detected!("avx2")
             && std::arch::is_x86_feature_detected!("fma"))
     {
         Build::Baseline
-    } else if !off("KEA_NO_AVX512")
+    } else if limit == Limit::Widest
         && std::arch::is_x86_feature_detected!("avx512f")
         && std::arch::is_x86_feature_detected!("avx512vl")
     {
@@ -500,7 +497,7 @@ impl<'m, const N: usize> Engine<'m, N> {
     #[target_feature(enable = "avx2,fma")]
     fn run_avx2(&self, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
         // The explicit AVX2 row kernels: this function is only entered on a CPU with AVX2.
-        self.run_body::<crate::lanes::Avx2>(progress)
+        self.run_body::<crate::numerics::lanes::Avx2>(progress)
     }
 
     /// The same loop for AVX-512: LLVM puts the fixed-size (N ≤ 12) row operations
@@ -509,7 +506,7 @@ impl<'m, const N: usize> Engine<'m, N> {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
     fn run_avx512(&self, progress: &mut dyn Progress) -> Result<AnalysisResult, Error> {
-        self.run_body::<crate::lanes::Avx2>(progress)
+        self.run_body::<crate::numerics::lanes::Avx2>(progress)
     }
 
     /// The recursion; `L` supplies the row kernels (portable or AVX2).
@@ -1038,13 +1035,13 @@ impl<'m, const N: usize> Engine<'m, N> {
             };
             format!(
                 "{BOUND_WARNING} overflowed at step {k} (t = {}): {why}",
-                crate::report::short(t)
+                crate::text::short(t)
             )
         });
         let open_why = open_diverged.map(|(k, t)| {
             format!(
                 "the open-loop (a-priori) covariance overflowed at step {k} (t = {}){}",
-                crate::report::short(t),
+                crate::text::short(t),
                 if unstable {
                     ": the model is unstable on this interval (a mode of A grows)"
                 } else {
@@ -1138,7 +1135,7 @@ impl<'m, const N: usize> Engine<'m, N> {
         if let Some((k, t, spread)) = ill_conditioned {
             warnings.push(format!(
                 "the measurement noise covariance Γ V Γᵀ is ill-conditioned from step {k} (t = {}): the pivots of its factorisation span up to {:.1e}, so whitening the measurements loses about {:.0} of f64's 16 digits, which the covariance set's R and, more so, the bound set's χ (a product of |I − pC| over the steps) carry; noises this nearly dependent are better given a noise of their own per measurement, or the shared noise modelled as a state",
-                crate::validate::num(t),
+                crate::text::num(t),
                 spread,
                 spread.log10().round()
             ));
@@ -1147,7 +1144,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             warnings.push(format!(
                 "the filtered variance of \"{}\" fell to ≤ {ROUNDING_LEVEL:e} of its predicted variance at step {k} (t = {}); {cancelled_steps} of the {} steps had a state's at that level: the update cancels it almost exactly — a state measured only through others (its correlation with a measured state, or a row of c that combines states), with an initial or model-error SKO far above what the measurements leave of it — so R's diagonal there keeps fewer than 4 correct digits: the covariance set's ZX and YX at those steps are ratios of rounding errors, and later steps inherit R's error until the filter forgets it",
                 m.states[i],
-                crate::validate::num(t),
+                crate::text::num(t),
                 self.steps
             ));
         }
@@ -1382,9 +1379,9 @@ fn euler_unstable(a: &[f64], n: usize, dt: f64, span: f64, steps: u64) -> Option
     let needed = (span / dt_max).floor() as u64 + 1;
     Some(format!(
         "the mean state overflowed, though the model is stable here: Euler's step y + (a y + u)Δt is not. A mode of a with real part {} decays, but each step of Δt = {} multiplies it by more than 1 (Euler is stable for it only with Δt < {}); give time.steps ≥ {needed} (now {steps}), or \"auto\"",
-        crate::validate::num(re),
-        crate::validate::num(dt),
-        crate::validate::num(dt_max)
+        crate::text::num(re),
+        crate::text::num(dt),
+        crate::text::num(dt_max)
     ))
 }
 
@@ -1534,7 +1531,7 @@ fn gelfand_radius(a: &[f64], n: usize) -> f64 {
 fn covariance_growth(a: &[f64], n: usize, dt: f64, k: u64) -> Option<(String, String)> {
     const HUGE: f64 = 1e10;
     // (Four significant digits: these are magnitudes, not values to copy.)
-    let num = |x: f64| crate::validate::num(format!("{x:.3e}").parse().unwrap_or(x));
+    let num = |x: f64| crate::text::num(format!("{x:.3e}").parse().unwrap_or(x));
     let (big, at) = a
         .iter()
         .enumerate()
@@ -1579,7 +1576,7 @@ fn lost_precision(k: u64, t: f64, j: u64, t_j: f64, state: &str) -> Error {
         path: "system".into(),
         message: format!(
             "the filter's covariance lost its precision: from step {j} (t = {}) the update cancelled the variance of \"{state}\" to 1e-12 of its predicted variance or less (the small difference of large terms), and here the innovation covariance q = C r Cᵀ + Γ V Γᵀ came out ≤ 0 by rounding; an initial SKO (eta0) or a model-error SKO (phi) many orders of magnitude above the measurement's (psi) does this: bring them nearer, or rescale the units",
-            crate::validate::num(t_j)
+            crate::text::num(t_j)
         ),
     }
 }

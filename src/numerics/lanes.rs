@@ -12,7 +12,7 @@
 
 /// Row kernels; every slice argument is at least as long as `d`.
 pub(crate) trait Lanes: Copy {
-    /// d ← d − a·x + b·y, element-wise (the Joseph row update, [`crate::riccati`]).
+    /// d ← d − a·x + b·y, element-wise (the Joseph row update, [`crate::numerics::riccati`]).
     fn sub_add(d: &mut [f64], x: &[f64], a: f64, y: &[f64], b: f64);
     /// d ← d + a·x.
     fn add_scaled(d: &mut [f64], x: &[f64], a: f64);

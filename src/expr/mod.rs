@@ -27,8 +27,15 @@
 //! - `round` rounds halves away from zero: `round(2.5)` is 3, `round(-2.5)` is −3.
 
 use crate::error::FieldError;
-use crate::expr_block::{Block, BlockEx, LANES, ScalarEx};
-use crate::model::Value;
+use crate::expr::block::{Block, BlockEx, ScalarEx};
+pub use value::Value;
+
+/// Time points per evaluation.
+pub const LANES: usize = 16;
+
+pub mod block;
+mod trig;
+mod value;
 use exmex::prelude::*;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
@@ -50,7 +57,7 @@ fn language() -> &'static Language {
             unary: Vec::new(),
             binary: Vec::new(),
         };
-        for op in <crate::expr_block::ScalarOps as exmex::MakeOperators<f64>>::make() {
+        for op in <crate::expr::block::ScalarOps as exmex::MakeOperators<f64>>::make() {
             let name = op.repr();
             if !name.chars().all(|c| c.is_alphanumeric() || c == '_') {
                 continue; // + - * / ^

@@ -16,12 +16,12 @@
 //! result is bit-identical for a given seed whatever the executor. Memory is
 //! O(R·N + blocks·chunk), independent of D.
 
+use crate::analysis::inputs::{Inputs, time_err};
+use crate::analysis::result::*;
 use crate::analysis::{Avg, SetSums, bisect_root, criteria_set, overflowed};
 use crate::error::{Error, FieldError};
-use crate::inputs::{Inputs, time_err};
-use crate::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym, mul_vec};
-use crate::result::*;
-use crate::validate::CompiledModel;
+use crate::model::compile::CompiledModel;
+use crate::numerics::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym, mul_vec};
 use crate::{Model, Overrides, Progress};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -35,12 +35,12 @@ pub const MAX_RUNS: u64 = 100_000;
 pub const MAX_WORK: f64 = 1e11;
 /// Most steps per chunk: the Riccati is computed for a chunk, then all blocks advance.
 pub const CHUNK_STEPS: usize = 256;
-/// The work of a chunk (the plan's steps and every run's, units of [`crate::cost`])
+/// The work of a chunk (the plan's steps and every run's, units of [`crate::work`])
 /// at which chunks get shorter than [`CHUNK_STEPS`]: 16 times the analysis's
-/// [`crate::analysis::WORK_BETWEEN_REPORTS`], ≈ 17 ms of one core (less on several
+/// [`crate::progress::WORK_BETWEEN_REPORTS`], ≈ 17 ms of one core (less on several
 /// threads), so that handing the blocks to the executor stays a small share of a
 /// chunk.
-pub const CHUNK_WORK: f64 = 16.0 * crate::analysis::WORK_BETWEEN_REPORTS;
+pub const CHUNK_WORK: f64 = crate::progress::WORK_BETWEEN_PARTS;
 /// At most this many blocks of runs (more runs make bigger blocks).
 const MAX_BLOCKS: usize = 64;
 /// At least this many runs per block.
@@ -62,9 +62,15 @@ pub const BAND_PROBABILITY: f64 = 0.95;
 
 pub use crate::exec::{Executor, Sequential};
 use crate::exec::{Forgetful, Memo};
-use crate::resume::{
-    BlockState, F, RowsState, SIMULATION_KEY, SimulationStamp, SimulationState, bits, put, values,
-};
+use crate::resume::{F, bits, put, values};
+pub use state::STATE_KEY;
+use state::{BlockState, RowsState, SimulationStamp, SimulationState};
+
+pub mod kind;
+pub mod report;
+pub use report::traces_csv;
+mod state;
+pub mod work;
 
 /// What the filter is compared with (METHOD §1.8).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -285,7 +291,7 @@ pub fn check_request(req: &SimulationRequest, model: &CompiledModel) -> Result<(
             format!("{} runs is more than the limit of {MAX_RUNS}", req.runs),
         ));
     }
-    let max_rows = crate::validate::max_trace_rows(model.n_states() * T_SERIES + 2);
+    let max_rows = crate::model::limits::max_trace_rows(model.n_states() * T_SERIES + 2);
     if let Some(tp) = req.trace_points
         && !(2..=max_rows).contains(&tp)
     {
@@ -293,7 +299,7 @@ pub fn check_request(req: &SimulationRequest, model: &CompiledModel) -> Result<(
             "trace_points",
             format!(
                 "expected 2 to {max_rows} rows (at most {} values in all), got {tp}",
-                crate::validate::MAX_TRACE_VALUES
+                crate::model::limits::MAX_TRACE_VALUES
             ),
         ));
     }
@@ -344,13 +350,25 @@ pub fn simulate_resumable<E: Executor>(
     progress: &mut dyn Progress,
     memo: &dyn Memo,
 ) -> Result<SimulationResult, Error> {
-    let compiled = crate::validate::compile(model, set)?;
-    check_request(req, &compiled)?;
+    let compiled = crate::model::compile::compile(model, set)?;
+    simulate_compiled(&compiled, req, exec, progress, memo)
+}
+
+/// [`simulate_resumable`] of a compiled model: its analysis (the first 5 % of the
+/// progress), then the runs.
+pub fn simulate_compiled<E: Executor>(
+    compiled: &CompiledModel,
+    req: &SimulationRequest,
+    exec: &E,
+    progress: &mut dyn Progress,
+    memo: &dyn Memo,
+) -> Result<SimulationResult, Error> {
+    check_request(req, compiled)?;
     // The analysis takes a small share of the work; report it as the first 5 %.
     let mut scaled = |f: f64| progress.report(0.05 * f);
-    let analysis = crate::analysis::run_resumable(&compiled, &mut scaled, memo)?;
+    let analysis = crate::analysis::run_resumable(compiled, &mut scaled, memo)?;
     let mut rest = |f: f64| progress.report(0.05 + 0.95 * f);
-    run_resumable(&compiled, &analysis, req, exec, &mut rest, memo)
+    run_resumable(compiled, &analysis, req, exec, &mut rest, memo)
 }
 
 /// Simulate a compiled model, given its analysis (D, y_B, z_B, the other sets).
@@ -390,13 +408,13 @@ pub fn run_resumable<E: Executor>(
 }
 
 /// Steps per chunk: as many as make [`CHUNK_WORK`] by the work estimate of a step
-/// (the plan's, [`crate::cost::simulation_plan_step`], and every run's,
-/// [`crate::cost::simulation_run_step`]), 1 to [`CHUNK_STEPS`]. A chunk's length never
+/// (the plan's, [`crate::monte_carlo::work::simulation_plan_step`], and every run's,
+/// [`crate::monte_carlo::work::simulation_run_step`]), 1 to [`CHUNK_STEPS`]. A chunk's length never
 /// changes a result (each run's stream and sums go on across chunks).
 pub fn chunk_steps(model: &CompiledModel, req: &SimulationRequest) -> usize {
-    let step = crate::cost::simulation_plan_step(model, None)
-        + req.runs as f64 * crate::cost::simulation_run_step(model, req.model_error);
-    crate::cost::fitting(CHUNK_WORK, step, CHUNK_STEPS as u64) as usize
+    let step = crate::monte_carlo::work::simulation_plan_step(model, None)
+        + req.runs as f64 * crate::monte_carlo::work::simulation_run_step(model, req.model_error);
+    crate::work::fitting(CHUNK_WORK, step, CHUNK_STEPS as u64) as usize
 }
 
 /// Dimensions shared by the plan and the blocks.
@@ -494,7 +512,7 @@ struct Plan<'m> {
     dt: f64,
     /// A = I + aΔt (dense here), uΔt, bΔt, B, Γ, Rv, ζ: the analysis' inputs.
     inp: Inputs,
-    schedule: Option<crate::schedule::Schedules>,
+    schedule: Option<crate::model::schedule::Schedules>,
     big_a: Vec<f64>,
     y: Vec<f64>,
     big_r: Vec<f64>,
@@ -1230,8 +1248,8 @@ fn run_n<const N: usize, E: Executor>(
     let bd_nz = pattern(&m.b, false);
     // Γ = C g in the seed's form: Γ's pattern is not g's; take it dense then.
     let g_nz = match &m.noise {
-        crate::validate::MeasurementNoise::Gamma(g) => pattern(g, false),
-        crate::validate::MeasurementNoise::SeedG(_) => (0..d.nm)
+        crate::model::compile::MeasurementNoise::Gamma(g) => pattern(g, false),
+        crate::model::compile::MeasurementNoise::SeedG(_) => (0..d.nm)
             .flat_map(|i| (0..d.ms).map(move |j| (i, j)))
             .collect(),
     };
@@ -1306,7 +1324,7 @@ fn run_n<const N: usize, E: Executor>(
     let block_runs: Vec<usize> = blocks.iter().map(|b| b.runs).collect();
     let series = n * T_SERIES + 2;
     let earlier = memo
-        .recall(SIMULATION_KEY)
+        .recall(STATE_KEY)
         .and_then(|text| SimulationState::from_text(&text, stamp, &block_runs, series));
     let mut resumed_from = None;
     if let Some(s) = earlier {
@@ -1477,7 +1495,7 @@ fn run_n<const N: usize, E: Executor>(
                 ratio_in: ratio_in.clone(),
                 bias_sum: bits(&bias_sum),
             };
-            memo.keep_state(SIMULATION_KEY, &state.to_text());
+            memo.keep_state(STATE_KEY, &state.to_text());
         }
     }
 
@@ -1645,53 +1663,6 @@ fn outgrown(state: &str, scale: f64, sko: f64, k: u64, t: f64) -> Error {
     }
 }
 
-/// Traces of a simulation as CSV: t, then per state the sample and potential SKOs; a
-/// value that is not a number (overflowed, or no measurement) is an empty cell, as in
-/// the analysis's CSV (`null` in the JSON).
-pub fn traces_csv(r: &SimulationResult) -> String {
-    const SERIES: [&str; 7] = [
-        "a_priori_sko",
-        "open_loop_sko",
-        "measured_sko",
-        "filtered_sko",
-        "filtered_mean",
-        "potential_sko",
-        "chi",
-    ];
-    let tr = &r.traces;
-    let header = std::iter::once("t".to_string())
-        .chain(
-            tr.states
-                .iter()
-                .flat_map(|st| SERIES.iter().map(move |s| format!("{s}:{}", st.state))),
-        )
-        .chain(["nees".to_string(), "nis".to_string()]);
-    // (As the analysis's CSV: plain, or in exponent form outside [1e-4, 1e15).)
-    let num = crate::validate::num;
-    let opt = |v: Option<f64>| v.filter(|x| x.is_finite()).map(num).unwrap_or_default();
-    let rows = tr.t.iter().enumerate().map(|(row, t)| {
-        let mut fields = vec![num(*t)];
-        for st in &tr.states {
-            let meas = st.measured_sko.as_ref().and_then(|m| m[row]);
-            fields.extend(
-                [
-                    Some(st.a_priori_sko[row]),
-                    Some(st.open_loop_sko[row]),
-                    meas,
-                    Some(st.filtered_sko[row]),
-                    Some(st.filtered_mean[row]),
-                    Some(st.potential_sko[row]),
-                    Some(st.chi[row]),
-                ]
-                .map(opt),
-            );
-        }
-        fields.extend([opt(tr.nees[row]), opt(tr.nis[row])]);
-        fields
-    });
-    crate::report::csv_text(header, rows)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1713,7 +1684,7 @@ mod tests {
                 .unwrap();
         json["time"]["steps"] = 2000.into();
         let model = crate::model_from_value(json).unwrap();
-        let compiled = crate::validate::compile(&model, &Overrides::new()).unwrap();
+        let compiled = crate::model::compile::compile(&model, &Overrides::new()).unwrap();
         let analysis = crate::analysis::run(&compiled, &mut crate::NoProgress).unwrap();
         let req = SimulationRequest::new(40, 7);
         let json = |chunk: usize| {

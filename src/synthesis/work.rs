@@ -1,0 +1,26 @@
+//! The synthesis's work estimate: its planned analyses, each the analysis's.
+
+use super::SynthesisRequest;
+use crate::Error;
+use crate::analysis::work::analysis_work;
+use crate::model::CompiledModel;
+use crate::work::Work;
+
+/// The work of a synthesis: at most its planned analyses
+/// ([`crate::synthesis::planned_analyses`]), each the analysis' estimate. Compiles the
+/// model (its errors at the model's own paths).
+pub fn synthesis_work(request: &SynthesisRequest) -> Result<Work, Error> {
+    let compiled = crate::model::compile::compile(&request.model, &request.set)?;
+    Ok(synthesis_work_of(request, &compiled))
+}
+
+/// [`synthesis_work`] of a request whose model is compiled already.
+pub fn synthesis_work_of(request: &SynthesisRequest, compiled: &CompiledModel) -> Work {
+    let analyses = crate::synthesis::planned_analyses(request);
+    let one = analysis_work(compiled, Some(&request.model));
+    Work {
+        units: one.units * analyses as f64,
+        explain: format!("at most {analyses} analyses × {}", one.explain),
+        path: "mode".into(),
+    }
+}

@@ -108,13 +108,10 @@ fn main() {
     let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<u64>().ok());
     // The builds compared as with `kea` (KEA_NO_SIMD, KEA_NO_AVX512; kea_core::cpu).
     let set = |k: &str| std::env::var_os(k).is_some();
-    kea_core::cpu::set_limit(if set("KEA_NO_SIMD") {
-        kea_core::cpu::Limit::Baseline
-    } else if set("KEA_NO_AVX512") {
-        kea_core::cpu::Limit::Avx2
-    } else {
-        kea_core::cpu::Limit::Widest
-    });
+    kea_core::cpu::set_limit(kea_core::cpu::Limit::from_switches(
+        set("KEA_NO_SIMD"),
+        set("KEA_NO_AVX512"),
+    ));
     let d = env("KEA_BENCH_STEPS").unwrap_or(1_000_000);
     let runs = |r: usize| env("KEA_BENCH_RUNS").map_or(r, |v| v as usize);
     for p in [4, 6, 8, 9, 10] {

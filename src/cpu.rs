@@ -18,6 +18,20 @@ pub enum Limit {
     Baseline,
 }
 
+impl Limit {
+    /// The ceiling that two switches ask for: `baseline` the portable build, else
+    /// `no_avx512` at most AVX2 (the switches `KEA_NO_SIMD` and `KEA_NO_AVX512`).
+    pub fn from_switches(baseline: bool, no_avx512: bool) -> Limit {
+        if baseline {
+            Limit::Baseline
+        } else if no_avx512 {
+            Limit::Avx2
+        } else {
+            Limit::Widest
+        }
+    }
+}
+
 static LIMIT: AtomicU8 = AtomicU8::new(0);
 
 /// Lower (or raise back) the ceiling for the runs that follow. The expressions' sin

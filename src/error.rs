@@ -97,10 +97,27 @@ impl Error {
                 format!("{prefix}.{p}")
             }
         };
+        self.map_paths(join)
+    }
+
+    /// The error's paths without `prefix` (`model.x` is `x`, `model` the root), the
+    /// inverse of [`Error::with_prefix`]: a request's errors as those of its member.
+    pub fn without_prefix(self, prefix: &str) -> Self {
+        let strip = |p: &str| match p.strip_prefix(prefix) {
+            Some("") => String::new(),
+            Some(rest) if rest.starts_with('.') => rest[1..].to_string(),
+            Some(rest) if rest.starts_with('[') => rest.to_string(),
+            _ => p.to_string(),
+        };
+        self.map_paths(strip)
+    }
+
+    /// The error with every path mapped by `f`.
+    fn map_paths(self, f: impl Fn(&str) -> String) -> Self {
         match self {
             Error::Invalid(v) => Error::Invalid(
                 v.into_iter()
-                    .map(|e| FieldError::new(join(&e.path), e.message))
+                    .map(|e| FieldError::new(f(&e.path), e.message))
                     .collect(),
             ),
             Error::Numerical {
@@ -111,7 +128,7 @@ impl Error {
             } => Error::Numerical {
                 step,
                 t,
-                path: join(&path),
+                path: f(&path),
                 message,
             },
             Error::Cancelled => Error::Cancelled,

@@ -17,6 +17,7 @@ pub mod error;
 pub mod exec;
 pub mod json;
 pub mod progress;
+pub mod request;
 pub mod resume;
 pub mod text;
 pub mod work;
@@ -30,6 +31,8 @@ pub mod kind;
 pub mod analysis;
 pub mod monte_carlo;
 pub mod synthesis;
+
+pub mod registry;
 
 pub mod presets;
 

@@ -1,7 +1,7 @@
 //! Heap use, counted by a global allocator: the architecture invariant that memory
 //! does not grow with the number of steps D (criteria accumulated on the fly, traces
 //! decimated), and the documented cost of time-dependent expressions, which the
-//! model's expression limits rest on (README "The model format", `expr::MAX_TIME_*`).
+//! model's expression limits rest on (docs/model-format.md, "Limits", `expr::MAX_TIME_*`).
 
 mod common;
 
@@ -148,7 +148,7 @@ fn expressions_at_the_model_limits_take_the_documented_memory() {
     };
     const KB: f64 = 1024.0;
     const MB: f64 = 1024.0 * 1024.0;
-    // Per expression, short and at the longest text (README: "a parsed one, in both
+    // Per expression, short and at the longest text (docs/model-format.md: "a parsed one, in both
     // its forms, holds ≈ 45 KB plus ≈ 0.7 KB per character, shared by the analyses
     // that run it"): an analysis's peak adds little to what the compiled model holds.
     let (held_short, peak_short) = cost(101, 20);
@@ -165,7 +165,7 @@ fn expressions_at_the_model_limits_take_the_documented_memory() {
     );
     assert!(per(held_short, 101) <= 50.0 && per(peak_short, 101) <= 50.0);
     assert!(per_char <= 1.0);
-    // The whole model at the limits (README: ≈ 85 MB held, little more at the peak;
+    // The whole model at the limits (docs/model-format.md: ≈ 85 MB held, little more at the peak;
     // before the parses were shared, ≈ 40 MB held and ≈ 125 MB at the peak).
     let chars = MAX_TIME_EXPRESSION_CHARS / MAX_TIME_EXPRESSIONS;
     let (held, peak) = cost(MAX_TIME_EXPRESSIONS, chars);

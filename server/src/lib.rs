@@ -67,13 +67,10 @@ pub struct Cli {
 /// + FMA. The results are the same bits whichever runs (`kea_core::cpu`).
 pub fn cpu_limit_from_env() {
     let set = |var: &str| std::env::var_os(var).is_some();
-    kea_core::cpu::set_limit(if set("KEA_NO_SIMD") {
-        kea_core::cpu::Limit::Baseline
-    } else if set("KEA_NO_AVX512") {
-        kea_core::cpu::Limit::Avx2
-    } else {
-        kea_core::cpu::Limit::Widest
-    });
+    kea_core::cpu::set_limit(kea_core::cpu::Limit::from_switches(
+        set("KEA_NO_SIMD"),
+        set("KEA_NO_AVX512"),
+    ));
 }
 
 impl Cli {

@@ -4,8 +4,9 @@
 use super::result::{AnalysisResult, Timing};
 use crate::error::Error;
 use crate::exec::{Executor, Memo};
-use crate::kind::{Kind, request};
+use crate::kind::Kind;
 use crate::model::CompiledModel;
+use crate::request;
 use crate::work::Work;
 use crate::{Model, Progress};
 use serde_json::{Map, Value};

@@ -205,16 +205,7 @@ pub struct StateTrace {
     pub local_yx: Vec<Option<f64>>,
 }
 
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Timing {
-    /// Filled by the caller (the core has no clock: it also runs in wasm).
-    pub wall_ms: f64,
-    /// The run went on from the state an interrupted run of the same request kept
-    /// after this step ([`crate::resume`]; a server's job after a restart): `wall_ms`
-    /// is then the time from there. Absent for a run from the start.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub resumed_from_step: Option<u64>,
-}
+pub use crate::kind::Timing;
 
 /// R_D and p_D of the filter's covariance recursion run alone
 /// ([`crate::covariance_recursion`]): the analysis's `final.covariance` and

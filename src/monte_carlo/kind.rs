@@ -5,8 +5,9 @@ use super::{DEFAULT_SEED, ModelError, SimulationRequest, SimulationResult, Truth
 use crate::analysis::result::Timing;
 use crate::error::{Error, FieldError};
 use crate::exec::{Executor, Memo};
-use crate::kind::{Kind, request};
+use crate::kind::Kind;
 use crate::model::CompiledModel;
+use crate::request;
 use crate::work::Work;
 use crate::{Model, Progress};
 use serde_json::{Map, Value};
@@ -58,12 +59,15 @@ impl Kind for MonteCarlo {
             return Err(Error::Invalid(errors));
         };
         let compiled = request::compile(&model, &set).map_err(request::locate)?;
-        super::check_request(&sim, &compiled)?;
         Ok(Request {
             model,
             compiled,
             monte_carlo: sim,
         })
+    }
+
+    fn check(r: &Request) -> Result<(), Error> {
+        super::check_request(&r.monte_carlo, &r.compiled)
     }
 
     fn work(r: &Request) -> Work {

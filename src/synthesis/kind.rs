@@ -6,7 +6,8 @@ use crate::Progress;
 use crate::analysis::result::Timing;
 use crate::error::{Error, FieldError, got, member_path, plain_serde_error};
 use crate::exec::{Executor, Memo};
-use crate::kind::{Kind, request};
+use crate::kind::Kind;
+use crate::request;
 use crate::work::Work;
 use serde_json::{Map, Value};
 

@@ -361,7 +361,7 @@ pub fn validated(req: &SynthesisRequest) -> Result<crate::model::CompiledModel, 
     let mut errs: Vec<FieldError> = Vec::new();
     let compiled = crate::model::compile::compile(&req.model, &req.set);
     if let Err(e) = &compiled {
-        errs.extend(locate_model_errors(e.clone()).field_errors());
+        errs.extend(crate::request::locate(e.clone()).field_errors());
     }
     let t = &req.target;
     // F_YZ and F_ZX of a state are defined only where it has a measurement: a target
@@ -411,7 +411,7 @@ pub fn validated(req: &SynthesisRequest) -> Result<crate::model::CompiledModel, 
         let mut set = req.set.clone();
         set.insert(name.to_string(), value);
         if let Err(e) = crate::check(&req.model, &set)
-            && let Some(first) = locate_model_errors(e).field_errors().into_iter().next()
+            && let Some(first) = crate::request::locate(e).field_errors().into_iter().next()
         {
             errs.push(FieldError::new(
                 path,
@@ -672,27 +672,6 @@ fn duplicate_check<'a>(
     }
 }
 
-/// Model errors under `model`, override errors (`set.q`) as they are.
-fn locate_model_errors(e: Error) -> Error {
-    match e {
-        Error::Invalid(v) => Error::Invalid(
-            v.into_iter()
-                .map(|f| {
-                    if f.path == "set" || f.path.starts_with("set.") || f.path.starts_with("set[") {
-                        f
-                    } else {
-                        Error::Invalid(vec![f])
-                            .with_prefix("model")
-                            .field_errors()
-                            .remove(0)
-                    }
-                })
-                .collect(),
-        ),
-        other => other.with_prefix("model"),
-    }
-}
-
 /// The values of a seed-search param: high, high·k, high·k², … while ≥ low (the low
 /// bound counts as reached within a relative 1e-9, so 0.5·0.5² = 0.125 is included).
 pub fn levels(p: &RangeParam) -> Vec<f64> {
@@ -848,7 +827,7 @@ impl Ctx<'_> {
         }
         let r = crate::analyze(self.model, &set, progress).map_err(|e| {
             let at = describe(params);
-            match locate_model_errors(e) {
+            match crate::request::locate(e) {
                 Error::Invalid(v) => Error::Invalid(
                     v.into_iter()
                         .map(|f| FieldError::new(f.path, format!("{} (at {at})", f.message)))

@@ -91,11 +91,11 @@ fn work_json(work: kea_core::work::Work) -> String {
 }
 
 /// A request (JSON text) of the kind `kind` read and compiled by the core
-/// ([`kea_core::kind`]), as the server's job of that kind reads it.
-fn prepare(kind: &str, request_json: &str) -> Result<kea_core::kind::Prepared, Error> {
+/// ([`kea_core::registry`]), as the server's job of that kind reads it.
+fn prepare(kind: &str, request_json: &str) -> Result<kea_core::registry::Prepared, Error> {
     let value = kea_core::parse_json(request_json.as_bytes())
         .map_err(|e| Error::invalid("", format!("not valid JSON: {e}")))?;
-    kea_core::kind::prepare(kind, value)
+    kea_core::registry::prepare_checked(kind, value)
 }
 
 /// The estimated work of [`run`] on the same kind and request, the server's estimate
@@ -140,35 +140,6 @@ fn analysis_request(model_json: &str, set_json: &str) -> Result<String, Error> {
     Ok(format!(r#"{{"model": {model_json}, "set": {set}}}"#))
 }
 
-/// A request's error as the model's: `model.x` is `x` (the editor's paths).
-fn of_model(e: Error) -> Error {
-    let strip = |path: String| match path.strip_prefix("model") {
-        Some("") => String::new(),
-        Some(rest) if rest.starts_with('.') => rest[1..].to_string(),
-        Some(rest) if rest.starts_with('[') => rest.to_string(),
-        _ => path,
-    };
-    match e {
-        Error::Invalid(v) => Error::Invalid(
-            v.into_iter()
-                .map(|f| FieldError::new(strip(f.path), f.message))
-                .collect(),
-        ),
-        Error::Numerical {
-            step,
-            t,
-            path,
-            message,
-        } => Error::Numerical {
-            step,
-            t,
-            path: strip(path),
-            message,
-        },
-        other => other,
-    }
-}
-
 /// [`work`] of a synthesis request (an alias kept for older pages).
 #[wasm_bindgen]
 pub fn synthesis_work(request_json: &str) -> Result<String, JsValue> {
@@ -186,7 +157,7 @@ pub fn simulation_work(request_json: &str) -> Result<String, JsValue> {
 #[wasm_bindgen]
 pub fn analysis_work(model_json: &str, set_json: &str) -> Result<String, JsValue> {
     let request = analysis_request(model_json, set_json).map_err(|e| to_js(&e))?;
-    let prepared = prepare("analysis", &request).map_err(|e| to_js(&of_model(e)))?;
+    let prepared = prepare("analysis", &request).map_err(|e| to_js(&e.without_prefix("model")))?;
     Ok(work_json(prepared.work()))
 }
 
@@ -200,7 +171,7 @@ pub fn analyze(
 ) -> Result<String, JsValue> {
     analysis_request(model_json, set_json)
         .and_then(|request| run_as("analysis", &request, progress))
-        .map_err(|e| to_js(&of_model(e)))
+        .map_err(|e| to_js(&e.without_prefix("model")))
 }
 
 /// A progress callback as the core's `Progress`: `progress(fraction)` returning

@@ -301,7 +301,7 @@ pub fn print_run<T: serde::Serialize>(
 }
 
 /// A command that runs one of the core's kinds on a request it made of its arguments
-/// ([`kea_core::kind`]): the request is read and compiled once, its work held to
+/// ([`kea_core::registry`]): the request is read and compiled once, its work held to
 /// `--max-work`, then it runs with the progress bar and prints its text, JSON or CSV.
 /// The model is a file here, not a request's member: its errors are at the file's
 /// own paths (`system.a[0][1]`, not `model.system.a[0][1]`).
@@ -320,12 +320,16 @@ impl KindRun<'_> {
         request: serde_json::Value,
         exec: &E,
     ) -> ExitCode {
-        let prepared = match kea_core::kind::prepare(self.kind, request) {
+        let prepared = match kea_core::registry::prepare(self.kind, request) {
             Ok(p) => p,
-            Err(e) => return report_error(&of_model_file(e)),
+            Err(e) => return report_error(&e.without_prefix("model")),
         };
         if let Err(code) = self.limit.check(Ok(prepared.work())) {
             return code;
+        }
+        // (After the work: a run too large is told so first, whatever else it asks.)
+        if let Err(e) = prepared.check() {
+            return report_error(&e.without_prefix("model"));
         }
         let csv = match Csv::open(self.csv, self.input, self.json) {
             Ok(c) => c,
@@ -337,7 +341,7 @@ impl KindRun<'_> {
         bar.finish();
         let mut outcome = match outcome {
             Ok(o) => o,
-            Err(e) => return report_error(&of_model_file(e)),
+            Err(e) => return report_error(&e.without_prefix("model")),
         };
         outcome.timing().wall_ms = start.elapsed().as_secs_f64() * 1e3;
         let text_on_stdout = !matches!(csv, Some(Csv::Stdout));
@@ -357,35 +361,6 @@ impl KindRun<'_> {
             Ok(()) => ExitCode::SUCCESS,
             Err(code) => code,
         }
-    }
-}
-
-/// A request's error as the model file's: `model.x` is `x` (`model` the root).
-fn of_model_file(e: kea_core::Error) -> kea_core::Error {
-    let strip = |path: String| match path.strip_prefix("model") {
-        Some("") => String::new(),
-        Some(rest) if rest.starts_with('.') => rest[1..].to_string(),
-        Some(rest) if rest.starts_with('[') => rest.to_string(),
-        _ => path,
-    };
-    match e {
-        kea_core::Error::Invalid(v) => kea_core::Error::Invalid(
-            v.into_iter()
-                .map(|f| kea_core::FieldError::new(strip(f.path), f.message))
-                .collect(),
-        ),
-        kea_core::Error::Numerical {
-            step,
-            t,
-            path,
-            message,
-        } => kea_core::Error::Numerical {
-            step,
-            t,
-            path: strip(path),
-            message,
-        },
-        other => other,
     }
 }
 

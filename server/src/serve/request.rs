@@ -1,15 +1,15 @@
 //! Reading requests: the JSON body (size limit, media type, syntax), query strings,
 //! and the pieces every computation request shares (`model` | `model_id`, `set`).
 
-use super::problem::{Problem, kind, omitted_count};
+use super::problem::{Problem, kind};
 use super::state::AppState;
 use axum::extract::path::ErrorKind;
 use axum::extract::rejection::PathRejection;
 use axum::extract::{FromRequest, FromRequestParts, Path, Request};
 use axum::http::request::Parts;
 use axum::http::{StatusCode, header};
+use kea_core::FieldError;
 pub use kea_core::error::{got, json_kind};
-use kea_core::{FieldError, Overrides};
 use serde_json::{Map, Value};
 use std::collections::BTreeMap;
 
@@ -284,142 +284,6 @@ pub fn object(body: Value) -> Result<Map<String, Value>, Problem> {
     }
 }
 
-/// Errors for members of `obj` outside `allowed`.
-pub fn unknown_members(obj: &Map<String, Value>, allowed: &[&str]) -> Vec<FieldError> {
-    obj.keys()
-        .filter(|k| !allowed.contains(&k.as_str()))
-        .map(|k| {
-            FieldError::new(
-                k.clone(),
-                format!("unknown member; expected one of: {}", allowed.join(", ")),
-            )
-        })
-        .collect()
-}
-
-/// Parse `set` (parameter overrides): an object of finite numbers.
-/// The `model` and `set` members of a job request; problems are added to `errors`
-/// with paths into the request (`model.system.a[0][0]`, `set.q`).
-pub fn model_and_set(
-    obj: &Map<String, Value>,
-    errors: &mut Vec<FieldError>,
-) -> (Option<kea_core::Model>, Overrides) {
-    let model = match obj.get("model") {
-        None => {
-            errors.push(FieldError::new(
-                "model",
-                "missing: give `model` (a model object) or `model_id` (a stored model)",
-            ));
-            None
-        }
-        Some(v) => match kea_core::model_from_value(v.clone()) {
-            Ok(m) => Some(m),
-            Err(e) => {
-                errors.extend(e.with_prefix("model").field_errors());
-                None
-            }
-        },
-    };
-    let set = match overrides(obj.get("set")) {
-        Ok(s) => s,
-        Err(e) => {
-            errors.extend(e);
-            Overrides::new()
-        }
-    };
-    (model, set)
-}
-
-pub fn overrides(set: Option<&Value>) -> Result<Overrides, Vec<FieldError>> {
-    let Some(set) = set else {
-        return Ok(Overrides::new());
-    };
-    let Value::Object(m) = set else {
-        return Err(vec![FieldError::new(
-            "set",
-            format!(
-                "expected an object of parameter values (e.g. {{\"q\": 0.5}}), got {}",
-                json_kind(set)
-            ),
-        )]);
-    };
-    let mut out = BTreeMap::new();
-    let mut errors = Vec::new();
-    for (name, v) in m {
-        match v.as_f64() {
-            Some(x) if x.is_finite() => {
-                out.insert(name.clone(), x);
-            }
-            _ => errors.push(FieldError::new(
-                kea_core::error::member_path("set", name),
-                format!("expected a number, got {}", json_kind(v)),
-            )),
-        }
-    }
-    if errors.is_empty() {
-        Ok(out)
-    } else {
-        Err(errors)
-    }
-}
-
-/// Validate and compile `model` with `set`. Where the model is valid without `set`
-/// (and no error is about `set` itself: an unknown name), its errors are the values' doing (`set: {q: -3}` makes `phi[0]` negative): one more
-/// entry, at `set`, names them, so that a request naming only `model_id` and `set`
-/// learns what it sent wrong. Paths are the core's (see [`locate`]).
-pub fn compile(
-    model: &kea_core::Model,
-    set: &Overrides,
-) -> Result<kea_core::model::compile::CompiledModel, kea_core::Error> {
-    match kea_core::model::compile(model, set) {
-        Err(kea_core::Error::Invalid(mut errors))
-            if !set.is_empty()
-                && !errors.iter().any(|e| e.path.starts_with("set"))
-                && kea_core::model::compile(model, &Overrides::new()).is_ok() =>
-        {
-            let values: Vec<String> = set
-                .iter()
-                .map(|(k, v)| format!("{k} = {}", kea_core::text::num(*v)))
-                .collect();
-            errors.push(FieldError::new(
-                "set",
-                format!(
-                    "the model is valid without `set`; with {} it is not (the other errors say where)",
-                    values.join(", ")
-                ),
-            ));
-            Err(kea_core::Error::Invalid(errors))
-        }
-        r => r,
-    }
-}
-
-/// Locate a core error from `check`/`analyze` of (`model`, `set`) in the request body:
-/// paths about the overrides (`set.…`) stay, and so does the entry that counts the
-/// errors left out (it is about the whole list, at the top level); the rest are under
-/// `model`.
-pub fn locate(err: kea_core::Error) -> kea_core::Error {
-    let under_set = |p: &str| p == "set" || p.starts_with("set.") || p.starts_with("set[");
-    match err {
-        kea_core::Error::Invalid(v) => kea_core::Error::Invalid(
-            v.into_iter()
-                .map(|e| {
-                    if under_set(&e.path) || omitted_count(&e).is_some() {
-                        e
-                    } else {
-                        match kea_core::Error::Invalid(vec![e]).with_prefix("model") {
-                            kea_core::Error::Invalid(mut one) => one.remove(0),
-                            _ => unreachable!("with_prefix keeps the variant"),
-                        }
-                    }
-                })
-                .collect(),
-        ),
-        e @ kea_core::Error::Numerical { .. } => e.with_prefix("model"),
-        e => e,
-    }
-}
-
 /// Query parameters of the list routes: `limit` (1..=1000, default 50), `cursor` (the
 /// `next_cursor` of the previous page), and the route's `extra` ones; each at most once.
 pub struct ListQuery {
@@ -607,32 +471,6 @@ fn percent_decode(s: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn locate_keeps_set_paths_and_prefixes_model_paths() {
-        let e = kea_core::Error::Invalid(vec![
-            FieldError::new("set.q", "unknown"),
-            FieldError::new("system.a[0][1]", "bad"),
-            FieldError::new("", "root"),
-            FieldError::new("", "… and 7 more errors (only the first 100 are listed)"),
-        ]);
-        let paths: Vec<String> = locate(e)
-            .field_errors()
-            .into_iter()
-            .map(|e| e.path)
-            .collect();
-        assert_eq!(paths, vec!["set.q", "model.system.a[0][1]", "model", ""]);
-    }
-
-    #[test]
-    fn overrides_are_numbers() {
-        let ok = overrides(Some(&serde_json::json!({"q": 2, "r": 0.5}))).unwrap();
-        assert_eq!(ok.get("q"), Some(&2.0));
-        let err = overrides(Some(&serde_json::json!({"q": "x"}))).unwrap_err();
-        assert_eq!(err[0].path, "set.q");
-        let err = overrides(Some(&serde_json::json!([1]))).unwrap_err();
-        assert_eq!(err[0].path, "set");
-    }
 
     #[test]
     fn query_strings_decode() {

@@ -1,5 +1,5 @@
 //! Job kinds: what a job computes, independent of queues, storage and HTTP — the
-//! core's kinds ([`kea_core::kind`]), each run here on a rayon pool. A request (the
+//! core's kinds ([`kea_core::registry`]), each run here on a rayon pool. A request (the
 //! `model_id` already resolved to `model`) is read and compiled by its kind into a
 //! [`PreparedJob`], which estimates its work and runs on a worker thread with progress
 //! and cancellation. A new kind is the core's: nothing here changes.
@@ -14,7 +14,7 @@ use std::time::Instant;
 pub use kea_core::work::Work;
 
 /// A validated request, ready to run.
-pub struct PreparedJob(kea_core::kind::Prepared);
+pub struct PreparedJob(kea_core::registry::Prepared);
 
 /// What a finished job produced.
 pub struct JobOutput {
@@ -24,21 +24,21 @@ pub struct JobOutput {
     pub traces_csv: Option<String>,
 }
 
-/// Read and compile a request (the job body without `kind`) of the kind `kind` (a
+/// Read, compile and check a request (the job body without `kind`) of the kind `kind` (a
 /// name or an alias). Errors carry paths into the request body
 /// (`model.system.a[0][1]`, `set.q`).
 pub fn prepare(kind: &str, request: Value) -> Result<PreparedJob, Error> {
-    kea_core::kind::prepare(kind, request).map(PreparedJob)
+    kea_core::registry::prepare_checked(kind, request).map(PreparedJob)
 }
 
 /// The kind a request's `kind` names, as its name; `None` for none.
 pub fn find(kind: &str) -> Option<&'static str> {
-    kea_core::kind::find(kind)
+    kea_core::registry::find(kind)
 }
 
 /// Every kind's name, in the order errors list them.
 pub fn names() -> &'static [&'static str] {
-    kea_core::kind::NAMES
+    kea_core::registry::NAMES
 }
 
 impl PreparedJob {

@@ -1,57 +1,15 @@
-//! The kinds of run, and the one way into each: a request (JSON) is read strictly
-//! once, with every problem at its path, and compiled once ([`prepare`]); what was
-//! compiled gives the work estimate ([`Prepared::work`]) and runs with a caller's
-//! executor, progress and memo ([`Prepared::run`]); the outcome renders itself as
-//! JSON, a text report and CSV ([`Outcome`]). The server's jobs, the command line,
-//! the wasm module and so the web page's worker all come in here.
-//!
-//! The kinds are listed once, in [`kinds!`]'s invocation below: a new kind is its
-//! module (a type implementing [`Kind`]) and one line there.
-
-pub mod request;
+//! The registry of the kinds of run ([`crate::kind::Kind`]): every kind listed once,
+//! in [`kinds!`]'s invocation, and the one way in for every shell — [`prepare`] a
+//! request of a kind named in it, estimate its work, run it, render its outcome.
 
 use crate::Progress;
 use crate::analysis::result::Timing;
 use crate::error::{Error, FieldError};
 use crate::exec::{Executor, Memo};
+use crate::kind::Kind;
+use crate::request;
 use crate::work::Work;
-use serde_json::{Map, Value};
-
-/// One kind of run: how its request is read and compiled, estimated, run and shown.
-pub trait Kind {
-    /// The kind's name in a request (`"analysis"`).
-    const NAME: &'static str;
-    /// Older names still read as this kind (stored jobs, scripts).
-    const ALIASES: &'static [&'static str];
-    /// The members its request may have (`model_id`: a stored model, resolved to
-    /// `model` by the server before the kind sees the request).
-    const MEMBERS: &'static [&'static str];
-    /// The request read and compiled, ready to run.
-    type Request;
-    /// What a run gives (its JSON is the result document).
-    type Outcome: serde::Serialize;
-
-    /// Read and compile a request (an object; paths into it: `model.system.a[0][1]`,
-    /// `set.q`, `runs`).
-    fn prepare(request: Map<String, Value>) -> Result<Self::Request, Error>;
-    /// The work estimate of a prepared request.
-    fn work(request: &Self::Request) -> Work;
-    /// Run it; `Error::Cancelled` when `progress` said stop. `memo` keeps finished
-    /// parts and states for a run of the same request after a restart, and holds those
-    /// of an earlier run (`crate::resume`).
-    fn run<E: Executor>(
-        request: &Self::Request,
-        exec: &E,
-        progress: &mut dyn Progress,
-        memo: &dyn Memo,
-    ) -> Result<Self::Outcome, Error>;
-    /// The outcome's timing (its wall-clock time is the caller's to fill in).
-    fn timing(outcome: &mut Self::Outcome) -> &mut Timing;
-    /// The plain-text report (`kea <kind>`'s table).
-    fn text(outcome: &Self::Outcome) -> String;
-    /// The traces as CSV, where the kind has them.
-    fn csv(outcome: &Self::Outcome) -> Option<String>;
-}
+use serde_json::Value;
 
 /// The registry: the [`Prepared`] and [`Outcome`] enums, with one variant per kind,
 /// and [`NAMES`].
@@ -86,7 +44,8 @@ macro_rules! kinds {
             &[]
         }
 
-        /// Read and compile a request of the kind `kind` (a name or an alias).
+        /// Read and compile a request of the kind `kind` (a name or an alias); its kind's
+        /// own checks are [`Prepared::check`]'s (see [`prepare_checked`]).
         pub fn prepare(kind: &str, request: Value) -> Result<Prepared, Error> {
             let name = find(kind).ok_or_else(|| unknown(kind))?;
             let obj = request::object(request)?;
@@ -101,6 +60,13 @@ macro_rules! kinds {
             pub fn kind(&self) -> &'static str {
                 match self {
                     $(Prepared::$variant(_) => <$kind as Kind>::NAME,)*
+                }
+            }
+
+            /// The kind's own checks of the request ([`Kind::check`]).
+            pub fn check(&self) -> Result<(), Error> {
+                match self {
+                    $(Prepared::$variant(r) => <$kind as Kind>::check(r),)*
                 }
             }
 
@@ -179,4 +145,11 @@ fn unknown(kind: &str) -> Error {
         "kind",
         format!("unknown job kind `{kind}`; known: {}", NAMES.join(", ")),
     )])
+}
+
+/// [`prepare`] and [`Prepared::check`]: a request read, compiled and checked.
+pub fn prepare_checked(kind: &str, request: Value) -> Result<Prepared, Error> {
+    let prepared = prepare(kind, request)?;
+    prepared.check()?;
+    Ok(prepared)
 }

@@ -40,6 +40,7 @@ impl Run for Args {
             json: self.json,
             csv: self.csv.as_deref(),
             limit: &self.limit,
+            model_file: true,
         };
         run.run(request, &kea_core::exec::Sequential)
     }

@@ -312,54 +312,63 @@ pub struct KindRun<'a> {
     pub json: bool,
     pub csv: Option<&'a Path>,
     pub limit: &'a WorkLimit,
+    /// The input is a model file (`kea analyze`, `kea simulate`), not a request.
+    pub model_file: bool,
 }
 
 impl KindRun<'_> {
+    /// Run the request and print its outcome; exit 0, or the failure's code.
     pub fn run<E: kea_core::exec::Executor>(
         &self,
         request: serde_json::Value,
         exec: &E,
     ) -> ExitCode {
-        let prepared = match kea_core::registry::prepare(self.kind, request) {
-            Ok(p) => p,
-            Err(e) => return report_error(&e.without_prefix("model")),
-        };
-        if let Err(code) = self.limit.check(Ok(prepared.work())) {
-            return code;
+        match self.outcome(request, exec) {
+            Ok(_) => ExitCode::SUCCESS,
+            Err(code) => code,
         }
+    }
+
+    /// Run the request and print its outcome, which is returned (a command whose exit
+    /// code depends on it: a synthesis that found no answer).
+    pub fn outcome<E: kea_core::exec::Executor>(
+        &self,
+        request: serde_json::Value,
+        exec: &E,
+    ) -> Result<kea_core::registry::Outcome, ExitCode> {
+        let prepared = kea_core::registry::prepare(self.kind, request)
+            .map_err(|e| report_error(&self.located(e)))?;
+        self.limit.check(Ok(prepared.work()))?;
         // (After the work: a run too large is told so first, whatever else it asks.)
-        if let Err(e) = prepared.check() {
-            return report_error(&e.without_prefix("model"));
-        }
-        let csv = match Csv::open(self.csv, self.input, self.json) {
-            Ok(c) => c,
-            Err(code) => return code,
-        };
+        prepared
+            .check()
+            .map_err(|e| report_error(&self.located(e)))?;
+        let csv = Csv::open(self.csv, self.input, self.json)?;
         let start = Instant::now();
         let mut bar = Bar::new(self.kind);
         let outcome = prepared.run(exec, &mut bar, &kea_core::exec::Forgetful);
         bar.finish();
-        let mut outcome = match outcome {
-            Ok(o) => o,
-            Err(e) => return report_error(&e.without_prefix("model")),
-        };
+        let mut outcome = outcome.map_err(|e| report_error(&self.located(e)))?;
         outcome.timing().wall_ms = start.elapsed().as_secs_f64() * 1e3;
         let text_on_stdout = !matches!(csv, Some(Csv::Stdout));
-        let printed = (|| {
-            if let Some(csv) = csv {
-                csv.write(&outcome.csv().unwrap_or_default())?;
-            }
-            if self.json {
-                print_text(&format!("{}\n", outcome.to_json_pretty()))
-            } else if text_on_stdout {
-                print_text(&outcome.text())
-            } else {
-                Ok(())
-            }
-        })();
-        match printed {
-            Ok(()) => ExitCode::SUCCESS,
-            Err(code) => code,
+        if let Some(csv) = csv {
+            csv.write(&outcome.csv().unwrap_or_default())?;
+        }
+        if self.json {
+            print_text(&format!("{}\n", outcome.to_json_pretty()))?;
+        } else if text_on_stdout {
+            print_text(&outcome.text())?;
+        }
+        Ok(outcome)
+    }
+
+    /// An error at the request's paths as the command's input has them: a model
+    /// file's own (`model.x` is `x`), a request file's as they are.
+    fn located(&self, e: kea_core::Error) -> kea_core::Error {
+        if self.model_file {
+            e.without_prefix("model")
+        } else {
+            e
         }
     }
 }

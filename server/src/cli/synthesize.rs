@@ -5,10 +5,9 @@
 
 use crate::Run;
 use crate::parallel::Rayon;
-use kea_core::synthesis::{self, Status};
+use kea_core::synthesis::Status;
 use serde_json::Value;
 use std::process::ExitCode;
-use std::time::Instant;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -125,10 +124,6 @@ impl Run for Args {
                 }
             }
         }
-        let request = match synthesis::request_from_value(value) {
-            Ok(r) => r,
-            Err(e) => return super::report_error(&e),
-        };
         let exec = match Rayon::new(self.threads) {
             Ok(x) => x,
             Err(e) => {
@@ -136,28 +131,19 @@ impl Run for Args {
                 return ExitCode::from(super::EXIT_FAILURE);
             }
         };
-        let work = synthesis::validate(&request)
-            .and_then(|()| kea_core::synthesis::work::synthesis_work(&request));
-        if let Err(code) = self.limit.check(work) {
-            return code;
-        }
-        let start = Instant::now();
-        let mut bar = super::Bar::new("synthesis");
-        let result = synthesis::synthesize(&request, &exec, &mut bar);
-        bar.finish();
-        let mut result = match result {
-            Ok(r) => r,
-            Err(e) => return super::report_error(&e),
+        let run = super::KindRun {
+            kind: "synthesis",
+            input: self.request.as_deref().unwrap_or("-"),
+            json: self.json,
+            csv: None,
+            limit: &self.limit,
+            model_file: false,
         };
-        result.timing.wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        let printed = if self.json {
-            super::print_json(&result)
-        } else {
-            super::print_text(&synthesis::render_text(&result))
+        let result = match run.outcome(value, &exec) {
+            Ok(kea_core::registry::Outcome::Synthesis(r)) => r,
+            Ok(_) => unreachable!("a synthesis request gives a synthesis"),
+            Err(code) => return code,
         };
-        if let Err(code) = printed {
-            return code;
-        }
         match result.status {
             Status::Found | Status::Table => ExitCode::SUCCESS,
             // A valid run without an answer (not found, non-monotonic, whole range).

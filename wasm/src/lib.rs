@@ -38,13 +38,16 @@ fn to_js(e: &Error) -> JsValue {
     JsValue::from_str(&error_json(e))
 }
 
-/// Parse `{"name": value, ...}` overrides; an empty string means none.
+/// Parse `{"name": value, ...}` overrides (as every request's `set`); an empty
+/// string means none.
 fn overrides(set_json: &str) -> Result<Overrides, Error> {
     if set_json.trim().is_empty() {
         return Ok(Overrides::new());
     }
-    serde_json::from_str(set_json)
-        .map_err(|e| Error::invalid("set", format!("expected an object of numbers: {e}")))
+    // The strict reader and the one reading of `set` every way in shares.
+    let value = kea_core::parse_json(set_json.as_bytes())
+        .map_err(|e| Error::invalid("set", format!("not valid JSON: {e}")))?;
+    kea_core::request::overrides(Some(&value)).map_err(Error::Invalid)
 }
 
 /// Parse and validate a model: the list of problems as JSON (`[]` when valid).

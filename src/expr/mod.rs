@@ -265,6 +265,24 @@ pub fn compile_const(
     }
 }
 
+/// The names a text uses — params, `t`, constants, functions — each once, in the
+/// order of their first use; none for a text that does not lex (its entry is an error
+/// of its own). What a compiled entry owes to which param
+/// ([`crate::model::params::ParamDependence`]).
+pub fn names(text: &str) -> Vec<String> {
+    let Ok(tokens) = lex::lex(text) else {
+        return Vec::new();
+    };
+    let mut out: Vec<String> = Vec::new();
+    for t in tokens.iter().filter(|t| t.tok == lex::Tok::Name) {
+        let name = &text[t.start..t.end];
+        if !out.iter().any(|o| o == name) {
+            out.push(name.to_string());
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -70,6 +70,10 @@ pub struct CompiledModel {
     /// Parts of the model that were accepted but have no effect, said in the result's
     /// warnings (`time.auto` with an integer `steps`).
     pub notes: Vec<String>,
+    /// Which entries depend on which params: the values above are at the params'
+    /// values (a constant entry folded to its number), this says what each owes to
+    /// which param (METHOD §3's ∂/∂θ; `crate::model::params`).
+    pub param_dependence: crate::model::params::ParamDependence,
 }
 
 #[derive(Clone, Debug)]
@@ -672,5 +676,6 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         trace_points: op.trace_points,
         steady_state_shortcut: op.steady_state_shortcut,
         notes,
+        param_dependence: crate::model::params::ParamDependence::of(model),
     })
 }

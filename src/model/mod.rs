@@ -5,6 +5,7 @@
 pub mod compile;
 pub mod format;
 pub mod limits;
+pub mod params;
 pub mod schedule;
 
 pub use compile::{CompiledModel, compile};

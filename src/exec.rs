@@ -19,7 +19,7 @@ pub trait Executor: Sync {
 
     /// Whether the computations running in a batch should stop now (a cancel, a time
     /// limit, a shutdown): asked by each of them at its progress points, where the
-    /// caller's own [`crate::Progress`] cannot be (it is not shared between threads).
+    /// caller's own [`crate::progress::Progress`] cannot be (it is not shared between threads).
     /// Never true for [`Sequential`], whose items report to the caller in turn.
     fn stop_requested(&self) -> bool {
         false

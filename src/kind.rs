@@ -8,9 +8,9 @@
 //! The kinds are listed once, in [`crate::registry`]: a new kind is its module (a
 //! type implementing [`Kind`]) and one line there.
 
-use crate::Progress;
 use crate::error::Error;
 use crate::exec::{Executor, Memo};
+use crate::progress::Progress;
 use crate::work::Work;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};

@@ -42,10 +42,7 @@ pub use json::{from_value_at, parse_json};
 pub use model::{Model, model_from_json, model_from_value};
 pub use progress::{NoProgress, Progress};
 
-use std::collections::BTreeMap;
-
-/// Parameter overrides (`--set name=value`): each must name an existing param.
-pub type Overrides = BTreeMap<String, f64>;
+pub use model::Overrides;
 
 /// Run the analysis of METHOD §1.2–§1.6 on a model with parameter overrides.
 pub fn analyze(
@@ -53,8 +50,7 @@ pub fn analyze(
     set: &Overrides,
     progress: &mut dyn Progress,
 ) -> Result<AnalysisResult, Error> {
-    let compiled = model::compile(model, set)?;
-    analysis::run(&compiled, progress)
+    analysis::analyze(model, set, progress)
 }
 
 /// The filter's covariance recursion alone, (2.1)–(2.7) and the mean, with the
@@ -72,5 +68,5 @@ pub fn covariance_recursion(
 
 /// Validate a model without running it; every problem found is returned.
 pub fn check(model: &Model, set: &Overrides) -> Result<(), Error> {
-    model::compile(model, set).map(|_| ())
+    model::check(model, set)
 }

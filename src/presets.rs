@@ -68,7 +68,8 @@ pub fn synthesis_json(name: &str) -> Option<&'static str> {
 
 /// The preset as a model.
 pub fn get(name: &str) -> Option<Model> {
-    get_json(name).map(|j| crate::model_from_json(j).expect("embedded presets parse (tested)"))
+    get_json(name)
+        .map(|j| crate::model::model_from_json(j).expect("embedded presets parse (tested)"))
 }
 
 /// Names of all presets.
@@ -82,7 +83,7 @@ mod tests {
     fn every_preset_parses_and_validates() {
         for name in super::names() {
             let m = super::get(name).unwrap();
-            crate::check(&m, &Default::default())
+            crate::model::check(&m, &Default::default())
                 .unwrap_or_else(|e| panic!("preset {name} invalid: {e}"));
         }
     }
@@ -103,9 +104,12 @@ mod tests {
             request["model"] = serde_json::from_str(super::get_json(name).unwrap()).unwrap();
             let request = synthesis::request_from_value(request)
                 .unwrap_or_else(|e| panic!("{name}: example invalid: {e}"));
-            let r =
-                synthesis::synthesize(&request, &crate::exec::Sequential, &mut crate::NoProgress)
-                    .unwrap_or_else(|e| panic!("{name}: {e}"));
+            let r = synthesis::synthesize(
+                &request,
+                &crate::exec::Sequential,
+                &mut crate::progress::NoProgress,
+            )
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
             assert_eq!(r.status, Status::Found, "{name}: {}", r.message);
             let v = r.verification.as_ref().unwrap();
             assert!(v.passed, "{name}: {}", r.message);

@@ -2,11 +2,11 @@
 //! in [`kinds!`]'s invocation, and the one way in for every shell — [`prepare`] a
 //! request of a kind named in it, estimate its work, run it, render its outcome.
 
-use crate::Progress;
 use crate::analysis::result::Timing;
 use crate::error::{Error, FieldError};
 use crate::exec::{Executor, Memo};
 use crate::kind::Kind;
+use crate::progress::Progress;
 use crate::request;
 use crate::work::Work;
 use serde_json::Value;

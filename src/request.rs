@@ -5,7 +5,8 @@
 
 use crate::error::{Error, FieldError, got, json_kind, member_path, omitted_count};
 use crate::model::CompiledModel;
-use crate::{Model, Overrides};
+use crate::model::Model;
+use crate::model::Overrides;
 use serde_json::{Map, Value};
 
 /// The request as a JSON object, or an error at the root.
@@ -46,7 +47,7 @@ pub fn model_and_set(
             ));
             None
         }
-        Some(v) => match crate::model_from_value(v.clone()) {
+        Some(v) => match crate::model::model_from_value(v.clone()) {
             Ok(m) => Some(m),
             Err(e) => {
                 errors.extend(e.with_prefix("model").field_errors());

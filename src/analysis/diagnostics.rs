@@ -2,7 +2,6 @@
 //! (the mean, the filter's covariance, the maxima (1.5)), singular innovation covariances,
 //! the update's cancellation (2.7), Euler's instability (§1.2), the bound's growth; r∞ (doubling).
 
-use super::engine::all_finite;
 use crate::analysis::inputs::Inputs;
 use crate::analysis::result::{Final, StepSelection};
 use crate::error::Error;
@@ -571,6 +570,12 @@ pub(crate) fn singular(k: u64, t: f64) -> Error {
         path: "measurement".into(),
         message: "the innovation covariance q = C r Cᵀ + Γ V Γᵀ is singular (not positive definite): a measurement has no error (Γ V Γᵀ is 0 in its direction) and what it measures is already known exactly (C r Cᵀ is 0 there: C is 0, or the state's variance is); or the terms are below f64's range (entries of c, gamma or psi near 1e-154 or below, whose squares underflow to 0); give non-zero psi/V or eta0, or rescale the units".into(),
     }
+}
+
+/// Whether every entry is finite (no early exit, so the loop vectorises).
+#[inline(always)]
+pub(super) fn all_finite(v: &[f64]) -> bool {
+    v.iter().fold(true, |ok, x| ok & x.is_finite())
 }
 
 #[cfg(test)]

@@ -8,15 +8,14 @@ use super::criteria::{
     laplace_lambda,
 };
 use super::diagnostics::{
-    BOUND_WARNING, ILL_CONDITIONED_RV, ROUNDING_LEVEL, bound_growth, covariance_overflowed,
-    euler_unstable, growth_per_step, lost_precision, mean_overflowed, not_positive,
-    overflowed_maxima, stationary,
+    BOUND_WARNING, ILL_CONDITIONED_RV, ROUNDING_LEVEL, all_finite, bound_growth,
+    covariance_overflowed, euler_unstable, growth_per_step, lost_precision, mean_overflowed,
+    not_positive, overflowed_maxima, stationary,
 };
 use super::state::{LoopState, STATE_KEY};
 use super::traces::{SERIES, Written, build_traces, take_row};
 #[cfg(target_arch = "x86_64")]
 use super::{Build, build};
-use crate::Progress;
 use crate::analysis::inputs::{Inputs, time_err};
 use crate::analysis::result::{AnalysisResult, CriteriaSets, Final, PairOut, SteadyState, Timing};
 use crate::error::Error;
@@ -28,6 +27,7 @@ use crate::numerics::linalg::{
     SparseRows, arr, arr_mut, cov_rel_diff, mat, predict_in_place, predict_work,
 };
 use crate::numerics::riccati::{Prepared, SequentialJoseph};
+use crate::progress::Progress;
 use crate::resume::{F, bits, put, values};
 
 /// The shortcut freezes the Riccati recursion once r_k is this close (relative) to
@@ -814,12 +814,6 @@ fn mul_vec<const N: usize, L: Lanes>(m: &SparseRows, y: &mut [f64], x: &[f64], n
     } else {
         m.mul_vec::<L>(y, x, n);
     }
-}
-
-/// Whether every entry is finite (no early exit, so the loop vectorises).
-#[inline(always)]
-pub(super) fn all_finite(v: &[f64]) -> bool {
-    v.iter().fold(true, |ok, x| ok & x.is_finite())
 }
 
 /// The cheap first test of the steady state: every diagonal entry within `tol`.

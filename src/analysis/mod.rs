@@ -10,12 +10,12 @@
 //! assembly in `criteria.rs`, the warnings and numerical errors in `diagnostics.rs`,
 //! the traces in `traces.rs`; here the entry points and the progress checkpoints.
 
-use crate::Progress;
 use crate::analysis::result::{AnalysisResult, FinalCovariance};
 use crate::analysis::steps::{Selected, select_steps};
 use crate::error::Error;
 use crate::exec::Memo;
 use crate::model::compile::{CompiledModel, StepPlan};
+use crate::progress::Progress;
 use diagnostics::unconverged;
 use engine::Engine;
 pub use state::{SELECTION_KEY, STATE_KEY};
@@ -98,6 +98,16 @@ impl Checkpoints {
         self.next = (k / self.every + 1) * self.every;
         self
     }
+}
+
+/// Compile a model with its parameter overrides and run its analysis.
+pub fn analyze(
+    model: &crate::model::Model,
+    set: &crate::model::Overrides,
+    progress: &mut dyn Progress,
+) -> Result<AnalysisResult, Error> {
+    let compiled = crate::model::compile(model, set)?;
+    run(&compiled, progress)
 }
 
 /// Run the analysis of a compiled model.

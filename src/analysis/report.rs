@@ -185,7 +185,12 @@ mod tests {
         let mut model = crate::presets::get("cv-tracker").unwrap();
         model.time.t_end = 1000.0;
         model.time.steps = crate::model::Steps::Fixed(10_000);
-        let r = crate::analyze(&model, &Default::default(), &mut crate::NoProgress).unwrap();
+        let r = crate::analysis::analyze(
+            &model,
+            &Default::default(),
+            &mut crate::progress::NoProgress,
+        )
+        .unwrap();
         let table = super::criteria_table(&r);
         let overflow: Vec<&str> = table
             .lines()
@@ -203,7 +208,7 @@ mod tests {
     /// columns.
     #[test]
     fn csv_quotes_names_that_need_it() {
-        let model = crate::model_from_value(serde_json::json!({
+        let model = crate::model::model_from_value(serde_json::json!({
             "time": {"t0": 0, "t_end": 1, "steps": 100},
             "system": {"states": ["p,1", "v \"x\", w"], "a": [[0, 1], [0, 0]],
                        "b": [[0], [1]], "phi": [1], "eta0": [1, 1]},
@@ -211,7 +216,12 @@ mod tests {
             "options": {"trace_points": 10}
         }))
         .unwrap();
-        let r = crate::analyze(&model, &Default::default(), &mut crate::NoProgress).unwrap();
+        let r = crate::analysis::analyze(
+            &model,
+            &Default::default(),
+            &mut crate::progress::NoProgress,
+        )
+        .unwrap();
         let text = traces_csv(&r);
         assert!(
             text.starts_with("t,\"y:p,1\",\"eta:p,1\","),

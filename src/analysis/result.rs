@@ -208,7 +208,7 @@ pub struct StateTrace {
 pub use crate::kind::Timing;
 
 /// R_D and p_D of the filter's covariance recursion run alone
-/// ([`crate::covariance_recursion`]): the analysis's `final.covariance` and
+/// ([`crate::analysis::covariance_recursion`]): the analysis's `final.covariance` and
 /// `final.gain`, bit for bit.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FinalCovariance {

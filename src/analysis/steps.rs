@@ -4,11 +4,11 @@
 //! (relative to max|y|), or at the cap. Both solutions run in lockstep, so memory
 //! does not grow with D.
 
-use crate::Progress;
 use crate::analysis::result::{StepSelection, StepTrial};
 use crate::error::Error;
 use crate::expr::TimeMatrix;
 use crate::model::compile::CompiledModel;
+use crate::progress::Progress;
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

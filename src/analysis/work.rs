@@ -43,11 +43,13 @@
 //! [`simulation_run_step`]); estimated 1.07–2.4 times the CPU time of the presets and of
 //! N = 10, L = M = 200 with 2 to 1000 runs.
 
+use crate::error::Error;
 use crate::expr::Value;
+use crate::model::Model;
+use crate::model::Overrides;
 use crate::model::compile::{CompiledModel, MeasurementNoise};
 use crate::model::schedule::Availability;
 use crate::work::Work;
-use crate::{Error, Model, Overrides};
 use std::collections::HashSet;
 
 /// The cost of the expressions in t of a model, per step.
@@ -447,7 +449,7 @@ mod tests {
         let chain = (0..100).fold("(1+t)".to_string(), |e, _| format!("({e})^1.01"));
         assert_eq!(call_units(&chain), 6000);
     }
-    use crate::Overrides;
+    use crate::model::Overrides;
 
     #[test]
     fn fitting_counts_whole_items_from_one_to_the_cap() {
@@ -459,7 +461,7 @@ mod tests {
     }
 
     fn model(json: serde_json::Value) -> (Model, CompiledModel) {
-        let m = crate::model_from_value(json).unwrap();
+        let m = crate::model::model_from_value(json).unwrap();
         let c = crate::model::compile::compile(&m, &Overrides::new()).unwrap();
         (m, c)
     }

@@ -1,10 +1,10 @@
 //! Validation: a submitted [`Model`] plus overrides becomes a [`CompiledModel`] or a
 //! list of errors, each naming the field path and what was expected.
 
-use crate::Overrides;
 use crate::error::{Error, FieldError, member_path};
 use crate::error::{MAX_REPORTED_ERRORS, omitted_entry};
 use crate::expr::{ExprBudget, TimeMatrix, compile_const};
+use crate::model::Overrides;
 use crate::model::limits::*;
 use crate::model::{MODEL_FORMAT_VERSION, Model, Steps};
 use crate::text::{is_identifier, num};

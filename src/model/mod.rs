@@ -9,6 +9,15 @@ pub mod params;
 pub mod schedule;
 
 pub use compile::{CompiledModel, compile};
+
+/// Validate a model without running it; every problem found is returned.
+pub fn check(model: &Model, set: &Overrides) -> Result<(), Error> {
+    compile(model, set).map(|_| ())
+}
+
+/// Parameter overrides (`--set name=value`, a request's `set`): each must name one
+/// of the model's params.
+pub type Overrides = std::collections::BTreeMap<String, f64>;
 pub use format::*;
 
 use crate::error::{self, Error, FieldError};

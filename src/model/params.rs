@@ -214,7 +214,7 @@ mod tests {
     use super::*;
 
     fn model(json: serde_json::Value) -> Model {
-        crate::model_from_value(json).expect("a model")
+        crate::model::model_from_value(json).expect("a model")
     }
 
     #[test]

@@ -7,9 +7,10 @@ use crate::error::{Error, FieldError};
 use crate::exec::{Executor, Memo};
 use crate::kind::Kind;
 use crate::model::CompiledModel;
+use crate::model::Model;
+use crate::progress::Progress;
 use crate::request;
 use crate::work::Work;
-use crate::{Model, Progress};
 use serde_json::{Map, Value};
 
 /// The Monte Carlo kind (its name in requests: `simulation`).

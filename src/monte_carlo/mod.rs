@@ -19,8 +19,10 @@
 use crate::analysis::result::{AnalysisResult, Timing};
 use crate::analysis::{Avg, SetSums, criteria_set};
 use crate::error::Error;
+use crate::model::Model;
+use crate::model::Overrides;
 use crate::model::compile::CompiledModel;
-use crate::{Model, Overrides, Progress};
+use crate::progress::Progress;
 use std::ops::ControlFlow;
 
 /// Most steps per chunk: the Riccati is computed for a chunk, then all blocks advance.
@@ -634,9 +636,9 @@ mod tests {
             serde_json::from_str(crate::presets::get_json("seed-example").expect("preset"))
                 .unwrap();
         json["time"]["steps"] = 2000.into();
-        let model = crate::model_from_value(json).unwrap();
+        let model = crate::model::model_from_value(json).unwrap();
         let compiled = crate::model::compile::compile(&model, &Overrides::new()).unwrap();
-        let analysis = crate::analysis::run(&compiled, &mut crate::NoProgress).unwrap();
+        let analysis = crate::analysis::run(&compiled, &mut crate::progress::NoProgress).unwrap();
         let req = SimulationRequest::new(40, 7);
         let json = |chunk: usize| {
             let r = run_n::<0, Sequential>(
@@ -644,7 +646,7 @@ mod tests {
                 &analysis,
                 &req,
                 &Sequential,
-                &mut crate::NoProgress,
+                &mut crate::progress::NoProgress,
                 &Forgetful,
                 chunk,
             )

@@ -3,8 +3,8 @@
 //! `crate::analysis::work`'s notes).
 
 use super::{ModelError, SimulationRequest};
-use crate::Model;
 use crate::analysis::work::{AnalysisStep, analysis_work};
+use crate::model::Model;
 use crate::model::compile::{CompiledModel, MeasurementNoise};
 use crate::work::Work;
 

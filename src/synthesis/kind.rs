@@ -2,11 +2,11 @@
 //! the error levels that reach a desired filtering effect (METHOD §1.7).
 
 use super::{HINTS, SynthesisRequest, SynthesisResult};
-use crate::Progress;
 use crate::analysis::result::Timing;
 use crate::error::{Error, FieldError, got, member_path, plain_serde_error};
 use crate::exec::{Executor, Memo};
 use crate::kind::Kind;
+use crate::progress::Progress;
 use crate::request;
 use crate::work::Work;
 use serde_json::{Map, Value};

@@ -1,6 +1,6 @@
 //! Synthesis (METHOD §1.7, (3.27)): the error levels that reach a desired filtering
 //! effect, e.g. F_YX ≥ F*_YX. Three modes, each built on repeated analyses
-//! ([`crate::analyze`]) with parameter overrides:
+//! ([`crate::analysis::analyze`]) with parameter overrides:
 //!
 //! - `seed_search` — the seed's section-4 procedure, faithfully: nested loops over the
 //!   params from their upper bounds, multiplying by shrink factors < 1, stopping at the
@@ -16,9 +16,12 @@
 //! counts analyses, the adapters fill `timing.wall_ms`.
 
 use crate::analysis::result::{AnalysisResult, Timing};
+use crate::error::Error;
+use crate::error::FieldError;
 use crate::exec::{Executor, Forgetful, Memo};
 use crate::model::Model;
-use crate::{Error, FieldError, Overrides, Progress};
+use crate::model::Overrides;
+use crate::progress::Progress;
 use serde::{Deserialize, Serialize};
 use std::ops::ControlFlow;
 
@@ -118,7 +121,7 @@ impl Ctx<'_> {
         for (k, v) in params {
             set.insert(k.clone(), *v);
         }
-        let r = crate::analyze(self.model, &set, progress).map_err(|e| {
+        let r = crate::analysis::analyze(self.model, &set, progress).map_err(|e| {
             let at = describe(params);
             match crate::request::locate(e) {
                 Error::Invalid(v) => Error::Invalid(

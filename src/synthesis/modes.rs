@@ -3,7 +3,8 @@
 //! verified by a fresh analysis.
 
 use super::Ctx;
-use super::report::{best_of, crit_name, fmt_num, fmt_params, fmt_value};
+use super::report::{best_of, fmt_num, fmt_params, fmt_value};
+use super::request::crit_name;
 use super::request::{
     Bisect, Cheaper, Grid, GridParam, SeedSearch, bisect_iterations_max, cartesian, levels,
     seed_order,
@@ -11,8 +12,9 @@ use super::request::{
 use super::result::{
     BisectOut, Details, GridCell, GridOut, Point, SeedSearchOut, Side, Status, Verification,
 };
+use crate::error::Error;
 use crate::exec::Executor;
-use crate::{Error, Progress};
+use crate::progress::Progress;
 use std::collections::BTreeMap;
 
 /// How much looser than the bisection answer the verification's "looser" point is.

@@ -1,7 +1,6 @@
 //! The synthesis in words: its messages' pieces (the params, the numbers, the
 //! criterion's name, the best value) and the plain-text rendering with the grid's tables.
 
-use super::request::{CriteriaSetName, Criterion, Target};
 use super::result::{Details, Point, SynthesisResult};
 use std::collections::BTreeMap;
 
@@ -52,22 +51,6 @@ pub(super) fn fmt_num(x: f64) -> String {
         format!("{x:.4e}")
     } else {
         format!("{}", (x * 1e6).round() / 1e6)
-    }
-}
-
-pub(super) fn crit_name(t: &Target) -> String {
-    let c = match t.criterion {
-        Criterion::Yz => "YZ",
-        Criterion::Zx => "ZX",
-        Criterion::Yx => "YX",
-    };
-    let set = match t.set {
-        CriteriaSetName::Bound => "bound",
-        CriteriaSetName::Covariance => "covariance",
-    };
-    match &t.state {
-        Some(s) => format!("f_{c}({s}, {set})"),
-        None => format!("F_{c} ({set})"),
     }
 }
 

@@ -2,9 +2,10 @@
 //! params; parsing with located errors, validation (every problem at its path), the
 //! seed search's levels and order, and the analyses a request plans.
 
-use super::report::crit_name;
+use crate::error::Error;
+use crate::error::FieldError;
 use crate::model::Model;
-use crate::{Error, FieldError, Overrides};
+use crate::model::Overrides;
 use serde::{Deserialize, Serialize};
 
 /// Largest number of points a seed search or a grid may have.
@@ -195,11 +196,11 @@ pub const HINTS: &[(&str, &str)] = &[
 
 /// Parse a request from JSON, with serde errors located at their field path.
 pub fn request_from_value(value: serde_json::Value) -> Result<SynthesisRequest, Error> {
-    crate::from_value_at(value, HINTS)
+    crate::json::from_value_at(value, HINTS)
 }
 
 pub fn request_from_json(text: &str) -> Result<SynthesisRequest, Error> {
-    let value = crate::parse_json(text.as_bytes())
+    let value = crate::json::parse_json(text.as_bytes())
         .map_err(|e| Error::invalid("", format!("not valid JSON: {e}")))?;
     request_from_value(value)
 }
@@ -263,7 +264,7 @@ pub fn validated(req: &SynthesisRequest) -> Result<crate::model::CompiledModel, 
         }
         let mut set = req.set.clone();
         set.insert(name.to_string(), value);
-        if let Err(e) = crate::check(&req.model, &set)
+        if let Err(e) = crate::model::check(&req.model, &set)
             && let Some(first) = crate::request::locate(e).field_errors().into_iter().next()
         {
             errs.push(FieldError::new(
@@ -590,4 +591,21 @@ pub(super) fn bisect_iterations_max(b: &Bisect) -> u32 {
     let width = (b.high.ln() - b.low.ln()) / (b.probes - 1) as f64;
     let goal = b.rel_tol.ln_1p();
     ((width / goal).log2().ceil().max(0.0) as u32).saturating_add(1)
+}
+
+/// The target's criterion as messages name it (`F_YX (covariance)`, `f_YZ(x, bound)`).
+pub(super) fn crit_name(t: &Target) -> String {
+    let c = match t.criterion {
+        Criterion::Yz => "YZ",
+        Criterion::Zx => "ZX",
+        Criterion::Yx => "YX",
+    };
+    let set = match t.set {
+        CriteriaSetName::Bound => "bound",
+        CriteriaSetName::Covariance => "covariance",
+    };
+    match &t.state {
+        Some(s) => format!("f_{c}({s}, {set})"),
+        None => format!("F_{c} ({set})"),
+    }
 }

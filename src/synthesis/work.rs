@@ -1,8 +1,8 @@
 //! The synthesis's work estimate: its planned analyses, each the analysis's.
 
 use super::SynthesisRequest;
-use crate::Error;
 use crate::analysis::work::analysis_work;
+use crate::error::Error;
 use crate::model::CompiledModel;
 use crate::work::Work;
 

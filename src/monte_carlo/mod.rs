@@ -155,6 +155,10 @@ pub fn run_resumable<E: Executor>(
         6 => run_n::<6, E>(model, analysis, req, exec, progress, memo, chunk),
         7 => run_n::<7, E>(model, analysis, req, exec, progress, memo, chunk),
         8 => run_n::<8, E>(model, analysis, req, exec, progress, memo, chunk),
+        9 => run_n::<9, E>(model, analysis, req, exec, progress, memo, chunk),
+        10 => run_n::<10, E>(model, analysis, req, exec, progress, memo, chunk),
+        11 => run_n::<11, E>(model, analysis, req, exec, progress, memo, chunk),
+        12 => run_n::<12, E>(model, analysis, req, exec, progress, memo, chunk),
         _ => run_n::<0, E>(model, analysis, req, exec, progress, memo, chunk),
     }
 }

@@ -114,22 +114,32 @@ impl Error {
 
     /// The error with every path mapped by `f`.
     fn map_paths(self, f: impl Fn(&str) -> String) -> Self {
+        self.map(f, |m| m)
+    }
+
+    /// The error with every message mapped by `f` (a note added to each, say).
+    pub fn map_messages(self, f: impl Fn(String) -> String) -> Self {
+        self.map(str::to_string, f)
+    }
+
+    /// The error with every path mapped by `path` and every message by `message`.
+    fn map(self, path: impl Fn(&str) -> String, message: impl Fn(String) -> String) -> Self {
         match self {
             Error::Invalid(v) => Error::Invalid(
                 v.into_iter()
-                    .map(|e| FieldError::new(f(&e.path), e.message))
+                    .map(|e| FieldError::new(path(&e.path), message(e.message)))
                     .collect(),
             ),
             Error::Numerical {
                 step,
                 t,
-                path,
-                message,
+                path: p,
+                message: m,
             } => Error::Numerical {
                 step,
                 t,
-                path: f(&path),
-                message,
+                path: path(&p),
+                message: message(m),
             },
             Error::Cancelled => Error::Cancelled,
         }

@@ -17,7 +17,6 @@
 
 use crate::analysis::result::{AnalysisResult, Timing};
 use crate::error::Error;
-use crate::error::FieldError;
 use crate::exec::{Executor, Forgetful, Memo};
 use crate::model::Model;
 use crate::model::Overrides;
@@ -123,25 +122,7 @@ impl Ctx<'_> {
         }
         let r = crate::analysis::analyze(self.model, &set, progress).map_err(|e| {
             let at = describe(params);
-            match crate::request::locate(e) {
-                Error::Invalid(v) => Error::Invalid(
-                    v.into_iter()
-                        .map(|f| FieldError::new(f.path, format!("{} (at {at})", f.message)))
-                        .collect(),
-                ),
-                Error::Numerical {
-                    step,
-                    t,
-                    path,
-                    message,
-                } => Error::Numerical {
-                    step,
-                    t,
-                    path,
-                    message: format!("{message} (at {at})"),
-                },
-                Error::Cancelled => Error::Cancelled,
-            }
+            crate::request::locate(e).map_messages(|m| format!("{m} (at {at})"))
         })?;
         // The warnings that concern the target's set: the bound set's own say nothing
         // of a covariance target's criteria.

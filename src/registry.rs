@@ -36,14 +36,6 @@ macro_rules! kinds {
             None
         }
 
-        /// The members a kind's request may have.
-        pub fn members(kind: &str) -> &'static [&'static str] {
-            $(if Some(<$kind as Kind>::NAME) == find(kind) {
-                return <$kind as Kind>::MEMBERS;
-            })*
-            &[]
-        }
-
         /// Read and compile a request of the kind `kind` (a name or an alias); its kind's
         /// own checks are [`Prepared::check`]'s (see [`prepare_checked`]).
         pub fn prepare(kind: &str, request: Value) -> Result<Prepared, Error> {
@@ -56,13 +48,6 @@ macro_rules! kinds {
         }
 
         impl Prepared {
-            /// The kind's name.
-            pub fn kind(&self) -> &'static str {
-                match self {
-                    $(Prepared::$variant(_) => <$kind as Kind>::NAME,)*
-                }
-            }
-
             /// The kind's own checks of the request ([`Kind::check`]).
             pub fn check(&self) -> Result<(), Error> {
                 match self {
@@ -139,8 +124,8 @@ kinds! {
     Synthesis => crate::synthesis::kind::Synthesis,
 }
 
-/// The error for a `kind` that names none.
-fn unknown(kind: &str) -> Error {
+/// The error for a `kind` that names none (at the request's `kind`).
+pub fn unknown(kind: &str) -> Error {
     Error::Invalid(vec![FieldError::new(
         "kind",
         format!("unknown job kind `{kind}`; known: {}", NAMES.join(", ")),

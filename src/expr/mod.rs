@@ -287,7 +287,8 @@ pub fn names(text: &str) -> Vec<String> {
 mod tests {
     use super::*;
 
-    fn params() -> BTreeMap<String, f64> {
+    /// Two params, `m` and `s`, for the expressions' tests.
+    pub(super) fn params() -> BTreeMap<String, f64> {
         [("m".to_string(), 100.0), ("s".to_string(), 37.17)]
             .into_iter()
             .collect()

@@ -165,12 +165,7 @@ impl TimeMatrixBuilder {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn params() -> BTreeMap<String, f64> {
-        [("m".to_string(), 100.0), ("s".to_string(), 37.17)]
-            .into_iter()
-            .collect()
-    }
+    use crate::expr::tests::params;
 
     /// A 2 × 2 matrix: two entries share `text`, one is constant, one is `other`.
     fn grid_matrix(text: &str, other: &str) -> TimeMatrix {

@@ -53,13 +53,11 @@ impl Kind for Synthesis {
         }
         let synthesis = super::request_from_value(Value::Object(obj))?;
         let compiled = super::validated(&synthesis)?;
-        let work = super::work::synthesis_work_of(&synthesis, &compiled);
-        let analysis_work =
-            crate::analysis::work::analysis_work(&compiled, Some(&synthesis.model)).units;
+        let one = crate::analysis::work::analysis_work(&compiled, Some(&synthesis.model));
         Ok(Request {
+            work: super::work::synthesis_work_of(&synthesis, &one),
+            analysis_work: one.units,
             synthesis,
-            work,
-            analysis_work,
         })
     }
 

@@ -3,7 +3,6 @@
 use super::SynthesisRequest;
 use crate::analysis::work::analysis_work;
 use crate::error::Error;
-use crate::model::CompiledModel;
 use crate::work::Work;
 
 /// The work of a synthesis: at most its planned analyses
@@ -11,13 +10,13 @@ use crate::work::Work;
 /// model (its errors at the model's own paths).
 pub fn synthesis_work(request: &SynthesisRequest) -> Result<Work, Error> {
     let compiled = crate::model::compile::compile(&request.model, &request.set)?;
-    Ok(synthesis_work_of(request, &compiled))
+    let one = analysis_work(&compiled, Some(&request.model));
+    Ok(synthesis_work_of(request, &one))
 }
 
-/// [`synthesis_work`] of a request whose model is compiled already.
-pub fn synthesis_work_of(request: &SynthesisRequest, compiled: &CompiledModel) -> Work {
+/// [`synthesis_work`] of a request whose one analysis is estimated at `one`.
+pub fn synthesis_work_of(request: &SynthesisRequest, one: &Work) -> Work {
     let analyses = crate::synthesis::planned_analyses(request);
-    let one = analysis_work(compiled, Some(&request.model));
     Work {
         units: one.units * analyses as f64,
         explain: format!("at most {analyses} analyses × {}", one.explain),

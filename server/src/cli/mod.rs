@@ -124,12 +124,6 @@ pub fn no_preset(name: &str) -> String {
     )
 }
 
-/// The model a command names ([`read_json`]), parsed; errors at their field paths.
-pub fn load_model(arg: &str) -> Result<kea_core::Model, ExitCode> {
-    let value = read_json(arg)?;
-    kea_core::model_from_value(value).map_err(|e| report_error(&e))
-}
-
 /// Where a command's `--csv` goes.
 pub enum Csv {
     /// A regular file (or one still to be made): the CSV is written whole to a
@@ -276,28 +270,6 @@ fn write_replacing(path: &Path, text: &str) -> Result<(), ExitCode> {
         file.persist(&target).map(drop).map_err(|e| e.error)
     });
     written.map_err(|e| cannot_write(path, &e, EXIT_FAILURE))
-}
-
-/// Print a run's result: its CSV where `--csv` says, then the JSON (`--json`) or the
-/// text on stdout, unless the CSV took stdout.
-pub fn print_run<T: serde::Serialize>(
-    result: &T,
-    json: bool,
-    csv: Option<Csv>,
-    csv_text: impl FnOnce(&T) -> String,
-    text: impl FnOnce(&T) -> String,
-) -> Result<(), ExitCode> {
-    let text_on_stdout = !matches!(csv, Some(Csv::Stdout));
-    if let Some(csv) = csv {
-        csv.write(&csv_text(result))?;
-    }
-    if json {
-        print_json(result)
-    } else if text_on_stdout {
-        print_text(&text(result))
-    } else {
-        Ok(())
-    }
 }
 
 /// A command that runs one of the core's kinds on a request it made of its arguments

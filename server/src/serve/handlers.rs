@@ -270,12 +270,10 @@ pub fn in_stored_model(err: kea_core::Error, id: Option<&str>) -> kea_core::Erro
 /// thread: a large model takes long enough to stall the async workers, and every
 /// other request (`/healthz` too) with them. `stored`: the `model_id` it gave.
 pub async fn prepare(
-    state: &AppState,
     kind: &str,
     request: Value,
     stored: Option<&str>,
 ) -> Result<PreparedJob, Problem> {
-    let _ = state;
     let kind = kind.to_string();
     tokio::task::spawn_blocking(move || jobs::prepare(&kind, request))
         .await
@@ -313,7 +311,7 @@ pub async fn analyze(
 ) -> Result<Response, Problem> {
     let mut obj = request::object(body)?;
     let stored = resolve_model_id(&state, &mut obj).await?;
-    let prepared = prepare(&state, "analysis", Value::Object(obj), stored.as_deref()).await?;
+    let prepared = prepare("analysis", Value::Object(obj), stored.as_deref()).await?;
     let limits = &state.config.limits;
     check_work(
         &prepared.work(),

@@ -84,10 +84,7 @@ pub async fn submit(
         }
     };
     if super::jobs::find(&kind_name).is_none() {
-        return Err(Problem::invalid(vec![FieldError::new(
-            "kind",
-            format!("unknown job kind `{kind_name}`; known: {names}"),
-        )]));
+        return Err(Problem::from_core(kea_core::registry::unknown(&kind_name)));
     }
     let stored = resolve_model_id(&state, &mut obj).await?;
     let model_name = obj
@@ -97,7 +94,7 @@ pub async fn submit(
         .map(str::to_owned);
     let request = Value::Object(obj);
     let request_json = request.to_string();
-    let prepared = prepare(&state, &kind_name, request, stored.as_deref()).await?;
+    let prepared = prepare(&kind_name, request, stored.as_deref()).await?;
     let work = prepared.work();
     check_work(
         &work,

@@ -11,9 +11,10 @@
 //! format, another model size or another run is not taken: the run starts over.
 
 //!
-//! This module holds what every kind's state shares: f64s kept as their bits ([`F`]).
-//! The states are their kinds': `analysis::state`, `monte_carlo::state`,
-//! `numerics::decimate`'s.
+//! This module holds what every kind's state shares: f64s kept as their bits ([`F`],
+//! and the serde `with` modules [`f64_bits`], [`f64s`] and [`columns`] for the loops'
+//! own structs, which are their states). The states are their kinds':
+//! `analysis::state`, `monte_carlo::state`.
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
@@ -48,4 +49,56 @@ pub(crate) fn put(dst: &mut [f64], src: &[F]) {
 /// Bits as values.
 pub(crate) fn values(v: &[F]) -> Vec<f64> {
     v.iter().map(|x| x.0).collect()
+}
+
+/// serde `with`: an f64 as its bits.
+pub(crate) mod f64_bits {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub(crate) fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_u64(v.to_bits())
+    }
+
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        u64::deserialize(d).map(f64::from_bits)
+    }
+}
+
+/// serde `with`: f64s as their bits.
+pub(crate) mod f64s {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub(crate) fn serialize<S: Serializer>(v: &[f64], s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(v.iter().map(|x| x.to_bits()))
+    }
+
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+        let b = Vec::<u64>::deserialize(d)?;
+        Ok(b.into_iter().map(f64::from_bits).collect())
+    }
+}
+
+/// serde `with`: columns of optional f64s as their bits.
+pub(crate) mod columns {
+    use super::F;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub(crate) fn serialize<S: Serializer>(
+        v: &[Vec<Option<f64>>],
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        s.collect_seq(
+            v.iter()
+                .map(|c| c.iter().map(|x| x.map(F)).collect::<Vec<_>>()),
+        )
+    }
+
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<Vec<Vec<Option<f64>>>, D::Error> {
+        let b = Vec::<Vec<Option<F>>>::deserialize(d)?;
+        Ok(b.into_iter()
+            .map(|c| c.into_iter().map(|x| x.map(|f| f.0)).collect())
+            .collect())
+    }
 }

@@ -42,7 +42,9 @@ pub(crate) struct SetSums {
 /// The running sums (3.24) of the six criteria of every state during a run, as
 /// parallel arrays indexed [criterion · n + state] (criteria in the order of the
 /// `C_*` constants) so that a step's update is one vectorisable loop.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub(super) struct Running {
+    #[serde(with = "crate::resume::f64s")]
     pub(super) sum: Vec<f64>,
     pub(super) count: Vec<u64>,
     pub(super) excluded: Vec<u64>,

@@ -38,7 +38,6 @@ pub use criteria::laplace_lambda;
 pub(crate) use criteria::{Avg, SetSums, bisect_root, criteria_set};
 pub use diagnostics::{BOUND_GROWTH_WARN, ROUNDING_LEVEL, bound_set_only};
 pub(crate) use diagnostics::{overflowed, singular};
-pub(crate) use traces::SERIES;
 
 /// When a loop over steps reports progress: every `every` steps, `every` chosen so
 /// that the steps between two reports are about [`WORK_BETWEEN_REPORTS`] by the work

@@ -25,9 +25,10 @@ const S_RZX: usize = 8;
 const S_RYX: usize = 9;
 
 /// A step whose row is written (its trace values and criteria ratios) and how.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
 pub(super) struct Written {
     pub(super) k: u64,
+    #[serde(with = "crate::resume::f64_bits")]
     pub(super) t: f64,
     pub(super) bound_ok: bool,
     pub(super) open_ok: bool,

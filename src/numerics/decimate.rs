@@ -3,25 +3,12 @@
 //! its minimum and maximum over the bucket on them, in the order they occurred. So a
 //! spike that lasts one step survives decimation. Memory is O(rows), not O(steps).
 
-use crate::resume::{F, bits, values};
+use crate::resume::{columns, f64_bits, f64s};
 use serde::{Deserialize, Serialize};
 
-/// The trace decimator's state ([`crate::numerics::decimate::Decimator`]).
+/// Decimates `series` parallel series sampled at steps 1..=steps. It is also its own
+/// state for [`crate::resume`] (its f64s kept as their bits).
 #[derive(Clone, Debug, Serialize, Deserialize)]
-pub(crate) struct DecimatorState {
-    pub min: Vec<F>,
-    pub min_at: Vec<u32>,
-    pub max: Vec<F>,
-    pub max_at: Vec<u32>,
-    pub in_bucket: u64,
-    pub first_t: F,
-    pub last_t: F,
-    pub t: Vec<F>,
-    pub columns: Vec<Vec<Option<F>>>,
-}
-
-/// Decimates `series` parallel series sampled at steps 1..=steps.
-#[derive(Clone, Debug)]
 pub struct Decimator {
     bucket: u64,
     steps: u64,
@@ -30,15 +17,21 @@ pub struct Decimator {
     /// (their places in the bucket: 32 bits, half the width of a value, so that the
     /// selects cost half), as parallel arrays so that [`Decimator::put_row`] is one
     /// vectorisable loop. A series has a value in the bucket exactly when min ≤ max.
+    #[serde(with = "f64s")]
     min: Vec<f64>,
     min_at: Vec<u32>,
+    #[serde(with = "f64s")]
     max: Vec<f64>,
     max_at: Vec<u32>,
     in_bucket: u64,
+    #[serde(with = "f64_bits")]
     first_t: f64,
+    #[serde(with = "f64_bits")]
     last_t: f64,
+    #[serde(with = "f64s")]
     pub t: Vec<f64>,
     /// One column per series; `None` where a series had no defined value.
+    #[serde(with = "columns")]
     pub columns: Vec<Vec<Option<f64>>>,
     /// `max_rows == 0`: record nothing (results without traces).
     enabled: bool,
@@ -80,53 +73,39 @@ impl Decimator {
         self.bucket
     }
 
-    /// The state after a step (for [`crate::resume`]).
-    pub(crate) fn state(&self) -> DecimatorState {
-        DecimatorState {
-            min: bits(&self.min),
-            min_at: self.min_at.clone(),
-            max: bits(&self.max),
-            max_at: self.max_at.clone(),
-            in_bucket: self.in_bucket,
-            first_t: F(self.first_t),
-            last_t: F(self.last_t),
-            t: bits(&self.t),
-            columns: (self.columns.iter())
-                .map(|c| c.iter().map(|v| v.map(F)).collect())
-                .collect(),
-        }
-    }
-
-    /// Whether `s` is a state of this decimator's series.
-    pub(crate) fn fits(&self, s: &DecimatorState) -> bool {
+    /// Whether `s` (a kept state) is a state of this decimator: the same steps,
+    /// buckets and series.
+    pub(crate) fn fits(&self, s: &Decimator) -> bool {
         let series = self.series;
-        [
-            s.min.len(),
-            s.min_at.len(),
-            s.max.len(),
-            s.max_at.len(),
-            s.columns.len(),
-        ]
-        .iter()
-        .all(|&l| l == series)
+        (s.bucket, s.steps, s.series, s.enabled) == (self.bucket, self.steps, series, self.enabled)
+            && [
+                s.min.len(),
+                s.min_at.len(),
+                s.max.len(),
+                s.max_at.len(),
+                s.columns.len(),
+            ]
+            .iter()
+            .all(|&l| l == series)
             && s.columns.iter().all(|c| c.len() == s.t.len())
             && s.in_bucket < self.bucket
     }
 
-    /// Take a state that [`Decimator::fits`].
-    pub(crate) fn restore(&mut self, s: &DecimatorState) {
-        self.min = values(&s.min);
-        self.min_at.clone_from(&s.min_at);
-        self.max = values(&s.max);
-        self.max_at.clone_from(&s.max_at);
+    /// Take the values of a state that [`Decimator::fits`], into this decimator's
+    /// buffers (allocated for the whole run).
+    pub(crate) fn restore(&mut self, s: Decimator) {
+        self.min = s.min;
+        self.min_at = s.min_at;
+        self.max = s.max;
+        self.max_at = s.max_at;
         self.in_bucket = s.in_bucket;
-        self.first_t = s.first_t.0;
-        self.last_t = s.last_t.0;
+        self.first_t = s.first_t;
+        self.last_t = s.last_t;
         self.t.clear();
-        self.t.extend(s.t.iter().map(|x| x.0));
-        for (col, from) in self.columns.iter_mut().zip(&s.columns) {
+        self.t.extend(s.t);
+        for (col, from) in self.columns.iter_mut().zip(s.columns) {
             col.clear();
-            col.extend(from.iter().map(|v| v.map(|x| x.0)));
+            col.extend(from);
         }
     }
 

@@ -25,24 +25,34 @@ use crate::numerics::linalg::{SparseRows, mat_mut, mirror, predict_cov, predict_
 /// form (2.3)–(2.7), at O(n·N²) instead of O(n·N² + n²·N + n³) and without a matrix
 /// solve. The block gain p_k of (2.5) is read off R_k or composed from the scalar
 /// gains (see [`SequentialJoseph::step`]).
-#[derive(Clone, Debug)]
+///
+/// It is also its part of an analysis's state ([`crate::resume`]: its f64s kept as
+/// their bits; the work buffers with them, which a step overwrites before it reads).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct SequentialJoseph {
+    #[serde(with = "crate::resume::f64s")]
     u: Vec<f64>,
+    #[serde(with = "crate::resume::f64s")]
     s: Vec<f64>,
     /// The scalar gains, composed into the columns of the whitened block gain (nk × N).
+    #[serde(with = "crate::resume::f64s")]
     kt: Vec<f64>,
     /// r_k, the predicted (a-priori) covariance (2.1).
+    #[serde(with = "crate::resume::f64s")]
     pub r_pred: Vec<f64>,
     /// p_kᵀ (nm × N): row j is the gain column of measurement j (zero when it is not
     /// available at this step).
+    #[serde(with = "crate::resume::f64s")]
     pub gain_t: Vec<f64>,
     /// h_kᵀ, the transpose of h_k = I − p_k C (N × N): row c is column c of h_k,
     /// so that building it and the bound's product |h| x (3.19) are row operations.
+    #[serde(with = "crate::resume::f64s")]
     pub ht: Vec<f64>,
     /// The last step's update was [`update_exact`]: the filtered variance of a state
     /// a unit row measures is then the filter's, however far below the predicted.
     pub exact: bool,
     /// update_exact's two rows (2N).
+    #[serde(with = "crate::resume::f64s")]
     row: Vec<f64>,
 }
 
@@ -58,6 +68,22 @@ impl SequentialJoseph {
             exact: false,
             row: vec![0.0; 2 * n],
         }
+    }
+
+    /// Whether a kept state is one for N states and `nm` measurements.
+    pub(crate) fn fits(&self, n: usize, nm: usize) -> bool {
+        let f = SequentialJoseph::new(n, nm);
+        [
+            (self.u.len(), f.u.len()),
+            (self.s.len(), f.s.len()),
+            (self.kt.len(), f.kt.len()),
+            (self.r_pred.len(), f.r_pred.len()),
+            (self.gain_t.len(), f.gain_t.len()),
+            (self.ht.len(), f.ht.len()),
+            (self.row.len(), f.row.len()),
+        ]
+        .iter()
+        .all(|(got, want)| got == want)
     }
 
     /// One step: from R_{k−1} (`big_r`, overwritten with R_k), A_{k−1} = I + E with E

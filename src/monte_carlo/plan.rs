@@ -118,6 +118,8 @@ pub(super) struct Plan<'m> {
     s_cr: Vec<f64>,
     q: Vec<f64>,
     x_solve: Vec<f64>,
+    /// p Rv (n × nm), for the Joseph form's p Rv pᵀ.
+    prv: Vec<f64>,
     xi: Vec<f64>,
     tmp_n: Vec<f64>,
     /// Whether the next step is the first of this run (from the start, or from a kept
@@ -158,6 +160,7 @@ impl<'m> Plan<'m> {
             s_cr: vec![0.0; d.nm * n],
             q: vec![0.0; d.nm * d.nm],
             x_solve: vec![0.0; d.nm * n],
+            prv: vec![0.0; n * d.nm],
             xi: vec![0.0; n],
             tmp_n: vec![0.0; n],
             fresh: true,
@@ -259,11 +262,9 @@ impl<'m> Plan<'m> {
         mul(&mut self.tmp_nn2, &self.tmp_nn, &self.r_pred, n, n, n); // h r
         mul_abt_sym(&mut self.big_r, &self.tmp_nn2, &self.tmp_nn, None, n, n); // h r hᵀ
         if nm > 0 {
-            let mut prv = vec![0.0; n * nm];
-            mul(&mut prv, &self.gain, &self.inp.rv, n, nm, nm);
-            let mut add = vec![0.0; n * n];
-            mul_abt_sym(&mut add, &prv, &self.gain, None, n, nm);
-            for (r, a) in self.big_r.iter_mut().zip(&add) {
+            mul(&mut self.prv, &self.gain, &self.inp.rv, n, nm, nm);
+            mul_abt_sym(&mut self.tmp_nn2, &self.prv, &self.gain, None, n, nm);
+            for (r, a) in self.big_r.iter_mut().zip(&self.tmp_nn2) {
                 *r += a;
             }
         }

@@ -29,6 +29,7 @@ pub mod numerics;
 pub mod kind;
 
 pub mod analysis;
+pub mod identification;
 pub mod monte_carlo;
 pub mod synthesis;
 

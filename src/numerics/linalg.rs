@@ -545,21 +545,7 @@ pub fn cholesky(q: &mut [f64], m: usize) -> bool {
 /// Solve L Lᵀ X = S in place for X (m×p), with L from [`cholesky`].
 #[inline(always)]
 pub fn cholesky_solve(l: &[f64], x: &mut [f64], m: usize, p: usize) {
-    // forward: L Y = S
-    for i in 0..m {
-        for k in 0..i {
-            let lik = l[i * m + k];
-            let (head, tail) = x.split_at_mut(i * p);
-            let xk = &head[k * p..k * p + p];
-            for (xi, &xkj) in tail[..p].iter_mut().zip(xk) {
-                *xi -= lik * xkj;
-            }
-        }
-        let d = l[i * m + i];
-        for v in &mut x[i * p..i * p + p] {
-            *v /= d;
-        }
-    }
+    solve_lower(l, x, m, p);
     // backward: Lᵀ X = Y
     for i in (0..m).rev() {
         for k in i + 1..m {
@@ -568,6 +554,26 @@ pub fn cholesky_solve(l: &[f64], x: &mut [f64], m: usize, p: usize) {
             let xk = &tail[..p];
             for (xi, &xkj) in head[i * p..i * p + p].iter_mut().zip(xk) {
                 *xi -= lki * xkj;
+            }
+        }
+        let d = l[i * m + i];
+        for v in &mut x[i * p..i * p + p] {
+            *v /= d;
+        }
+    }
+}
+
+/// Solve L Y = S in place for Y (m×p), L lower triangular (the lower triangle of `l`,
+/// as [`cholesky`] leaves it): Y = L⁻¹ S, e.g. S whitened by its covariance's factor.
+#[inline(always)]
+pub fn solve_lower(l: &[f64], x: &mut [f64], m: usize, p: usize) {
+    for i in 0..m {
+        for k in 0..i {
+            let lik = l[i * m + k];
+            let (head, tail) = x.split_at_mut(i * p);
+            let xk = &head[k * p..k * p + p];
+            for (xi, &xkj) in tail[..p].iter_mut().zip(xk) {
+                *xi -= lik * xkj;
             }
         }
         let d = l[i * m + i];

@@ -4,6 +4,7 @@
 //! ([`riccati`]), and the traces' decimation that keeps extremes ([`decimate`]).
 
 pub mod decimate;
+pub mod householder;
 pub(crate) mod lanes;
 pub mod linalg;
 pub mod riccati;

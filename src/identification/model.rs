@@ -1,0 +1,62 @@
+//! What the identification's filter works on: a linear discrete-time model at one θ
+//! (METHOD §3 (1.4.1)–(1.4.2)), the initial state's distribution and where it sits,
+//! and the measurements.
+
+/// x_{k+1} = Φ x_k + u + G w_k, w ~ N(0, Q); z_k = H x_k + v_k, v ~ N(0, R). All
+/// matrices row-major; N states, L process-noise sources, m measurements.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Discrete {
+    pub n: usize,
+    pub l: usize,
+    pub m: usize,
+    /// Φ (N × N).
+    pub phi: Vec<f64>,
+    /// u (N), the deterministic input per step.
+    pub u: Vec<f64>,
+    /// G (N × L).
+    pub g: Vec<f64>,
+    /// Q (L × L).
+    pub q: Vec<f64>,
+    /// H (m × N).
+    pub h: Vec<f64>,
+    /// R (m × m).
+    pub r: Vec<f64>,
+}
+
+/// Where the initial state x ~ N(x0, P0) sits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PriorAt {
+    /// At t0, one transition before the first measurement at t_1 (kea's convention,
+    /// as in the analysis).
+    T0,
+    /// At the first measurement itself: x_1 ~ N(x0, P0) (statsmodels' and Durbin and
+    /// Koopman's convention, and the identification references').
+    FirstMeasurement,
+}
+
+/// The initial state's distribution.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Prior {
+    /// x0 (N).
+    pub x0: Vec<f64>,
+    /// P0 (N × N), positive definite.
+    pub p0: Vec<f64>,
+    pub at: PriorAt,
+}
+
+/// The measurements z_1 … z_D: row k holds step k's m values (NaN: missing).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Data {
+    pub m: usize,
+    /// t_k of each row.
+    pub t: Vec<f64>,
+    /// D × m, row-major.
+    pub z: Vec<f64>,
+}
+
+impl Data {
+    /// D, the rows.
+    pub fn rows(&self) -> usize {
+        self.t.len()
+    }
+}

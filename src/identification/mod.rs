@@ -9,5 +9,5 @@
 pub mod model;
 pub mod srif;
 
-pub use model::{Data, Discrete, Prior, PriorAt};
-pub use srif::{Likelihood, Srif, likelihood};
+pub use model::{Data, Discrete, Partial, Prior, PriorAt};
+pub use srif::{Likelihood, Srif, likelihood, likelihood_and_gradient};

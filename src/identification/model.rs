@@ -60,3 +60,34 @@ impl Data {
         self.t.len()
     }
 }
+
+/// The derivatives of a [`Discrete`] model and its [`Prior`] with respect to one
+/// parameter θ_i (the same shapes; zero where an entry does not depend on θ_i).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Partial {
+    pub phi: Vec<f64>,
+    pub u: Vec<f64>,
+    pub g: Vec<f64>,
+    pub q: Vec<f64>,
+    pub h: Vec<f64>,
+    pub r: Vec<f64>,
+    pub x0: Vec<f64>,
+    pub p0: Vec<f64>,
+}
+
+impl Partial {
+    /// All zero: a parameter that nothing depends on.
+    pub fn zero(model: &Discrete) -> Partial {
+        let (n, l, m) = (model.n, model.l, model.m);
+        Partial {
+            phi: vec![0.0; n * n],
+            u: vec![0.0; n],
+            g: vec![0.0; n * l],
+            q: vec![0.0; l * l],
+            h: vec![0.0; m * n],
+            r: vec![0.0; m * m],
+            x0: vec![0.0; n],
+            p0: vec![0.0; n * n],
+        }
+    }
+}

@@ -53,6 +53,65 @@ pub fn triangularise(a: &mut [f64], rows: usize, cols: usize, p: usize) {
     }
 }
 
+/// The derivatives of a triangularisation (METHOD §3, seed (2.4.1)–(2.4.8)).
+///
+/// `a` is `rows` × (`cols` · (1 + `np`)), row-major: block 0 an array A, block 1 + i its
+/// derivative ∂_iA. After [`triangularise`] of its first `p` columns (which applies T to
+/// every block), block 0 is B = T A = [R B12; 0 B22] and block 1 + i is X = T ∂_iA;
+/// this turns each X into ∂_iB = Ω B + X, with Ω = ∂T Tᵀ skew (2.4.3): Ω21 = −X2 R⁻¹
+/// (the zeros under R stay zero), Ω11 = L_Yᵀ − L_Y with Y = X1 R⁻¹ (so that
+/// ∂R = (L_Yᵀ + D_Y + U_Y) R is upper triangular (2.4.8)), Ω12 = −Ω21ᵀ, Ω22 = 0 (the
+/// rows under R are free up to a rotation; the seed's W22 = 0). No inverse of A.
+/// `y` (rows × p) and `omega` (rows × rows) are work buffers. R must be non-singular.
+#[allow(clippy::too_many_arguments)]
+pub fn differentiate(
+    a: &mut [f64],
+    rows: usize,
+    cols: usize,
+    p: usize,
+    np: usize,
+    y: &mut [f64],
+    omega: &mut [f64],
+) {
+    let width = cols * (1 + np);
+    let p = p.min(rows);
+    for d in 0..np {
+        let off = cols * (1 + d);
+        // Y = X[:, :p] R⁻¹, row by row: y R = x (R upper triangular).
+        for r in 0..rows {
+            for j in 0..p {
+                let mut v = a[r * width + off + j];
+                for k in 0..j {
+                    v -= y[r * p + k] * a[k * width + j];
+                }
+                y[r * p + j] = v / a[j * width + j];
+            }
+        }
+        omega[..rows * rows].fill(0.0);
+        for r in 0..rows {
+            for j in 0..p.min(r) {
+                // r > j: below the diagonal of the first p columns.
+                omega[r * rows + j] = -y[r * p + j];
+                omega[j * rows + r] = y[r * p + j];
+            }
+        }
+        for r in 0..rows {
+            for c in 0..cols {
+                let v = if c < p && r > c {
+                    0.0
+                } else {
+                    let mut s = a[r * width + off + c];
+                    for k in 0..rows {
+                        s += omega[r * rows + k] * a[k * width + c];
+                    }
+                    s
+                };
+                a[r * width + off + c] = v;
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -103,5 +162,75 @@ mod tests {
         let mut a = vec![0.0, 1.0, 0.0, 2.0, 0.0, 3.0];
         triangularise(&mut a, 3, 2, 1);
         assert_eq!(a, vec![0.0, 1.0, 0.0, 2.0, 0.0, 3.0]);
+    }
+
+    /// ∂B against central differences of B(θ) for A(θ) = A0 + θ A1 + θ² A2 (the
+    /// triangularisation's signs do not flip near θ, so B is smooth there).
+    #[test]
+    fn derivatives_match_central_differences() {
+        let (rows, cols, p) = (6, 4, 3);
+        let base = |k: usize, s: usize| ((k * s % 29) as f64 - 14.0) / 7.0;
+        let at = |th: f64| -> Vec<f64> {
+            (0..rows * cols)
+                .map(|k| {
+                    base(k, 7)
+                        + 3.0 * ((k % 5 == 0) as u8 as f64)
+                        + th * base(k, 11)
+                        + th * th * base(k, 13)
+                })
+                .collect()
+        };
+        let th = 0.3;
+        let mut aug = vec![0.0; rows * cols * 2];
+        let (a0, da) = (
+            at(th),
+            (0..rows * cols)
+                .map(|k| base(k, 11) + 2.0 * th * base(k, 13))
+                .collect::<Vec<_>>(),
+        );
+        for r in 0..rows {
+            aug[r * 2 * cols..r * 2 * cols + cols].copy_from_slice(&a0[r * cols..r * cols + cols]);
+            aug[r * 2 * cols + cols..r * 2 * cols + 2 * cols]
+                .copy_from_slice(&da[r * cols..r * cols + cols]);
+        }
+        triangularise(&mut aug, rows, 2 * cols, p);
+        let (mut y, mut om) = (vec![0.0; rows * p], vec![0.0; rows * rows]);
+        differentiate(&mut aug, rows, cols, p, 1, &mut y, &mut om);
+        let h = 1e-6;
+        let (mut plus, mut minus) = (at(th + h), at(th - h));
+        triangularise(&mut plus, rows, cols, p);
+        triangularise(&mut minus, rows, cols, p);
+        // The rows under R are defined up to a rotation: compare R, B12 (the first p
+        // rows) exactly, and of B22 only what is invariant, its columns' Gram matrix.
+        for r in 0..p {
+            for c in 0..cols {
+                let fd = (plus[r * cols + c] - minus[r * cols + c]) / (2.0 * h);
+                let got = aug[r * 2 * cols + cols + c];
+                assert!(
+                    (got - fd).abs() <= 1e-6 * (1.0 + fd.abs()),
+                    "row {r} col {c}: {got} {fd}"
+                );
+            }
+        }
+        for c1 in p..cols {
+            for c2 in p..cols {
+                let gram = |m: &[f64], w: usize, o: usize| {
+                    (p..rows)
+                        .map(|r| m[r * w + o + c1] * m[r * w + o + c2])
+                        .sum::<f64>()
+                };
+                let fd = (gram(&plus, cols, 0) - gram(&minus, cols, 0)) / (2.0 * h);
+                let got: f64 = (p..rows)
+                    .map(|r| {
+                        aug[r * 2 * cols + cols + c1] * aug[r * 2 * cols + c2]
+                            + aug[r * 2 * cols + c1] * aug[r * 2 * cols + cols + c2]
+                    })
+                    .sum();
+                assert!(
+                    (got - fd).abs() <= 1e-6 * (1.0 + fd.abs()),
+                    "gram {c1},{c2}: {got} {fd}"
+                );
+            }
+        }
     }
 }

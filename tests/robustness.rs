@@ -318,7 +318,7 @@ fn a_grid_with_no_value_anywhere_says_so() {
     model["system"]["y0"] = json!([0]);
     let req = request_from_value(json!({
         "model": model,
-        "target": {"criterion": "yz", "set": "bound", "threshold": 1},
+        "target": {"criterion": "yz", "criteria": "bound", "threshold": 1},
         "mode": {"grid": {"params": [{"name": "q", "values": [1, 2]}]}}
     }))
     .unwrap();

@@ -309,7 +309,7 @@ fn input_errors_name_their_source_and_exit_2_up_front() {
     let request = dir.path().join("request.json");
     std::fs::write(
         &request,
-        r#"{"target": {"criterion": "yx", "set": "covariance", "threshold": 2}, "mode": {"grid": {"params": [{"name": "r", "values": [0.5, 1]}]}}}"#,
+        r#"{"target": {"criterion": "yx", "criteria": "covariance", "threshold": 2}, "mode": {"grid": {"params": [{"name": "r", "values": [0.5, 1]}]}}}"#,
     )
     .unwrap();
     let request = request.to_str().unwrap();
@@ -392,7 +392,7 @@ fn threads_above_the_cap_are_refused() {
 }
 
 /// A synthesis request that finds its point (exit 0) on preset:cv-tracker.
-const FOUND_REQUEST: &str = r#"{"target": {"criterion": "yx", "set": "covariance", "threshold": 2}, "mode": {"grid": {"params": [{"name": "r", "values": [0.5, 1]}]}}}"#;
+const FOUND_REQUEST: &str = r#"{"target": {"criterion": "yx", "criteria": "covariance", "threshold": 2}, "mode": {"grid": {"params": [{"name": "r", "values": [0.5, 1]}]}}}"#;
 
 /// Every command's output goes through one checked write: stdout that cannot be
 /// written (a full disk) is said on stderr and exits 1, never a panic or a silent 0;

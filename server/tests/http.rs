@@ -668,7 +668,7 @@ fn a_synthesis_job_is_cancelled_inside_its_analyses() {
         &json!({
             "kind": "synthesis",
             "model": model,
-            "target": {"criterion": "yx", "set": "covariance", "threshold": 1e9},
+            "target": {"criterion": "yx", "criteria": "covariance", "threshold": 1e9},
             "mode": {"grid": {"params": [{"name": "sd", "values": [2.5, 5.0]}]}}
         }),
     );

@@ -593,11 +593,11 @@ fn responses_validate_against_the_spec() {
         json!({"kind": "monte_carlo", "model": cv, "runs": 20, "seed": 1,
                "truth": "process", "model_error": "white", "trace_points": 10}),
         json!({"kind": "synthesis", "model": cv,
-               "target": {"criterion": "yx", "set": "covariance", "threshold": 1.5},
+               "target": {"criterion": "yx", "criteria": "covariance", "threshold": 1.5},
                "mode": {"grid": {"params": [{"name": "q", "values": [0.5, 2]}],
                                  "cost_order": [{"name": "q", "cheaper": "higher"}]}}}),
         json!({"kind": "synthesis", "model": cv,
-               "target": {"criterion": "yx", "set": "covariance", "threshold": 1.5},
+               "target": {"criterion": "yx", "criteria": "covariance", "threshold": 1.5},
                "mode": {"bisect": {"param": "r", "low": 0.01, "high": 100}}}),
     ];
     let schemas = &spec["components"]["schemas"];

@@ -221,7 +221,7 @@ test("a synthesis on the bound set shows the warnings of its answer's analysis",
   await choosePreset(page, 'helicopter-range', 0);
   await page.click('#tab-synthesis');
   await page.selectOption('#syn-criterion', 'yx');
-  await page.selectOption('#syn-set', 'bound');
+  await page.selectOption('#syn-criteria', 'bound');
   await page.fill('#syn-threshold', '0.6');
   await page.selectOption('#syn-mode', 'seed_search');
   await page.selectOption('#syn-seed-param-0', 'sd');
@@ -235,7 +235,7 @@ test("a synthesis on the bound set shows the warnings of its answer's analysis",
   assert.match(await page.textContent('#syn-warnings'), /answer \(sd = 5\) warns — these bound figures may not describe the filter:.*bound \(modulus procedure\) grew far beyond/s);
   // The covariance set: the warnings about the bound set alone say nothing of its
   // criteria; the core leaves them out (docs/synthesis.md), and none are shown.
-  await page.selectOption('#syn-set', 'covariance');
+  await page.selectOption('#syn-criteria', 'covariance');
   await page.fill('#syn-threshold', '0.01');
   await page.click('#syn-run');
   await page.waitForFunction(() => document.querySelector('#syn-summary')?.textContent.includes('covariance') && !document.getElementById('syn-run').disabled, null, { timeout: 60000 });

@@ -76,6 +76,7 @@ test('jobs of every kind are listed, opened with their model, request and result
   const synthesis = await submit({
     kind: 'synthesis',
     model,
+    // (`set`: the criteria set's former name, still read as `criteria`)
     target: { criterion: 'yx', set: 'covariance', threshold: 1.5 },
     mode: { grid: { params: [{ name: 'q', values: [0.5, 2] }], cost_order: [{ name: 'q', cheaper: 'higher' }] } },
   });
@@ -120,6 +121,7 @@ test('jobs of every kind are listed, opened with their model, request and result
   const syn = await openJob(synthesis, { result: 'syn-result', run: 'syn-run', download: 'syn-download' });
   assert.deepEqual(syn, expected[synthesis]);
   assert.equal(await page.inputValue('#syn-mode'), 'grid');
+  assert.equal(await page.inputValue('#syn-criteria'), 'covariance');
   assert.equal(await page.evaluate(() => document.getElementById('syn-result').classList.contains('stale')), false);
 
   // Run again: the Monte Carlo's stored request submitted as a new job and opened in

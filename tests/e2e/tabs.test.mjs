@@ -128,7 +128,7 @@ test('a synthesis grid gives the same table in the browser, on the server and in
   );
   await page.selectOption('#syn-mode', 'grid');
   await page.selectOption('#syn-criterion', 'yx');
-  await page.selectOption('#syn-set', 'bound');
+  await page.selectOption('#syn-criteria', 'bound');
   await page.selectOption('#syn-state', '');
   await page.fill('#syn-threshold', '10');
   await page.selectOption('#syn-grid-param-0', 'f');
@@ -154,7 +154,7 @@ test('a synthesis grid gives the same table in the browser, on the server and in
   await screenshot(page, '11-synthesis-grid-server');
 
   const request = {
-    target: { criterion: 'yx', set: 'bound', threshold: 10 },
+    target: { criterion: 'yx', criteria: 'bound', threshold: 10 },
     mode: { grid: { params: [{ name: 'f', values: [2, 4, 8] }, { name: 'c', values: [0.5, 0.25] }], cost_order: [{ name: 'f', cheaper: 'lower' }] } },
   };
   const requestFile = path.join(tmp, 'grid.json');
@@ -437,7 +437,7 @@ test('synthesis inputs are refused at their control, in words', async () => {
   await screenshot(page, '16-synthesis-override-error');
   // Without a cost order, the table's message names the control, not the API member.
   await page.fill('#syn-grid-values-0', '2, 4');
-  await page.selectOption('#syn-set', 'bound');
+  await page.selectOption('#syn-criteria', 'bound');
   await page.fill('#syn-threshold', '10'); // f = 4 meets it
   await runView('syn', 'browser');
   assert.equal(await page.$$eval('#synthesis-panel .control-error', (es) => es.length), 0, 'the marks went');
@@ -535,7 +535,7 @@ test("the Synthesis and Monte Carlo tabs' fields are kept over a reload; stored 
     await ready();
     const defaults = await fields();
     await other.selectOption('#syn-criterion', 'zx');
-    await other.selectOption('#syn-set', 'covariance');
+    await other.selectOption('#syn-criteria', 'covariance');
     await other.fill('#syn-threshold', '3.5');
     await other.selectOption('#syn-grid-param-1', 'c'); // a grid row, kept though another mode is shown
     await other.fill('#syn-grid-values-1', '0.1, 0.2');

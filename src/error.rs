@@ -210,7 +210,9 @@ pub fn got(v: &serde_json::Value) -> String {
 /// serde's messages in plain words, at the path of the member concerned: "missing
 /// field `mode`" at the root becomes `mode`: "missing: …", "invalid type: string
 /// \"2\", expected f64" becomes "expected a number, got a string (\"2\")". `hints`
-/// say what a missing member is, by name. A message of another form is kept.
+/// say what a missing member is, by name. "duplicate field" can only be a member given
+/// under its name and a former name (an alias: the reader refuses a key given twice
+/// before serde sees it). A message of another form is kept.
 pub fn plain_serde_error(e: FieldError, hints: &[(&str, &str)]) -> FieldError {
     let FieldError { path, message } = e;
     let join = |field: &str| {
@@ -226,6 +228,17 @@ pub fn plain_serde_error(e: FieldError, hints: &[(&str, &str)]) -> FieldError {
             .find(|(name, _)| *name == field)
             .map_or("this member is required", |(_, hint)| hint);
         return FieldError::new(join(field), format!("missing: {hint}"));
+    }
+    if let Some(field) = backticked(&message, "duplicate field ") {
+        let at = if path.rsplit('.').next() == Some(field) {
+            path.clone()
+        } else {
+            join(field)
+        };
+        return FieldError::new(
+            at,
+            format!("given twice, under its name and a former one; give `{field}` alone"),
+        );
     }
     if let Some(rest) = message.strip_prefix("unknown field `") {
         return FieldError::new(
@@ -444,7 +457,7 @@ mod tests {
         );
         assert_eq!(
             plain(
-                "target.set",
+                "target.criteria",
                 "unknown variant `mc`, expected `bound` or `covariance`"
             )
             .1,
@@ -453,10 +466,17 @@ mod tests {
         assert_eq!(
             plain(
                 "target.x",
-                "unknown field `x`, expected one of `criterion`, `set`, `state`, `threshold`"
+                "unknown field `x`, expected one of `criterion`, `criteria`, `state`, `threshold`"
             )
             .1,
-            "unknown member; expected one of: criterion, set, state, threshold"
+            "unknown member; expected one of: criterion, criteria, state, threshold"
+        );
+        assert_eq!(
+            plain("target", "duplicate field `criteria`"),
+            (
+                "target.criteria".to_string(),
+                "given twice, under its name and a former one; give `criteria` alone".to_string()
+            )
         );
         assert_eq!(plain("a", "something else").1, "something else");
     }

@@ -12,7 +12,7 @@ use crate::work::Work;
 use serde_json::Value;
 
 /// The registry: the [`Prepared`] and [`Outcome`] enums, with one variant per kind,
-/// and [`NAMES`].
+/// [`NAMES`] and [`ALIASES`].
 macro_rules! kinds {
     ($($variant:ident => $kind:ty,)*) => {
         /// A request read and compiled by its kind, ready to run.
@@ -27,6 +27,11 @@ macro_rules! kinds {
 
         /// Every kind's name, in the order errors list them.
         pub const NAMES: &[&str] = &[$(<$kind as Kind>::NAME,)*];
+
+        /// Every kind's name with its aliases ([`Kind::ALIASES`]: former names, still
+        /// read as the kind), in [`NAMES`]' order.
+        pub const ALIASES: &[(&str, &[&str])] =
+            &[$((<$kind as Kind>::NAME, <$kind as Kind>::ALIASES),)*];
 
         /// The kind a request's `kind` names (its name or an alias), as its name.
         pub fn find(name: &str) -> Option<&'static str> {

@@ -1,7 +1,7 @@
 //! A long computation's state, kept so that a run interrupted there (a server restart)
 //! goes on from that point instead of from the start, and ends with the result an
 //! uninterrupted run gives, bit for bit: an analysis's between two steps
-//! ([`LoopState`]), a Monte Carlo's between two chunks of steps ([`SimulationState`]).
+//! ([`LoopState`]), a Monte Carlo's between two chunks of steps ([`MonteCarloState`]).
 //!
 //! A state is text (a [`crate::exec::Memo`] value: the core has no storage): JSON in
 //! which every f64 is its bit pattern (a u64), so that NaN, ±∞ and −0 read back as

@@ -17,7 +17,7 @@ pub struct Work {
     /// 272 (N = 2))").
     pub explain: String,
     /// The request member that drives it, for an error's path: `model.time.steps`
-    /// (an analysis), `runs` (a simulation), `mode` (a synthesis).
+    /// (an analysis), `runs` (a Monte Carlo), `mode` (a synthesis).
     pub path: String,
 }
 

@@ -5,7 +5,7 @@
 
 mod common;
 
-use kea_core::monte_carlo::{Sequential, SimulationRequest, simulate};
+use kea_core::monte_carlo::{MonteCarloRequest, Sequential, simulate};
 use kea_core::{Model, NoProgress, Overrides, model_from_value};
 use serde_json::{Value, json};
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -106,7 +106,7 @@ fn an_analysis_heap_does_not_grow_with_the_steps() {
 
 #[test]
 fn a_monte_carlo_heap_does_not_grow_with_the_steps() {
-    let req = SimulationRequest::new(8, 7);
+    let req = MonteCarloRequest::new(8, 7);
     peak_does_not_grow("Monte Carlo (8 runs)", 10_000, 200_000, |m| {
         simulate(m, &Overrides::new(), &req, &Sequential, &mut NoProgress)
             .unwrap()

@@ -4,7 +4,7 @@
 
 mod common;
 
-use kea_core::monte_carlo::{self, SimulationRequest};
+use kea_core::monte_carlo::{self, MonteCarloRequest};
 use kea_core::synthesis;
 use kea_core::{Error, Model, Overrides};
 use serde_json::json;
@@ -68,7 +68,7 @@ fn a_costly_analysis_reports_every_few_steps_and_stops_when_told() {
 #[test]
 fn a_costly_monte_carlo_reports_within_a_chunk_of_steps_and_stops_when_told() {
     let model = costly(100, 64);
-    let req = SimulationRequest::new(8, 1);
+    let req = MonteCarloRequest::new(8, 1);
     let simulate = |p: &mut dyn FnMut(f64) -> ControlFlow<()>| {
         monte_carlo::simulate(
             &model,

@@ -12,8 +12,8 @@ use kea_core::analysis::{SELECTION_KEY, STATE_KEY};
 use kea_core::analysis::{run, run_resumable};
 use kea_core::exec::{Forgetful, Memo, Sequential};
 use kea_core::model::compile::{CompiledModel, compile};
-use kea_core::monte_carlo::STATE_KEY as SIMULATION_KEY;
-use kea_core::monte_carlo::{ModelError, SimulationRequest, Truth, simulate_resumable};
+use kea_core::monte_carlo::STATE_KEY as MONTE_CARLO_KEY;
+use kea_core::monte_carlo::{ModelError, MonteCarloRequest, Truth, simulate_resumable};
 use kea_core::{Error, NoProgress, Overrides, Progress, model_from_value};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -56,7 +56,7 @@ impl Keeper {
 impl Memo for Keeper {
     fn recall(&self, key: &str) -> Option<String> {
         assert!(
-            [STATE_KEY, SIMULATION_KEY, SELECTION_KEY].contains(&key),
+            [STATE_KEY, MONTE_CARLO_KEY, SELECTION_KEY].contains(&key),
             "{key}"
         );
         self.given.get(key).cloned()
@@ -67,7 +67,7 @@ impl Memo for Keeper {
         kept.insert(key.to_string(), value.to_string());
     }
     fn keep_state(&self, key: &str, value: &str) {
-        assert!([STATE_KEY, SIMULATION_KEY].contains(&key), "{key}");
+        assert!([STATE_KEY, MONTE_CARLO_KEY].contains(&key), "{key}");
         let mut kept = self.kept.lock().unwrap();
         kept.insert(key.to_string(), value.to_string());
     }
@@ -254,7 +254,7 @@ fn a_run_whose_open_loop_covariance_overflows_resumes_exactly() {
 /// (None: interrupted in the analysis).
 fn simulates_exactly(
     model: Value,
-    req: &SimulationRequest,
+    req: &MonteCarloRequest,
     stops: impl FnOnce(usize, usize) -> Vec<usize>,
 ) -> Vec<Option<u64>> {
     let model = model_from_value(model).unwrap();
@@ -262,7 +262,7 @@ fn simulates_exactly(
     let sim = |progress: &mut dyn Progress, memo: &dyn Memo| {
         simulate_resumable(&model, &set, req, &Sequential, progress, memo)
     };
-    let untimed = |r: &kea_core::monte_carlo::SimulationResult| {
+    let untimed = |r: &kea_core::monte_carlo::MonteCarloResult| {
         let mut v = serde_json::to_value(r).unwrap();
         v.as_object_mut().unwrap().remove("timing");
         v
@@ -288,7 +288,7 @@ fn simulates_exactly(
             "interrupted at report {stop}"
         );
         let kept = memo.kept.into_inner().unwrap();
-        let k = kept.get(SIMULATION_KEY).map(|s| {
+        let k = kept.get(MONTE_CARLO_KEY).map(|s| {
             let s: Value = serde_json::from_str(s).unwrap();
             s["k"].as_u64().unwrap()
         });
@@ -332,7 +332,7 @@ fn spread_at(at: &[Option<u64>]) {
 /// drawn once per run (kept with the runs), 100 runs in four blocks.
 #[test]
 fn a_monte_carlo_resumes_exactly() {
-    let mut req = SimulationRequest::new(100, 7);
+    let mut req = MonteCarloRequest::new(100, 7);
     req.model_error = ModelError::Constant;
     let at = simulates_exactly(
         json!({
@@ -357,7 +357,7 @@ fn a_monte_carlo_resumes_exactly() {
 fn a_runtime_size_monte_carlo_resumes_exactly() {
     let n = 13;
     let a = common::chain_a(n, |_| json!(-0.5), json!(1.0));
-    let mut req = SimulationRequest::new(40, 3);
+    let mut req = MonteCarloRequest::new(40, 3);
     req.truth = Truth::Mean;
     let at = simulates_exactly(
         json!({
@@ -379,7 +379,7 @@ fn a_runtime_size_monte_carlo_resumes_exactly() {
 fn a_monte_carlo_state_of_another_seed_is_ignored() {
     let model = model_from_value(tracker(3000, 30.0)).unwrap();
     let set = Overrides::new();
-    let (one, other) = (SimulationRequest::new(50, 1), SimulationRequest::new(50, 2));
+    let (one, other) = (MonteCarloRequest::new(50, 1), MonteCarloRequest::new(50, 2));
     let memo = Keeper::keeping();
     let r = simulate_resumable(
         &model,
@@ -391,7 +391,7 @@ fn a_monte_carlo_state_of_another_seed_is_ignored() {
     );
     assert!(matches!(r, Err(Error::Cancelled)));
     let kept = memo.kept.into_inner().unwrap();
-    assert!(kept.contains_key(SIMULATION_KEY));
+    assert!(kept.contains_key(MONTE_CARLO_KEY));
     let resumed = simulate_resumable(
         &model,
         &set,
@@ -500,7 +500,7 @@ fn every_preset_resumes_exactly_at_a_drawn_report() {
             );
             vec![rng.random_range(first_chunk..n)]
         };
-        let at = simulates_exactly(model, &SimulationRequest::new(40, 11), &mut draw);
+        let at = simulates_exactly(model, &MonteCarloRequest::new(40, 11), &mut draw);
         assert!(at[0].is_some(), "{name}: interrupted in the runs");
     }
 }

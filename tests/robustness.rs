@@ -224,12 +224,12 @@ fn a_measurement_noise_variance_that_underflows_to_zero_is_an_error() {
 #[test]
 fn a_simulated_process_that_outgrows_double_precision_stops_the_run() {
     use kea_core::exec::Sequential;
-    use kea_core::monte_carlo::{SimulationRequest, simulate, traces_csv};
+    use kea_core::monte_carlo::{MonteCarloRequest, simulate, traces_csv};
     let mut v = common::preset_value("cv-tracker");
     v["system"]["a"] = json!([[0, 1], [0, 10]]);
     v["time"] = json!({"t0": 0, "t_end": 100, "steps": 1000});
     let m = model_from_value(v).unwrap();
-    let req = SimulationRequest::new(10, 1);
+    let req = MonteCarloRequest::new(10, 1);
     let e = simulate(&m, &Overrides::new(), &req, &Sequential, &mut NoProgress).unwrap_err();
     let text = e.to_string();
     assert!(
@@ -263,14 +263,14 @@ fn a_simulated_process_that_outgrows_double_precision_stops_the_run() {
 #[test]
 fn a_simulation_without_measurements_says_why_nis_is_undefined() {
     use kea_core::exec::Sequential;
-    use kea_core::monte_carlo::{SimulationRequest, simulate};
+    use kea_core::monte_carlo::{MonteCarloRequest, simulate};
     let mut v = scalar();
     v["measurement"]["schedule"] = json!([{"when": -1}]);
     let m = model_from_value(v).unwrap();
     let r = simulate(
         &m,
         &Overrides::new(),
-        &SimulationRequest::new(4, 1),
+        &MonteCarloRequest::new(4, 1),
         &Sequential,
         &mut NoProgress,
     )
@@ -318,7 +318,7 @@ fn a_grid_with_no_value_anywhere_says_so() {
     model["system"]["y0"] = json!([0]);
     let req = request_from_value(json!({
         "model": model,
-        "target": {"criterion": "yz", "set": "bound", "threshold": 1},
+        "target": {"criterion": "yz", "criteria": "bound", "threshold": 1},
         "mode": {"grid": {"params": [{"name": "q", "values": [1, 2]}]}}
     }))
     .unwrap();

@@ -97,7 +97,7 @@ fn seed_grid_request(cost_order: Option<Value>) -> SynthesisRequest {
     }
     request(
         &seed_model(),
-        json!({"criterion": "yx", "set": "bound", "threshold": 14}),
+        json!({"criterion": "yx", "criteria": "bound", "threshold": 14}),
         json!({ "grid": grid }),
     )
 }
@@ -228,7 +228,7 @@ fn bisection_answer_meets_and_one_percent_looser_misses() {
     let model = fixed_phi_model();
     let req = request(
         &model,
-        json!({"criterion": "yx", "set": "bound", "threshold": 14}),
+        json!({"criterion": "yx", "criteria": "bound", "threshold": 14}),
         json!({"bisect": {"param": "psi", "low": 1e-6, "high": 1e-5, "rel_tol": 1e-3}}),
     );
     let r = run(&req);
@@ -701,7 +701,7 @@ fn the_verification_carries_the_answers_analysis_warnings() {
     let model = presets::get("helicopter-range").expect("preset");
     let req = request(
         &model,
-        json!({"set": "bound", "criterion": "yx", "threshold": 0.6}),
+        json!({"criteria": "bound", "criterion": "yx", "threshold": 0.6}),
         json!({"seed_search": {"params": [{"name": "sd", "low": 0.6, "high": 5, "shrink": 0.5}]}}),
     );
     let r = run(&req);
@@ -741,7 +741,7 @@ fn a_covariance_targets_verification_leaves_out_the_bound_sets_warnings() {
     let model = presets::get("cv-tracker").expect("preset");
     let req = request(
         &model,
-        json!({"set": "covariance", "criterion": "yx", "state": "position", "threshold": 300}),
+        json!({"criteria": "covariance", "criterion": "yx", "state": "position", "threshold": 300}),
         json!({"bisect": {"param": "r", "low": 0.05, "high": 5}}),
     );
     let r = run(&req);
@@ -794,7 +794,7 @@ fn an_interrupted_synthesis_resumes_from_what_it_kept() {
     use std::sync::atomic::Ordering::Relaxed;
     let bisect = request(
         &fixed_phi_model(),
-        json!({"criterion": "yx", "set": "bound", "threshold": 14}),
+        json!({"criterion": "yx", "criteria": "bound", "threshold": 14}),
         json!({"bisect": {"param": "psi", "low": 1e-6, "high": 1e-5, "rel_tol": 1e-3}}),
     );
     let search = fixed_phi_seed_search();
@@ -840,4 +840,69 @@ fn an_interrupted_synthesis_resumes_from_what_it_kept() {
             assert_eq!(same, whole, "{name}, {threads} threads");
         }
     }
+}
+
+/// The target's criteria set is `criteria`; `set`, its former name (a request's own
+/// `set` is its parameter overrides), is still read as it: the same request and the
+/// same result, which writes the set under both names and reads back either. The two
+/// together are refused at the target's `criteria`, by the request reader and by the
+/// kind (the server's and the command line's way in); an unknown member names
+/// `criteria`.
+#[test]
+fn the_targets_criteria_set_is_also_read_under_its_former_name_set() {
+    let model = serde_json::to_value(seed_model()).unwrap();
+    let target = |members: &[&str]| {
+        let mut t = json!({"criterion": "yx", "threshold": 14});
+        for m in members {
+            t[*m] = json!("covariance");
+        }
+        t
+    };
+    let mode = json!({"grid": {"params": [{"name": "f", "values": [2.0, 4.0]}]}});
+    let body = |t: Value| json!({"model": model, "target": t, "mode": mode});
+    let read = |t: Value| synthesis::request_from_value(body(t));
+    let new = read(target(&["criteria"])).unwrap();
+    let old = read(target(&["set"])).unwrap();
+    assert_eq!(old, new);
+    assert_eq!(new.target.criteria, synthesis::CriteriaSetName::Covariance);
+    let r = run(&old);
+    assert_eq!(r, run(&new));
+    let written = serde_json::to_value(&r).unwrap();
+    assert_eq!(written["target"]["criteria"], "covariance");
+    assert_eq!(written["target"]["set"], "covariance");
+    let back: SynthesisResult = serde_json::from_value(written.clone()).unwrap();
+    assert_eq!(back, r);
+    let mut earlier = written;
+    earlier["target"]
+        .as_object_mut()
+        .unwrap()
+        .remove("criteria");
+    let back: SynthesisResult = serde_json::from_value(earlier).unwrap();
+    assert_eq!(back, r, "a result of an earlier version, with `set` alone");
+
+    let twice = "given twice, under its name and a former one; give `criteria` alone";
+    let located = |e: Error| -> Vec<(String, String)> {
+        e.field_errors()
+            .into_iter()
+            .map(|f| (f.path, f.message))
+            .collect()
+    };
+    let both = read(target(&["criteria", "set"])).unwrap_err();
+    assert_eq!(
+        located(both),
+        [("target.criteria".to_string(), twice.to_string())]
+    );
+    let both = kea_core::registry::prepare("synthesis", body(target(&["set", "criteria"])))
+        .err()
+        .unwrap();
+    assert_eq!(
+        located(both),
+        [("target.criteria".to_string(), twice.to_string())]
+    );
+    let mut typo = target(&["criteria"]);
+    typo["critera"] = json!("bound");
+    let unknown = located(read(typo).unwrap_err());
+    assert_eq!(unknown.len(), 1, "{unknown:?}");
+    assert_eq!(unknown[0].0, "target.critera");
+    assert!(unknown[0].1.contains("criteria"), "{unknown:?}");
 }

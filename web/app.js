@@ -653,7 +653,8 @@ async function main() {
   const draft = leftDraft;
   if (draft) await loadDraft(draft);
   else await loadFromUrl();
-  // The link's tab (`&tab=synthesis` / `simulation`), kept in the URL as it changes.
+  // The link's tab (`&tab=synthesis` / `monte_carlo`; an older link's `simulation` is
+  // `monte_carlo`), kept in the URL as it changes.
   tabs.show(draft?.tab ?? new URLSearchParams(location.hash.slice(1)).get('tab') ?? 'analysis');
   document.addEventListener('kea:tab-changed', saveToUrl);
   // Server jobs started before a reload, followed again (the other tabs' run bars listen).

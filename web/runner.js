@@ -87,7 +87,7 @@ async function serverWorkLimit() {
  */
 export class WorkGate {
   constructor(op) {
-    this.op = op; // analysis_work, synthesis_work or simulation_work
+    this.op = op; // analysis_work, synthesis_work or monte_carlo_work
     this.allowed = null;
   }
 

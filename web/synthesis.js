@@ -1,5 +1,5 @@
 // The Synthesis tab (docs/synthesis.md): for the current model, a target (criterion,
-// set, weighted or one state, threshold) and a mode (bisect, grid, seed_search), run in
+// criteria set, weighted or one state, threshold) and a mode (bisect, grid, seed_search), run in
 // this browser (wasm, the core's Sequential executor) or as a server job of kind
 // `synthesis`; the result as grid tables or as the answer with its verification.
 
@@ -12,6 +12,14 @@ const CRITERIA = [
   ['yx', 'F_YX (filtered vs a-priori)'],
 ];
 const LABEL = { yz: 'F_YZ', zx: 'F_ZX', yx: 'F_YX' };
+
+/**
+ * A target's criteria set: `criteria`, or `set`, the member's former name (a request or
+ * a result of an earlier kea); `bound` when it names none, as the core reads it.
+ */
+function criteriaOf(target) {
+  return target.criteria ?? target.set ?? 'bound';
+}
 const MODES = [
   ['grid', 'grid — criteria tables over up to 3 params'],
   ['bisect', 'bisect — the loosest value of one param'],
@@ -63,8 +71,8 @@ export class SynthesisView extends RunView {
     const id = (s) => `syn-${s}`;
     this.criterion = select(id('criterion'), CRITERIA, 'yx');
     this.criterion.dataset.requestPath = 'target.criterion';
-    this.set = select(id('set'), [['bound', 'bound (the seed’s modulus)'], ['covariance', 'covariance']], 'bound');
-    this.set.dataset.requestPath = 'target.set';
+    this.criteria = select(id('criteria'), [['bound', 'bound (the seed’s modulus)'], ['covariance', 'covariance']], 'bound');
+    this.criteria.dataset.requestPath = 'target.criteria';
     this.state = select(id('state'), [['', 'weighted (all states)']], '');
     this.state.dataset.requestPath = 'target.state';
     this.threshold = input(id('threshold'), '14', { inputmode: 'decimal', 'data-request-path': 'target.threshold' });
@@ -76,7 +84,7 @@ export class SynthesisView extends RunView {
         'div',
         { class: 'row' },
         field('Criterion', this.criterion),
-        field('Set', this.set),
+        field('Criteria set', this.criteria),
         field('Of', this.state),
         field('Threshold F*', this.threshold),
       ),
@@ -212,7 +220,7 @@ export class SynthesisView extends RunView {
     const one = (c) => [c];
     const b = this.bisect;
     this.kept = new KeptFields('kea-synthesis', [
-      ...[this.criterion, this.set, this.state, this.threshold, this.mode].map(one),
+      ...[this.criterion, this.criteria, this.state, this.threshold, this.mode].map(one),
       [b.param, b.low, b.high],
       ...[b.rel_tol, b.probes].map(one),
       ...this.grid.map((row) => [row.param, row.values, row.cheaper]),
@@ -280,10 +288,14 @@ export class SynthesisView extends RunView {
     this.kept.save(); // the choices (and a new model's defaults) as they are now
   }
 
-  /** A preset's synthesis example ({target, mode}, as presets/synthesis/NAME.json has it) in the fields. */
+  /**
+   * A preset's synthesis example ({target, mode}, as presets/synthesis/NAME.json has it)
+   * in the fields; a target's criteria set may be under `set`, its former name (a job
+   * stored by an earlier kea).
+   */
   applyExample({ target: t, mode }) {
     this.criterion.value = t.criterion;
-    this.set.value = t.set;
+    this.criteria.value = criteriaOf(t);
     this.state.value = t.state ?? '';
     this.threshold.value = String(t.threshold);
     const [kind, m] = Object.entries(mode)[0];
@@ -380,7 +392,7 @@ export class SynthesisView extends RunView {
     };
     const target = {
       criterion: this.criterion.value,
-      set: this.set.value,
+      criteria: this.criteria.value,
       threshold: number(this.threshold, 'target.threshold'),
     };
     if (this.state.value) target.state = this.state.value;
@@ -484,7 +496,7 @@ export class SynthesisView extends RunView {
     this.out.dataset.where = where;
     this.out.dataset.status = r.status;
     const t = r.target;
-    const what = `${LABEL[t.criterion]} (${t.set}${t.state ? `, state ${t.state}` : ', weighted'}) ≥ ${fmt(t.threshold)}`;
+    const what = `${LABEL[t.criterion]} (${criteriaOf(t)}${t.state ? `, state ${t.state}` : ', weighted'}) ≥ ${fmt(t.threshold)}`;
     const parts = [
       el('p', { class: `syn-status status-${r.status}`, id: 'syn-message' }, el('strong', { text: `${r.status.replaceAll('_', ' ')}: ` }), uiWords(r.message)),
       el('p', { class: 'syn-summary', id: 'syn-summary' }, `Target ${what} · `, el('span', { id: 'syn-analyses', 'data-value': String(r.analyses), text: `${r.analyses} analyses` }), r.recalled_analyses ? ` (${r.recalled_analyses} of them kept from before a server restart)` : '', ` of D = ${r.steps.toLocaleString('en')} steps · ${duration(r.timing.wall_ms)} on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`),
@@ -517,7 +529,7 @@ export class SynthesisView extends RunView {
     const v = r.verification;
     if (!v?.warnings?.length) return null;
     const which = `the answer (${paramsText(v.point.params)})`;
-    const caution = r.target.set === 'bound' ? ' — these bound figures may not describe the filter' : '';
+    const caution = criteriaOf(r.target) === 'bound' ? ' — these bound figures may not describe the filter' : '';
     return el(
       'div',
       { class: 'syn-warnings', id: 'syn-warnings', 'data-state': 'warned' },
@@ -542,7 +554,7 @@ export class SynthesisView extends RunView {
     const wrap = el('div', { class: 'syn-grid', id: 'syn-grid' });
     const meets = g.cells.filter((c) => c.point.meets).length;
     wrap.append(
-      el('p', { class: 'help', text: `Each cell: F_YZ / F_ZX / F_YX (${r.target.set} set, ${r.target.state ? `state ${r.target.state}` : 'weighted'}); ✓ marks the ${meets} of ${g.cells.length} cells with ${LABEL[crit]} ≥ ${fmt(r.target.threshold)}${cheapest ? ', the outlined one is the cheapest' : ''}.` }),
+      el('p', { class: 'help', text: `Each cell: F_YZ / F_ZX / F_YX (${criteriaOf(r.target)} set, ${r.target.state ? `state ${r.target.state}` : 'weighted'}); ✓ marks the ${meets} of ${g.cells.length} cells with ${LABEL[crit]} ≥ ${fmt(r.target.threshold)}${cheapest ? ', the outlined one is the cheapest' : ''}.` }),
     );
     const pageValues = pages ? pages.values : [null];
     pageValues.forEach((pv, k) => {

@@ -1,11 +1,11 @@
 // The tabs of the run pane: Analysis (app.js), Synthesis (synthesis.js) and Monte
-// Carlo (simulation.js), all on the model in the editor, and Server: the models
+// Carlo (monte_carlo.js), all on the model in the editor, and Server: the models
 // (models.js) and jobs (jobs.js) the kea server keeps.
 // Arrow keys move between the tabs; Ctrl+Enter runs and Esc cancels in the tab shown.
 
 import { JobsView, KINDS } from './jobs.js';
 import { ModelsView } from './models.js';
-import { SimulationView } from './simulation.js';
+import { MonteCarloView } from './monte_carlo.js';
 import { SynthesisView } from './synthesis.js';
 
 /**
@@ -15,12 +15,16 @@ import { SynthesisView } from './synthesis.js';
  * of the tab shown), show(name), open(kind, id, request, model, body) (a server job in
  * its tab), storeModel() (the editor's model stored on the server: {ok, text})}.
  */
+// A tab by a former name (a link or a reloaded page of an earlier kea): the Monte Carlo
+// tab was `simulation`, its kind's former name.
+const FORMER_NAMES = { simulation: 'monte_carlo' };
+
 export function mountTabs(ctx) {
   const pane = document.getElementById('results-pane');
   const tabs = [...document.querySelectorAll('#run-tabs [role=tab]')];
   const views = {
     synthesis: new SynthesisView(document.getElementById('synthesis-panel'), ctx),
-    simulation: new SimulationView(document.getElementById('simulation-panel'), ctx),
+    monte_carlo: new MonteCarloView(document.getElementById('monte-carlo-panel'), ctx),
   };
   if (!ctx.server) {
     for (const v of Object.values(views)) v.bar.disableServer('No kea server answers here (open the page through `kea serve`).');
@@ -52,7 +56,8 @@ export function mountTabs(ctx) {
   };
   const current = () => pane.dataset.tab ?? 'analysis';
 
-  function show(name, focus = false) {
+  function show(shown, focus = false) {
+    const name = FORMER_NAMES[shown] ?? shown;
     if (!tabs.some((t) => t.dataset.tab === name)) return;
     const changed = name !== current();
     pane.dataset.tab = name;

@@ -1,5 +1,5 @@
 // Shared pieces of the Synthesis and Monte Carlo views (web/synthesis.js,
-// web/simulation.js): a DOM helper, a runner for a request of one kind — in this
+// web/monte_carlo.js): a DOM helper, a runner for a request of one kind — in this
 // browser (the wasm worker) or as a server job of the same kind (progress over SSE) —
 // the run bar (where, Run, Cancel, progress, status) and the fields kept over a reload.
 
@@ -43,7 +43,7 @@ export function input(id, value, attrs = {}) {
 }
 
 /**
- * A server job of one kind (`synthesis`, `simulation`): POST, follow SSE, fetch the
+ * A server job of one kind (`synthesis`, `monte_carlo`): POST, follow SSE, fetch the
  * result. The running job is kept for this browser tab (`kea-job-KIND`): see RunBar.resume.
  */
 class JobRunner extends ServerRunner {
@@ -328,7 +328,7 @@ export function runPart(model) {
   return JSON.stringify(rest);
 }
 
-/** A quick op of worker.js (check, simulation_csv, …) on a worker of its own. */
+/** A quick op of worker.js (check, monte_carlo_csv, …) on a worker of its own. */
 export function wasmCall(op, args) {
   helper ??= new WasmWorker();
   return helper.call(op, args);

@@ -1,8 +1,8 @@
 // The wasm build of kea-core, in a Web Worker so the page never freezes.
 //
 // Messages in:  {id, op: 'presets' | 'preset' | 'presetSynthesis' | 'check' | 'analyze' | 'analysis_work' | 'traces_csv', ...args}
-//               or {id, op: 'synthesize' | 'simulate' | 'synthesis_work' | 'simulation_work', request}
-//               or {id, op: 'simulation_csv', result} | {id, op: 'parse', bytes}
+//               or {id, op: 'synthesize' | 'simulate' | 'synthesis_work' | 'monte_carlo_work', request}
+//               or {id, op: 'monte_carlo_csv', result} | {id, op: 'parse', bytes}
 // Messages out: {id, progress} while analysing (at most every 50 ms), then
 //               {id, ok: <value>} or {id, error: {kind, title, errors:[{path, message}]}}.
 // Cancelling a run: the page terminates this worker and starts a new one (instant).
@@ -33,8 +33,8 @@ function asError(e) {
 const KINDS = {
   synthesize: 'synthesis',
   synthesis_work: 'synthesis',
-  simulate: 'simulation',
-  simulation_work: 'simulation',
+  simulate: 'monte_carlo',
+  monte_carlo_work: 'monte_carlo',
 };
 
 self.onmessage = async (event) => {
@@ -63,7 +63,7 @@ self.onmessage = async (event) => {
         value = JSON.parse(kea.analysis_work(event.data.model, event.data.set ?? ''));
         break;
       case 'synthesis_work':
-      case 'simulation_work': // the core's work(kind, request), as for a server job of that kind
+      case 'monte_carlo_work': // the core's work(kind, request), as for a server job of that kind
         value = JSON.parse(kea.work(KINDS[op], event.data.request));
         break;
       case 'check':
@@ -84,7 +84,7 @@ self.onmessage = async (event) => {
       }
       case 'synthesize':
       case 'simulate': {
-        // Synthesis and Monte Carlo (web/synthesis.js, web/simulation.js): one request
+        // Synthesis and Monte Carlo (web/synthesis.js, web/monte_carlo.js): one request
         // JSON, run by the core's run(kind, request) as a server job of that kind is.
         let last = 0;
         const text = kea.run(KINDS[op], event.data.request, (fraction) => {
@@ -98,8 +98,8 @@ self.onmessage = async (event) => {
         value = JSON.parse(text);
         break;
       }
-      case 'simulation_csv':
-        value = kea.simulation_csv(event.data.result);
+      case 'monte_carlo_csv':
+        value = kea.monte_carlo_csv(event.data.result);
         break;
       case 'traces_csv':
         value = kea.traces_csv(event.data.result);

@@ -1,7 +1,7 @@
 """Potential (Riccati) against real (simulated) error variance per coordinate, like
 seed 004's Figure 3, from the CSV written by
 
-    kea simulate preset:helicopter-hover --runs 1000 --seed 1 --trace-points 500 --csv hover.csv
+    kea monte-carlo preset:helicopter-hover --runs 1000 --seed 1 --trace-points 500 --csv hover.csv
 
 Usage: python3 plot.py hover.csv helicopter-hover.png
 """

@@ -46,7 +46,9 @@ commands! {
     /// Print a preset model's JSON (a starting point for your own model).
     Preset(cli::presets::ShowArgs),
     /// Monte Carlo: real (simulated) against potential (Riccati) accuracy.
-    Simulate(cli::simulate::Args),
+    // `simulate`: its former name, still read as it (scripts).
+    #[command(visible_alias = "simulate")]
+    MonteCarlo(cli::monte_carlo::Args),
     /// Synthesis: the error levels that reach a desired filtering effect.
     Synthesize(cli::synthesize::Args),
     /// Run the HTTP service (API, jobs, web UI).

@@ -144,6 +144,37 @@ fn run(cmd: &mut Command) -> (i32, String, String) {
 
 /// Work above `--max-work` (the server's estimate and default) is refused before
 /// anything runs, naming the field that drives it and the flag that lifts it.
+/// The Monte Carlo's command is `kea monte-carlo`; `kea simulate`, its former name, is
+/// its alias (listed in the help), the same command with the same output.
+#[test]
+fn simulate_is_an_alias_of_monte_carlo() {
+    let (code, help, _) = kea(&["--help"]);
+    assert_eq!(code, 0);
+    let line = help
+        .lines()
+        .find(|l| l.trim_start().starts_with("monte-carlo"))
+        .unwrap_or_else(|| panic!("no monte-carlo in:\n{help}"));
+    assert!(line.contains("[alias: simulate]"), "{line}");
+    assert!(
+        !help.lines().any(|l| l.trim_start().starts_with("simulate")),
+        "{help}"
+    );
+    let (code, usage, _) = kea(&["simulate", "--help"]);
+    assert_eq!(code, 0);
+    assert_eq!(usage, kea(&["monte-carlo", "--help"]).1);
+    let args = ["preset:cv-tracker", "--runs", "20", "--seed", "2"];
+    let report = |command: &str| {
+        let (code, text, err) = kea(&[&[command][..], &args[..]].concat());
+        assert_eq!(code, 0, "{err}");
+        // (but for the wall-clock time in the first line)
+        text.lines()
+            .filter(|l| !l.contains(" ms, "))
+            .map(str::to_owned)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(report("simulate"), report("monte-carlo"));
+}
+
 #[test]
 fn work_above_the_limit_is_refused_up_front() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
@@ -161,8 +192,8 @@ fn work_above_the_limit_is_refused_up_front() {
         "{err}"
     );
     assert!(err.contains("above --max-work 1.000e8"), "{err}");
-    // 2.35·10¹⁵ units of simulation: above the default 1e12, refused at once.
-    let (code, _, err) = kea(&["simulate", "preset:seed-example", "--runs", "100000000"]);
+    // 2.35·10¹⁵ units of Monte Carlo: above the default 1e12, refused at once.
+    let (code, _, err) = kea(&["monte-carlo", "preset:seed-example", "--runs", "100000000"]);
     assert_eq!(code, 2, "{err}");
     assert!(err.starts_with("runs: estimated work 2.350e15"), "{err}");
     assert!(err.contains("above --max-work 1.000e12"), "{err}");
@@ -278,7 +309,7 @@ fn input_errors_name_their_source_and_exit_2_up_front() {
     let request = dir.path().join("request.json");
     std::fs::write(
         &request,
-        r#"{"target": {"criterion": "yx", "set": "covariance", "threshold": 2}, "mode": {"grid": {"params": [{"name": "r", "values": [0.5, 1]}]}}}"#,
+        r#"{"target": {"criterion": "yx", "criteria": "covariance", "threshold": 2}, "mode": {"grid": {"params": [{"name": "r", "values": [0.5, 1]}]}}}"#,
     )
     .unwrap();
     let request = request.to_str().unwrap();
@@ -318,7 +349,7 @@ fn threads_above_the_cap_are_refused() {
     let (cap, above) = (MAX_THREADS.to_string(), (MAX_THREADS + 1).to_string());
     for cmd in [
         &[
-            "simulate",
+            "monte-carlo",
             "preset:cv-tracker",
             "--runs",
             "2",
@@ -344,11 +375,11 @@ fn threads_above_the_cap_are_refused() {
             "{cmd:?}: {err}"
         );
     }
-    let (code, _, err) = kea(&["simulate", "preset:cv-tracker", "--threads", "many"]);
+    let (code, _, err) = kea(&["monte-carlo", "preset:cv-tracker", "--threads", "many"]);
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("expected a whole number of threads"), "{err}");
     let (code, out, err) = kea(&[
-        "simulate",
+        "monte-carlo",
         "preset:cv-tracker",
         "--runs",
         "2",
@@ -361,7 +392,7 @@ fn threads_above_the_cap_are_refused() {
 }
 
 /// A synthesis request that finds its point (exit 0) on preset:cv-tracker.
-const FOUND_REQUEST: &str = r#"{"target": {"criterion": "yx", "set": "covariance", "threshold": 2}, "mode": {"grid": {"params": [{"name": "r", "values": [0.5, 1]}]}}}"#;
+const FOUND_REQUEST: &str = r#"{"target": {"criterion": "yx", "criteria": "covariance", "threshold": 2}, "mode": {"grid": {"params": [{"name": "r", "values": [0.5, 1]}]}}}"#;
 
 /// Every command's output goes through one checked write: stdout that cannot be
 /// written (a full disk) is said on stderr and exits 1, never a panic or a silent 0;
@@ -380,7 +411,8 @@ fn output_that_cannot_be_written_is_a_failure_and_a_closed_pipe_is_not() {
         &["preset", "cv-tracker"],
         &["analyze", "preset:cv-tracker"],
         &["analyze", "preset:cv-tracker", "--json"],
-        &["simulate", "preset:cv-tracker", "--runs", "20"],
+        &["monte-carlo", "preset:cv-tracker", "--runs", "20"],
+        // `simulate`: the former name of `monte-carlo`, still read as it.
         &["simulate", "preset:cv-tracker", "--runs", "20", "--json"],
         &["synthesize", request, "--preset", "cv-tracker"],
         &["synthesize", request, "--preset", "cv-tracker", "--json"],
@@ -414,11 +446,11 @@ fn output_that_cannot_be_written_is_a_failure_and_a_closed_pipe_is_not() {
 /// where four decimals would be unreadable (1.4281e25, not 26 digits; 1.2551e-5, not
 /// 0.0000), each close to the JSON's value, and `—` for anything undefined — never NaN.
 #[test]
-fn simulation_report_numbers_are_readable_and_undefined_is_a_dash() {
+fn monte_carlo_report_numbers_are_readable_and_undefined_is_a_dash() {
     let cases: [&[&str]; 2] = [
-        &["simulate", "preset:helicopter-hover", "--runs", "100"],
+        &["monte-carlo", "preset:helicopter-hover", "--runs", "100"],
         &[
-            "simulate",
+            "monte-carlo",
             "preset:cv-tracker",
             "--set",
             "r=1e7",
@@ -459,7 +491,7 @@ fn simulation_report_numbers_are_readable_and_undefined_is_a_dash() {
     model["measurement"]["schedule"] = json!(vec![json!({"when": "0"}); n]);
     let file = dir.path().join("unmeasured.json");
     std::fs::write(&file, model.to_string()).unwrap();
-    let (code, text, err) = kea(&["simulate", file.to_str().unwrap(), "--runs", "20"]);
+    let (code, text, err) = kea(&["monte-carlo", file.to_str().unwrap(), "--runs", "20"]);
     assert_eq!(code, 0, "{err}");
     let nis = text
         .lines()
@@ -475,14 +507,14 @@ fn simulation_report_numbers_are_readable_and_undefined_is_a_dash() {
     model["time"]["t_end"] = json!(1e-300);
     let file = dir.path().join("brief.json");
     std::fs::write(&file, model.to_string()).unwrap();
-    let (code, text, err) = kea(&["simulate", file.to_str().unwrap(), "--runs", "20"]);
+    let (code, text, err) = kea(&["monte-carlo", file.to_str().unwrap(), "--runs", "20"]);
     assert_eq!(code, 0, "{err}");
     assert!(text.contains("\nAt t = 1e-300: "), "{text}");
 }
 
 /// `--csv -` writes the CSV to stdout in place of the table (no file named `-`), and is
 /// refused with `--json`; a `--csv` path that is the model file is refused (exit 2)
-/// and the model left as it was — for analyze and simulate alike.
+/// and the model left as it was — for analyze and monte-carlo alike.
 #[test]
 fn csv_to_stdout_and_never_over_the_model() {
     let dir = tempfile::tempdir().unwrap();
@@ -497,7 +529,7 @@ fn csv_to_stdout_and_never_over_the_model() {
     assert!(!dir.path().join("-").exists());
     let (code, out, err) = run(Command::new(KEA)
         .args([
-            "simulate",
+            "monte-carlo",
             "preset:cv-tracker",
             "--runs",
             "20",
@@ -517,7 +549,7 @@ fn csv_to_stdout_and_never_over_the_model() {
     std::fs::write(&model, &text).unwrap();
     let same = dir.path().join(".").join("m.json");
     let (model, same) = (model.to_str().unwrap(), same.to_str().unwrap());
-    for cmd in ["analyze", "simulate"] {
+    for cmd in ["analyze", "monte-carlo"] {
         let (code, out, err) = kea(&[cmd, "preset:cv-tracker", "--json", "--csv", "-"]);
         assert_eq!(code, 2, "{err}");
         assert!(out.is_empty(), "{out}");
@@ -553,7 +585,7 @@ fn synthesize_refuses_stdin_twice() {
 /// in every command that takes `--set`; once is fine.
 #[test]
 fn a_set_name_given_twice_is_refused() {
-    for command in ["analyze", "simulate"] {
+    for command in ["analyze", "monte-carlo"] {
         let (code, _, err) = kea(&[command, "preset:cv-tracker", "--set", "q=1", "--set", "q=2"]);
         assert_eq!(code, 2, "{command}: {err}");
         assert!(
@@ -645,7 +677,7 @@ fn names_in(dir: &std::path::Path) -> Vec<String> {
 
 /// A `--csv` file is replaced only by a finished run's CSV: a run that fails, or is
 /// killed, leaves the file it named as it was (no truncation up front) and no
-/// temporary file beside it — for analyze and simulate alike.
+/// temporary file beside it — for analyze and monte-carlo alike.
 #[test]
 fn a_failed_or_killed_run_leaves_the_csv_file_as_it_was() {
     let dir = tempfile::tempdir().unwrap();
@@ -657,7 +689,7 @@ fn a_failed_or_killed_run_leaves_the_csv_file_as_it_was() {
     let (model, csv_arg) = (model.to_str().unwrap(), csv.to_str().unwrap());
     for args in [
         &["analyze", model, "--csv", csv_arg][..],
-        &["simulate", model, "--runs", "20", "--csv", csv_arg],
+        &["monte-carlo", model, "--runs", "20", "--csv", csv_arg],
     ] {
         let (code, out, err) = kea(args);
         assert_eq!(code, 1, "{args:?}: the model should diverge: {out}{err}");

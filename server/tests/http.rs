@@ -283,15 +283,15 @@ fn analyze_sync_and_job_equal_the_cli() {
     }
 }
 
-/// A simulation job gives `kea simulate`'s result, bit for bit — also without a seed,
-/// where both take the documented default (the server once took 0, the CLI 1).
+/// A Monte Carlo job gives `kea monte-carlo`'s result, bit for bit — also without a
+/// seed, where both take the documented default (the server once took 0, the CLI 1).
 #[test]
-fn a_simulation_job_equals_kea_simulate() {
+fn a_monte_carlo_job_equals_kea_monte_carlo() {
     let dir = tmp();
     let s = Server::start(dir.path(), &[]);
     let cli = |seed: &str| {
         without_timing(kea_json(&[
-            "simulate",
+            "monte-carlo",
             "preset:cv-tracker",
             "--runs",
             "20",
@@ -310,7 +310,7 @@ fn a_simulation_job_equals_kea_simulate() {
         (json!({}), &default_seed),
         (json!({"seed": 0, "runs": 20.0}), &seed_0),
     ] {
-        let mut body = json!({"kind": "simulation", "model": preset("cv-tracker"), "runs": 20});
+        let mut body = json!({"kind": "monte_carlo", "model": preset("cv-tracker"), "runs": 20});
         body.as_object_mut()
             .unwrap()
             .extend(request.as_object().unwrap().clone());
@@ -319,8 +319,111 @@ fn a_simulation_job_equals_kea_simulate() {
         let id = job.json()["id"].as_str().unwrap().to_string();
         assert_eq!(s.wait_finished(&id, LONG)["status"], "succeeded");
         let result = without_timing(s.get(&format!("/v1/jobs/{id}/result")).json());
-        assert_eq!(&result, expected, "simulation job {request}");
+        assert_eq!(&result, expected, "Monte Carlo job {request}");
     }
+}
+
+/// `simulation`, the Monte Carlo kind's former name, still reads as it: a job submitted
+/// under it is stored and shown as a `monte_carlo` job with the same result, `kea
+/// simulate` is `kea monte-carlo`, and the jobs an earlier kea stored under it — one
+/// finished, one still queued — are read, listed and run as Monte Carlo jobs.
+#[test]
+fn jobs_of_the_former_kind_name_simulation_are_monte_carlo_jobs() {
+    let dir = tmp();
+    let mut s = Server::start(dir.path(), &["--workers", "1"]);
+    let body = |kind: &str| {
+        json!({"kind": kind, "model": preset("cv-tracker"), "runs": 20, "seed": 4,
+               "trace_points": 10})
+    };
+    let run = |s: &Server, kind: &str| {
+        let job = s.post("/v1/jobs", &body(kind));
+        assert_eq!(job.status, 202, "{}", job.text);
+        assert_eq!(job.json()["kind"], "monte_carlo", "{}", job.text);
+        let id = job.json()["id"].as_str().unwrap().to_string();
+        let done = s.wait_finished(&id, LONG);
+        assert_eq!(done["status"], "succeeded", "{done}");
+        assert_eq!(done["kind"], "monte_carlo");
+        id
+    };
+    let result =
+        |s: &Server, id: &str| without_timing(s.get(&format!("/v1/jobs/{id}/result")).json());
+    let traces = |s: &Server, id: &str| s.get(&format!("/v1/jobs/{id}/traces.csv")).text;
+    let fresh = run(&s, "monte_carlo");
+    let expected = (result(&s, &fresh), traces(&s, &fresh));
+    let aliased = run(&s, "simulation");
+    assert_eq!((result(&s, &aliased), traces(&s, &aliased)), expected);
+    let stored = s.get(&format!("/v1/jobs/{aliased}/request")).json();
+    assert_eq!(stored, body("monte_carlo"), "stored under the kind's name");
+    let cli = |command: &str| {
+        without_timing(kea_json(&[
+            command,
+            "preset:cv-tracker",
+            "--runs",
+            "20",
+            "--seed",
+            "4",
+            "--trace-points",
+            "10",
+            "--json",
+        ]))
+    };
+    assert_eq!(cli("simulate"), expected.0);
+    assert_eq!(cli("monte-carlo"), expected.0);
+    assert!(s.terminate(LONG), "kea serve exits on SIGTERM");
+
+    // What an earlier kea left: the finished job's row as it stored it, and a queued
+    // job of the same request, both of the kind `simulation`.
+    let queued = "0190a3c2-7b1e-7c3d-9f00-5a1e0c0ffee1";
+    {
+        let c = rusqlite::Connection::open(dir.path().join("kea.sqlite")).unwrap();
+        let changed = c
+            .execute(
+                "UPDATE jobs SET kind = 'simulation' WHERE id = ?1",
+                [&aliased],
+            )
+            .unwrap();
+        assert_eq!(changed, 1);
+        let mut request = body("simulation");
+        request.as_object_mut().unwrap().remove("kind");
+        c.execute(
+            "INSERT INTO jobs (id, kind, status, request_json, work, created_at)
+             VALUES (?1, 'simulation', 'queued', ?2, 1, '2026-01-01T00:00:00Z')",
+            rusqlite::params![queued, request.to_string()],
+        )
+        .unwrap();
+    }
+    let s = Server::start(dir.path(), &["--workers", "1"]);
+    let old = s.get(&format!("/v1/jobs/{aliased}")).json();
+    assert_eq!(old["kind"], "monte_carlo", "{old}");
+    assert_eq!((result(&s, &aliased), traces(&s, &aliased)), expected);
+    let stored = s.get(&format!("/v1/jobs/{aliased}/request")).json();
+    assert_eq!(stored, body("monte_carlo"));
+    let done = s.wait_finished(queued, LONG);
+    assert_eq!(done["status"], "succeeded", "{done}");
+    assert_eq!(done["kind"], "monte_carlo");
+    assert_eq!((result(&s, queued), traces(&s, queued)), expected);
+    let listed = s.get("/v1/jobs").json();
+    let kinds: Vec<&Value> = listed["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| &j["kind"])
+        .collect();
+    assert_eq!(kinds.len(), 3, "{listed}");
+    assert!(kinds.iter().all(|k| *k == "monte_carlo"), "{listed}");
+    // Run again: its stored request, posted back as it is.
+    assert_eq!(result(&s, &run_stored(&s, queued)), expected.0);
+}
+
+/// A job's stored request (`GET /v1/jobs/{id}/request`) posted back to `POST /v1/jobs`
+/// (the web page's Run again), run to its end: the new job's id.
+fn run_stored(s: &Server, id: &str) -> String {
+    let stored = s.get(&format!("/v1/jobs/{id}/request")).json();
+    let job = s.post("/v1/jobs", &stored);
+    assert_eq!(job.status, 202, "{}", job.text);
+    let again = job.json()["id"].as_str().unwrap().to_string();
+    assert_eq!(s.wait_finished(&again, LONG)["status"], "succeeded");
+    again
 }
 
 #[test]
@@ -565,7 +668,7 @@ fn a_synthesis_job_is_cancelled_inside_its_analyses() {
         &json!({
             "kind": "synthesis",
             "model": model,
-            "target": {"criterion": "yx", "set": "covariance", "threshold": 1e9},
+            "target": {"criterion": "yx", "criteria": "covariance", "threshold": 1e9},
             "mode": {"grid": {"params": [{"name": "sd", "values": [2.5, 5.0]}]}}
         }),
     );
@@ -692,7 +795,7 @@ fn an_analysis_resumes_after_a_crash_from_the_state_it_kept() {
 #[test]
 fn a_monte_carlo_resumes_after_a_crash_from_the_state_it_kept() {
     let steps = 600_000;
-    let body = json!({"kind": "simulation", "model": long_model(steps), "runs": 500, "seed": 5});
+    let body = json!({"kind": "monte_carlo", "model": long_model(steps), "runs": 500, "seed": 5});
     resumes_after_a_crash(body, steps);
 }
 
@@ -1207,7 +1310,7 @@ fn bad_request_corpus() {
         ),
         (
             "/v1/jobs",
-            json!({"kind": "simulation", "runs": 2, "model": cv, "set": {"q": -3}}),
+            json!({"kind": "monte_carlo", "runs": 2, "model": cv, "set": {"q": -3}}),
             422,
             vec!["model.system.phi[0]", "set"],
         ),
@@ -1777,7 +1880,7 @@ fn job_request_errors_name_the_member_and_what_is_expected() {
             vec!["missing", "param"],
         ),
         (
-            json!({"kind": "simulation", "model": cv, "runs": "5"}),
+            json!({"kind": "monte_carlo", "model": cv, "runs": "5"}),
             vec!["runs"],
             vec!["expected a whole number of runs", "got a string"],
         ),
@@ -1787,7 +1890,7 @@ fn job_request_errors_name_the_member_and_what_is_expected() {
             vec!["\"process\"", "\"mean\""],
         ),
         (
-            json!({"kind": "simulation", "model": cv, "runs": 5, "model_error": 3}),
+            json!({"kind": "monte_carlo", "model": cv, "runs": 5, "model_error": 3}),
             vec!["model_error"],
             vec!["\"white\"", "\"constant\"", "got 3"],
         ),

@@ -399,7 +399,9 @@ fn one_of_refs(schema: &Value) -> BTreeSet<String> {
 /// Every job kind the server runs is in the spec, and nothing else: `JobKind`, the
 /// request's `oneOf` and its discriminator, a `<Kind>JobRequest` whose `kind` is the
 /// kind, and a `<Kind>Result` among the result's `oneOf`. (The spec once listed two
-/// of the three kinds, with `additionalProperties: false`.)
+/// of the three kinds, with `additionalProperties: false`.) A kind's aliases (former
+/// names, still read as it) are in its request's `kind` and the discriminator, mapped
+/// to its request, and not in `JobKind`: a job is shown under its kind's name.
 #[test]
 fn the_spec_knows_every_job_kind() {
     let spec = spec();
@@ -409,6 +411,19 @@ fn the_spec_knows_every_job_kind() {
         .copied()
         .map(String::from)
         .collect();
+    let aliases = |kind: &str| -> Vec<String> {
+        kea_core::registry::ALIASES
+            .iter()
+            .find(|(name, _)| *name == kind)
+            .map(|(_, aliases)| aliases.iter().copied().map(String::from).collect())
+            .unwrap_or_default()
+    };
+    let every_alias: BTreeSet<String> = kinds.iter().flat_map(|k| aliases(k)).collect();
+    assert!(
+        every_alias.contains("simulation"),
+        "the Monte Carlo's former name"
+    );
+    assert!(every_alias.is_disjoint(&kinds));
     let listed: BTreeSet<String> = schemas["JobKind"]["enum"]
         .as_array()
         .unwrap()
@@ -423,7 +438,11 @@ fn the_spec_knows_every_job_kind() {
         .keys()
         .cloned()
         .collect();
-    assert_eq!(mapping, kinds, "JobRequest's discriminator");
+    assert_eq!(
+        mapping,
+        kinds.union(&every_alias).cloned().collect(),
+        "JobRequest's discriminator"
+    );
     let refs = |suffix: &str| -> BTreeSet<String> {
         kinds
             .iter()
@@ -437,17 +456,31 @@ fn the_spec_knows_every_job_kind() {
     );
     for k in &kinds {
         let name = format!("{}JobRequest", camel(k));
-        assert_eq!(
-            request["discriminator"]["mapping"][k],
-            format!("#/components/schemas/{name}")
-        );
-        assert_eq!(schemas[&name]["properties"]["kind"]["const"], k.as_str());
+        let names: Vec<String> = std::iter::once(k.clone()).chain(aliases(k)).collect();
+        for n in &names {
+            assert_eq!(
+                request["discriminator"]["mapping"][n],
+                format!("#/components/schemas/{name}")
+            );
+        }
+        let kind = &schemas[&name]["properties"]["kind"];
+        if names.len() == 1 {
+            assert_eq!(kind["const"], k.as_str());
+        } else {
+            assert_eq!(kind["enum"], json!(names), "{name}'s kind");
+        }
         assert!(
             !schemas[format!("{}Result", camel(k))].is_null(),
             "no {}Result",
             camel(k)
         );
     }
+    // A body naming a kind by an alias is that kind's request.
+    Validator::new(&spec).expect(
+        request,
+        &json!({"kind": "simulation", "model_id": "m", "runs": 2}),
+        "a Monte Carlo job body under the kind's former name",
+    );
     let result = response_schema(
         &spec,
         "get",
@@ -557,14 +590,14 @@ fn responses_validate_against_the_spec() {
     cv["options"]["trace_points"] = json!(20);
     let jobs = [
         json!({"kind": "analysis", "model": preset("helicopter-range")}),
-        json!({"kind": "simulation", "model": cv, "runs": 20, "seed": 1,
+        json!({"kind": "monte_carlo", "model": cv, "runs": 20, "seed": 1,
                "truth": "process", "model_error": "white", "trace_points": 10}),
         json!({"kind": "synthesis", "model": cv,
-               "target": {"criterion": "yx", "set": "covariance", "threshold": 1.5},
+               "target": {"criterion": "yx", "criteria": "covariance", "threshold": 1.5},
                "mode": {"grid": {"params": [{"name": "q", "values": [0.5, 2]}],
                                  "cost_order": [{"name": "q", "cheaper": "higher"}]}}}),
         json!({"kind": "synthesis", "model": cv,
-               "target": {"criterion": "yx", "set": "covariance", "threshold": 1.5},
+               "target": {"criterion": "yx", "criteria": "covariance", "threshold": 1.5},
                "mode": {"bisect": {"param": "r", "low": 0.01, "high": 100}}}),
     ];
     let schemas = &spec["components"]["schemas"];
@@ -664,7 +697,7 @@ fn responses_validate_against_the_spec() {
 }
 
 /// A traces CSV's header is the one the spec describes for its kind: `series:state`
-/// columns for both kinds (then `nees`, `nis` for a simulation),
+/// columns for both kinds (then `nees`, `nis` for a Monte Carlo),
 /// each series named in the description.
 fn check_csv_header(spec: &Value, kind: &str, header: &str) {
     let description =
@@ -681,8 +714,8 @@ fn check_csv_header(spec: &Value, kind: &str, header: &str) {
                 assert!(description.contains("`series:state`"));
                 c.split_once(':').map(|(series, _)| series)
             }
-            "simulation" if c == "nees" || c == "nis" => Some(c),
-            "simulation" => {
+            "monte_carlo" if c == "nees" || c == "nis" => Some(c),
+            "monte_carlo" => {
                 assert!(description.contains("`series:state`"));
                 c.split_once(':').map(|(series, _)| series)
             }
@@ -698,11 +731,11 @@ fn check_csv_header(spec: &Value, kind: &str, header: &str) {
     assert!(checked > 0, "{header}");
 }
 
-/// Submit a simulation job of `m` and wait for its end: its id and final record.
-fn simulation_job(s: &Server, m: &Value, runs: u64, trace_points: u64) -> (String, Value) {
+/// Submit a Monte Carlo job of `m` and wait for its end: its id and final record.
+fn monte_carlo_job(s: &Server, m: &Value, runs: u64, trace_points: u64) -> (String, Value) {
     let job = s.post(
         "/v1/jobs",
-        &json!({"kind": "simulation", "model": m, "runs": runs, "trace_points": trace_points}),
+        &json!({"kind": "monte_carlo", "model": m, "runs": runs, "trace_points": trace_points}),
     );
     assert_eq!(job.status, 202, "{}", job.text);
     let id = job.json()["id"].as_str().unwrap().to_string();
@@ -715,14 +748,14 @@ fn simulation_job(s: &Server, m: &Value, runs: u64, trace_points: u64) -> (Strin
 /// the result refused it. (A model whose simulated process diverges stops with an error
 /// instead: its sample SKOs would be rounding.)
 #[test]
-fn an_overflowing_simulation_validates_against_the_spec() {
+fn an_overflowing_monte_carlo_validates_against_the_spec() {
     let spec = spec();
     let v = Validator::new(&spec);
     let dir = tempfile::tempdir().unwrap();
     let s = Server::start(dir.path(), &[]);
     let mut m = preset("cv-tracker");
     m["time"] = json!({"t0": 0, "t_end": 1000, "steps": 10000});
-    let (id, done) = simulation_job(&s, &m, 10, 20);
+    let (id, done) = monte_carlo_job(&s, &m, 10, 20);
     assert_eq!(done["status"], "succeeded", "{done}");
     let result = s.get(&format!("/v1/jobs/{id}/result")).json();
     let fin = &result["final"];
@@ -732,14 +765,14 @@ fn an_overflowing_simulation_validates_against_the_spec() {
     );
     assert!(!result["warnings"].as_array().unwrap().is_empty());
     v.expect(
-        &spec["components"]["schemas"]["SimulationResult"],
+        &spec["components"]["schemas"]["MonteCarloResult"],
         &result,
-        "the overflowing simulation's result",
+        "the overflowing Monte Carlo's result",
     );
     // The diverging model: a failed job whose error names the state and the step.
     m["system"]["a"] = json!([[0, 1], [0, 10]]);
     m["time"] = json!({"t0": 0, "t_end": 100, "steps": 1000});
-    let (_, done) = simulation_job(&s, &m, 10, 20);
+    let (_, done) = monte_carlo_job(&s, &m, 10, 20);
     assert_eq!(done["status"], "failed", "{done}");
     let text = done["error"].to_string();
     assert!(
@@ -751,26 +784,26 @@ fn an_overflowing_simulation_validates_against_the_spec() {
 /// A Monte Carlo run with no measurement at any step: NIS has no degrees of freedom,
 /// so its band is [null, null] — the spec said numbers.
 #[test]
-fn a_simulation_without_measurements_validates_against_the_spec() {
+fn a_monte_carlo_without_measurements_validates_against_the_spec() {
     let spec = spec();
     let v = Validator::new(&spec);
     let dir = tempfile::tempdir().unwrap();
     let s = Server::start(dir.path(), &[]);
     let mut m = preset("cv-tracker");
     m["measurement"]["schedule"] = json!([{"when": "-1"}]);
-    let (id, done) = simulation_job(&s, &m, 5, 20);
+    let (id, done) = monte_carlo_job(&s, &m, 5, 20);
     assert_eq!(done["status"], "succeeded", "{done}");
     let result = s.get(&format!("/v1/jobs/{id}/result")).json();
     assert_eq!(result["consistency"]["nis"]["band"], json!([null, null]));
     v.expect(
-        &spec["components"]["schemas"]["SimulationResult"],
+        &spec["components"]["schemas"]["MonteCarloResult"],
         &result,
-        "a simulation without measurements",
+        "a Monte Carlo without measurements",
     );
 }
 
 /// max |dy/dt| and max |C y| of a model whose mean stays finite can overflow f64;
-/// they are null then, in the analysis and in the simulation. The spec said `Numbers`.
+/// they are null then, in the analysis and in the Monte Carlo. The spec said `Numbers`.
 #[test]
 fn an_overflowing_maximum_validates_against_the_spec() {
     let spec = spec();
@@ -789,7 +822,7 @@ fn an_overflowing_maximum_validates_against_the_spec() {
     v.expect(&schemas["AnalysisResult"], &result, "the analysis result");
     // Simulated, the state of size 1e308 leaves no digits for its filter errors: the
     // job fails, naming it.
-    let (_, done) = simulation_job(&s, &m, 2, 10);
+    let (_, done) = monte_carlo_job(&s, &m, 2, 10);
     assert_eq!(done["status"], "failed", "{done}");
     assert!(
         done["error"]

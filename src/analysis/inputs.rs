@@ -1,4 +1,4 @@
-//! The model's inputs at a step, for the analysis and the simulation's plan: the time
+//! The model's inputs at a step, for the analysis and the Monte Carlo's plan: the time
 //! functions evaluated on the grid (several steps at a time) and what is derived from
 //! them — METHOD (1.11)–(1.15), (3.16), (3.17).
 

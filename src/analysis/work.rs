@@ -1,11 +1,11 @@
 //! The analysis's work estimate: a cost model of the core's steps, in units of about a
 //! nanosecond of one core. The server's limits (`--sync-work-limit`, `--max-work`),
 //! the command line's `--max-work` and the web page (before a run in the browser)
-//! compare it ([`analysis_work`], [`simulation_work`], [`synthesis_work`]), and the core spaces its progress
+//! compare it ([`analysis_work`], [`monte_carlo_work`], [`synthesis_work`]), and the core spaces its progress
 //! reports (the callers' chance to cancel) by it
 //! ([`crate::analysis::steps_between_reports`]),
-//! so it must follow what the engine does per step (analysis.rs, inputs.rs,
-//! simulation.rs), not only N.
+//! so it must follow what the engine does per step (engine.rs, inputs.rs, and the
+//! Monte Carlo's plan.rs and runs.rs), not only N.
 //!
 //! An analysis step costs (units ≈ ns; N states, n measurements, L = columns of b,
 //! M = columns of Γ or g):
@@ -39,9 +39,10 @@
 //! chain of 100 `^1.01` (985 characters) was estimated at 997 units a step against
 //! 6.5 µs before calls were counted.
 //!
-//! A simulation adds the plan's and the runs' steps ([`simulation_plan_step`],
-//! [`simulation_run_step`]); estimated 1.07–2.4 times the CPU time of the presets and of
-//! N = 10, L = M = 200 with 2 to 1000 runs.
+//! A Monte Carlo adds the plan's and the runs' steps
+//! ([`crate::monte_carlo::work::plan_step`], [`crate::monte_carlo::work::run_step`]);
+//! estimated 1.07–2.4 times the CPU time of the presets and of N = 10, L = M = 200
+//! with 2 to 1000 runs.
 
 use crate::error::Error;
 use crate::expr::Value;

@@ -1,7 +1,7 @@
 //! The Monte Carlo as a kind of run ([`crate::kind`]): `{model, set?, runs, seed?,
 //! truth?, model_error?, trace_points?}` → the Monte Carlo result (METHOD §1.8).
 
-use super::{DEFAULT_SEED, ModelError, SimulationRequest, SimulationResult, Truth};
+use super::{DEFAULT_SEED, ModelError, MonteCarloRequest, MonteCarloResult, Truth};
 use crate::analysis::result::Timing;
 use crate::error::{Error, FieldError};
 use crate::exec::{Executor, Memo};
@@ -13,20 +13,21 @@ use crate::request;
 use crate::work::Work;
 use serde_json::{Map, Value};
 
-/// The Monte Carlo kind (its name in requests: `simulation`).
+/// The Monte Carlo kind (its name in requests: `monte_carlo`; `simulation`, its former
+/// name, is still read as it: stored jobs and older scripts).
 pub struct MonteCarlo;
 
 /// A Monte Carlo request, compiled.
 pub struct Request {
     pub model: Model,
     pub compiled: CompiledModel,
-    pub monte_carlo: SimulationRequest,
+    pub monte_carlo: MonteCarloRequest,
 }
 
 /// A Monte Carlo's outcome: the result (its JSON is the result's alone) and the
 /// threads it ran on, which the text report names.
 pub struct Outcome {
-    pub result: SimulationResult,
+    pub result: MonteCarloResult,
     pub threads: usize,
 }
 
@@ -37,8 +38,8 @@ impl serde::Serialize for Outcome {
 }
 
 impl Kind for MonteCarlo {
-    const NAME: &'static str = "simulation";
-    const ALIASES: &'static [&'static str] = &[];
+    const NAME: &'static str = "monte_carlo";
+    const ALIASES: &'static [&'static str] = &["simulation"];
     const MEMBERS: &'static [&'static str] = &[
         "model",
         "model_id",
@@ -72,7 +73,7 @@ impl Kind for MonteCarlo {
     }
 
     fn work(r: &Request) -> Work {
-        super::work::simulation_work(&r.compiled, Some(&r.model), &r.monte_carlo)
+        super::work::monte_carlo_work(&r.compiled, Some(&r.model), &r.monte_carlo)
     }
 
     fn run<E: Executor>(
@@ -105,8 +106,8 @@ impl Kind for MonteCarlo {
 }
 
 /// The Monte Carlo's own members, each checked at its own path.
-fn read_members(obj: &Map<String, Value>, errors: &mut Vec<FieldError>) -> SimulationRequest {
-    let mut sim = SimulationRequest::new(0, DEFAULT_SEED);
+fn read_members(obj: &Map<String, Value>, errors: &mut Vec<FieldError>) -> MonteCarloRequest {
+    let mut sim = MonteCarloRequest::new(0, DEFAULT_SEED);
     match request::whole(
         obj,
         "runs",

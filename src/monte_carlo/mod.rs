@@ -53,7 +53,7 @@ pub use crate::exec::{Executor, Sequential};
 use crate::exec::{Forgetful, Memo};
 use crate::resume::{F, bits, put};
 pub use state::STATE_KEY;
-use state::{SimulationStamp, SimulationState};
+use state::{MonteCarloStamp, MonteCarloState};
 
 mod bands;
 pub mod kind;
@@ -70,11 +70,11 @@ pub mod work;
 pub use bands::{BAND_PROBABILITY, chi2_band};
 use plan::{Layout, Plan, SumLayout};
 pub use request::{
-    DEFAULT_SEED, MAX_RUNS, MAX_WORK, ModelError, SimulationRequest, Truth, check_request, work,
+    DEFAULT_SEED, MAX_RUNS, MAX_WORK, ModelError, MonteCarloRequest, Truth, check_request, work,
 };
 pub use result::{
-    Consistency, ConsistencyStat, SimulationFinal, SimulationResult, SimulationStateTrace,
-    SimulationTraces, StateVerdict, Verdict,
+    Consistency, ConsistencyStat, MonteCarloFinal, MonteCarloResult, MonteCarloStateTrace,
+    MonteCarloTraces, StateVerdict, Verdict,
 };
 use rows::{Rows, T_APRIORI, T_CHI, T_FILT, T_MEAN, T_MEAS, T_OPEN, T_POT, T_SERIES};
 use runs::{Block, Shared, sqrt_psd};
@@ -83,10 +83,10 @@ use runs::{Block, Shared, sqrt_psd};
 pub fn simulate<E: Executor>(
     model: &Model,
     set: &Overrides,
-    req: &SimulationRequest,
+    req: &MonteCarloRequest,
     exec: &E,
     progress: &mut dyn Progress,
-) -> Result<SimulationResult, Error> {
+) -> Result<MonteCarloResult, Error> {
     simulate_resumable(model, set, req, exec, progress, &Forgetful)
 }
 
@@ -97,11 +97,11 @@ pub fn simulate<E: Executor>(
 pub fn simulate_resumable<E: Executor>(
     model: &Model,
     set: &Overrides,
-    req: &SimulationRequest,
+    req: &MonteCarloRequest,
     exec: &E,
     progress: &mut dyn Progress,
     memo: &dyn Memo,
-) -> Result<SimulationResult, Error> {
+) -> Result<MonteCarloResult, Error> {
     let compiled = crate::model::compile::compile(model, set)?;
     simulate_compiled(&compiled, req, exec, progress, memo)
 }
@@ -110,11 +110,11 @@ pub fn simulate_resumable<E: Executor>(
 /// progress), then the runs.
 pub fn simulate_compiled<E: Executor>(
     compiled: &CompiledModel,
-    req: &SimulationRequest,
+    req: &MonteCarloRequest,
     exec: &E,
     progress: &mut dyn Progress,
     memo: &dyn Memo,
-) -> Result<SimulationResult, Error> {
+) -> Result<MonteCarloResult, Error> {
     check_request(req, compiled)?;
     // The analysis takes a small share of the work; report it as the first 5 %.
     let mut scaled = |f: f64| progress.report(0.05 * f);
@@ -127,10 +127,10 @@ pub fn simulate_compiled<E: Executor>(
 pub fn run<E: Executor>(
     model: &CompiledModel,
     analysis: &AnalysisResult,
-    req: &SimulationRequest,
+    req: &MonteCarloRequest,
     exec: &E,
     progress: &mut dyn Progress,
-) -> Result<SimulationResult, Error> {
+) -> Result<MonteCarloResult, Error> {
     run_resumable(model, analysis, req, exec, progress, &Forgetful)
 }
 
@@ -139,11 +139,11 @@ pub fn run<E: Executor>(
 pub fn run_resumable<E: Executor>(
     model: &CompiledModel,
     analysis: &AnalysisResult,
-    req: &SimulationRequest,
+    req: &MonteCarloRequest,
     exec: &E,
     progress: &mut dyn Progress,
     memo: &dyn Memo,
-) -> Result<SimulationResult, Error> {
+) -> Result<MonteCarloResult, Error> {
     check_request(req, model)?;
     let chunk = chunk_steps(model, req);
     match model.n_states() {
@@ -164,24 +164,24 @@ pub fn run_resumable<E: Executor>(
 }
 
 /// Steps per chunk: as many as make [`CHUNK_WORK`] by the work estimate of a step
-/// (the plan's, [`crate::monte_carlo::work::simulation_plan_step`], and every run's,
-/// [`crate::monte_carlo::work::simulation_run_step`]), 1 to [`CHUNK_STEPS`]. A chunk's length never
+/// (the plan's, [`crate::monte_carlo::work::plan_step`], and every run's,
+/// [`crate::monte_carlo::work::run_step`]), 1 to [`CHUNK_STEPS`]. A chunk's length never
 /// changes a result (each run's stream and sums go on across chunks).
-pub fn chunk_steps(model: &CompiledModel, req: &SimulationRequest) -> usize {
-    let step = crate::monte_carlo::work::simulation_plan_step(model, None)
-        + req.runs as f64 * crate::monte_carlo::work::simulation_run_step(model, req.model_error);
+pub fn chunk_steps(model: &CompiledModel, req: &MonteCarloRequest) -> usize {
+    let step = crate::monte_carlo::work::plan_step(model, None)
+        + req.runs as f64 * crate::monte_carlo::work::run_step(model, req.model_error);
     crate::work::fitting(CHUNK_WORK, step, CHUNK_STEPS as u64) as usize
 }
 
 fn run_n<const N: usize, E: Executor>(
     m: &CompiledModel,
     analysis: &AnalysisResult,
-    req: &SimulationRequest,
+    req: &MonteCarloRequest,
     exec: &E,
     progress: &mut dyn Progress,
     memo: &dyn Memo,
     chunk_len: usize,
-) -> Result<SimulationResult, Error> {
+) -> Result<MonteCarloResult, Error> {
     let steps = analysis.steps;
     let runs = req.runs as usize;
     let mut plan = Plan::new(m, steps);
@@ -261,7 +261,7 @@ fn run_n<const N: usize, E: Executor>(
     let mut ratio_in = vec![0u64; n];
     let mut bias_sum = vec![0.0; n];
     let mut last_nis_dof = 0.0;
-    let mut final_ = SimulationFinal {
+    let mut final_ = MonteCarloFinal {
         a_priori_sko: vec![0.0; n],
         measured_sko: vec![None; n],
         filtered_sko: vec![0.0; n],
@@ -276,13 +276,13 @@ fn run_n<const N: usize, E: Executor>(
     let mut k0 = 1u64;
 
     // An earlier run's state (a restart): its values, and on from the chunk after it.
-    let stamp = SimulationStamp::new(steps, (n, nm), req.runs, req.seed, chunk_len);
+    let stamp = MonteCarloStamp::new(steps, (n, nm), req.runs, req.seed, chunk_len);
     let keeps = keeps_state(req.runs, n);
     let block_runs: Vec<usize> = blocks.iter().map(|b| b.runs).collect();
     let series = n * T_SERIES + 2;
     let earlier = memo
         .recall(STATE_KEY)
-        .and_then(|text| SimulationState::from_text(&text, stamp, &block_runs, series));
+        .and_then(|text| MonteCarloState::from_text(&text, stamp, &block_runs, series));
     let mut resumed_from = None;
     if let Some(s) = earlier {
         put(&mut plan.y, &s.y);
@@ -435,7 +435,7 @@ fn run_n<const N: usize, E: Executor>(
             let avgs = |a: &[Avg]| -> Vec<(F, u64, u64)> {
                 a.iter().map(|a| (F(a.sum), a.count, a.excluded)).collect()
             };
-            let state = SimulationState {
+            let state = MonteCarloState {
                 stamp,
                 k: k0 - 1,
                 y: bits(&plan.y),
@@ -532,7 +532,7 @@ fn run_n<const N: usize, E: Executor>(
     for i in 0..n {
         let base = i * T_SERIES;
         let meas = take(base + T_MEAS);
-        states.push(SimulationStateTrace {
+        states.push(MonteCarloStateTrace {
             state: m.states[i].clone(),
             a_priori_sko: sqrt_col(take(base + T_APRIORI)),
             open_loop_sko: sqrt_col(take(base + T_OPEN)),
@@ -560,7 +560,7 @@ fn run_n<const N: usize, E: Executor>(
     if nis_count == 0 {
         warnings.push("no measurement is available at any step, so the NIS check is undefined (its band and average are null)".into());
     }
-    Ok(SimulationResult {
+    Ok(MonteCarloResult {
         request: req.clone(),
         steps,
         dt: plan.dt,
@@ -578,7 +578,7 @@ fn run_n<const N: usize, E: Executor>(
             per_state,
         },
         final_,
-        traces: SimulationTraces {
+        traces: MonteCarloTraces {
             bucket_steps: bucket,
             t,
             states,
@@ -643,7 +643,7 @@ mod tests {
         let model = crate::model::model_from_value(json).unwrap();
         let compiled = crate::model::compile::compile(&model, &Overrides::new()).unwrap();
         let analysis = crate::analysis::run(&compiled, &mut crate::progress::NoProgress).unwrap();
-        let req = SimulationRequest::new(40, 7);
+        let req = MonteCarloRequest::new(40, 7);
         let json = |chunk: usize| {
             let r = run_n::<0, Sequential>(
                 &compiled,

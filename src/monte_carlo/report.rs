@@ -1,7 +1,7 @@
-//! The Monte Carlo's renderings: the plain-text report (`kea simulate`'s) and the
+//! The Monte Carlo's renderings: the plain-text report (`kea monte-carlo`'s) and the
 //! traces as CSV, shared by the command line, the server and wasm.
 
-use super::{SimulationResult, Verdict};
+use super::{MonteCarloResult, Verdict};
 use crate::text::{cell, short};
 use std::fmt::Write;
 
@@ -16,7 +16,7 @@ fn verdict(v: Verdict) -> &'static str {
 
 /// The plain-text report: final SKOs, verdicts, and the three criteria sets; numbers as
 /// in the analysis table ([`number`]), `—` where undefined.
-pub fn text(r: &SimulationResult, threads: usize) -> String {
+pub fn text(r: &MonteCarloResult, threads: usize) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -110,10 +110,10 @@ pub fn text(r: &SimulationResult, threads: usize) -> String {
     s
 }
 
-/// Traces of a simulation as CSV: t, then per state the sample and potential SKOs; a
+/// Traces of a Monte Carlo as CSV: t, then per state the sample and potential SKOs; a
 /// value that is not a number (overflowed, or no measurement) is an empty cell, as in
 /// the analysis's CSV (`null` in the JSON).
-pub fn traces_csv(r: &SimulationResult) -> String {
+pub fn traces_csv(r: &MonteCarloResult) -> String {
     const SERIES: [&str; 7] = [
         "a_priori_sko",
         "open_loop_sko",

@@ -34,14 +34,14 @@ pub enum ModelError {
     Constant,
 }
 
-/// The seed of a request that gives none: the same in the API, `kea simulate` and the
+/// The seed of a request that gives none: the same in the API, `kea monte-carlo` and the
 /// browser form, so one request gives the same numbers everywhere.
 pub const DEFAULT_SEED: u64 = 1;
 
 /// A Monte Carlo request (without the model).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct SimulationRequest {
+pub struct MonteCarloRequest {
     /// Number of runs R.
     #[serde(deserialize_with = "crate::json::whole_in::<_, _, 2, MAX_RUNS>")]
     pub runs: u64,
@@ -69,9 +69,9 @@ fn default_model_error() -> ModelError {
     ModelError::White
 }
 
-impl SimulationRequest {
+impl MonteCarloRequest {
     pub fn new(runs: u64, seed: u64) -> Self {
-        SimulationRequest {
+        MonteCarloRequest {
             runs,
             seed,
             truth: Truth::Process,
@@ -82,7 +82,7 @@ impl SimulationRequest {
 }
 
 /// Validate a request against a compiled model (paths: `runs`, `trace_points`, …).
-pub fn check_request(req: &SimulationRequest, model: &CompiledModel) -> Result<(), Error> {
+pub fn check_request(req: &MonteCarloRequest, model: &CompiledModel) -> Result<(), Error> {
     let mut errs = Vec::new();
     if req.runs < 2 {
         errs.push(FieldError::new(
@@ -126,7 +126,7 @@ pub fn check_request(req: &SimulationRequest, model: &CompiledModel) -> Result<(
     }
 }
 
-/// runs × steps × N²: the simulation's cost in multiply-adds, up to a constant.
+/// runs × steps × N²: the Monte Carlo's cost in multiply-adds, up to a constant.
 pub fn work(runs: u64, steps: u64, n: usize) -> f64 {
     runs as f64 * steps as f64 * (n * n) as f64
 }

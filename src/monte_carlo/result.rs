@@ -2,14 +2,14 @@
 //! consistency (average NEES and NIS with their χ² bands, a verdict per state), the
 //! sample and potential SKOs at the last step, and the traces.
 
-use super::request::SimulationRequest;
+use super::request::MonteCarloRequest;
 use crate::analysis::result::{CriteriaSets, Timing};
 use serde::{Deserialize, Serialize};
 
 /// The Monte Carlo result (JSON via serde).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct SimulationResult {
-    pub request: SimulationRequest,
+pub struct MonteCarloResult {
+    pub request: MonteCarloRequest,
     pub steps: u64,
     pub dt: f64,
     pub t0: f64,
@@ -24,8 +24,8 @@ pub struct SimulationResult {
     pub consistency: Consistency,
     /// Sample and potential SKOs at the last step D.
     #[serde(rename = "final")]
-    pub final_: SimulationFinal,
-    pub traces: SimulationTraces,
+    pub final_: MonteCarloFinal,
+    pub traces: MonteCarloTraces,
     pub timing: Timing,
     pub warnings: Vec<String>,
 }
@@ -102,7 +102,7 @@ impl Verdict {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct SimulationFinal {
+pub struct MonteCarloFinal {
     /// Sample SKOs at step D: a-priori (Y − y), measured (paired; null if the
     /// measurement is not available at D), filtered (X − truth).
     pub a_priori_sko: Vec<f64>,
@@ -116,17 +116,17 @@ pub struct SimulationFinal {
 /// Traces: each row is the average over a bucket of `bucket_steps` steps (variances
 /// are averaged, then square-rooted), at the bucket's last time.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct SimulationTraces {
+pub struct MonteCarloTraces {
     pub bucket_steps: u64,
     pub t: Vec<f64>,
-    pub states: Vec<SimulationStateTrace>,
+    pub states: Vec<MonteCarloStateTrace>,
     /// Average NEES per row (null where undefined) and its per-step band.
     pub nees: Vec<Option<f64>>,
     pub nis: Vec<Option<f64>>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct SimulationStateTrace {
+pub struct MonteCarloStateTrace {
     pub state: String,
     /// Sample SKO of the a-priori error Y − y.
     pub a_priori_sko: Vec<f64>,

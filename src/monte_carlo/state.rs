@@ -1,19 +1,19 @@
-//! The Monte Carlo's state between two chunks of steps ([`SimulationState`]), kept so
+//! The Monte Carlo's state between two chunks of steps ([`MonteCarloState`]), kept so
 //! that an interrupted run goes on from it ([`crate::resume`]).
 
 use crate::resume::F;
 use serde::{Deserialize, Serialize};
 
 /// The [`crate::exec::Memo`] key of a Monte Carlo's state.
-pub const STATE_KEY: &str = "simulation-state";
+pub const STATE_KEY: &str = "monte-carlo-state";
 
-/// The format of [`SimulationState`]; a state of another is ignored.
-const SIMULATION_FORMAT: u32 = 1;
+/// The format of [`MonteCarloState`]; a state of another is ignored.
+const FORMAT: u32 = 1;
 
 /// What makes a Monte Carlo's state belong to a run: the model's size, the steps, the
 /// runs and their seed, and the chunk length (a state is kept between chunks).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub(crate) struct SimulationStamp {
+pub(crate) struct MonteCarloStamp {
     pub format: u32,
     pub steps: u64,
     pub n: usize,
@@ -23,7 +23,7 @@ pub(crate) struct SimulationStamp {
     pub chunk: usize,
 }
 
-impl SimulationStamp {
+impl MonteCarloStamp {
     pub(crate) fn new(
         steps: u64,
         (n, nm): (usize, usize),
@@ -31,8 +31,8 @@ impl SimulationStamp {
         seed: u64,
         chunk: usize,
     ) -> Self {
-        SimulationStamp {
-            format: SIMULATION_FORMAT,
+        MonteCarloStamp {
+            format: FORMAT,
             steps,
             n,
             nm,
@@ -54,7 +54,7 @@ pub(crate) struct BlockState {
     pub word_pos: Vec<u64>,
 }
 
-/// A trace row buffer's state (`simulation::Rows`).
+/// A trace row buffer's state (`rows::Rows`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub(crate) struct RowsState {
     pub sum: Vec<F>,
@@ -65,10 +65,10 @@ pub(crate) struct RowsState {
 }
 
 /// A Monte Carlo's state after step `k`, the end of a chunk (see
-/// `simulation::run_n` for what each member is).
+/// `super::run_n` for what each member is).
 #[derive(Clone, Debug, Serialize, Deserialize)]
-pub(crate) struct SimulationState {
-    pub stamp: SimulationStamp,
+pub(crate) struct MonteCarloState {
+    pub stamp: MonteCarloStamp,
     /// The steps done.
     pub k: u64,
     /// The plan: the mean, R, P^Y and the bound χ.
@@ -89,7 +89,7 @@ pub(crate) struct SimulationState {
     pub bias_sum: Vec<F>,
 }
 
-impl SimulationState {
+impl MonteCarloState {
     pub(crate) fn to_text(&self) -> String {
         serde_json::to_string(self).expect("a state of numbers and bits serialises")
     }
@@ -99,11 +99,11 @@ impl SimulationState {
     /// otherwise (the run starts over).
     pub(crate) fn from_text(
         text: &str,
-        stamp: SimulationStamp,
+        stamp: MonteCarloStamp,
         blocks: &[usize],
         series: usize,
-    ) -> Option<SimulationState> {
-        let s: SimulationState = serde_json::from_str(text).ok()?;
+    ) -> Option<MonteCarloState> {
+        let s: MonteCarloState = serde_json::from_str(text).ok()?;
         let n = stamp.n;
         let block_fits = |b: &BlockState, runs: usize| {
             b.y.len() == runs * n && b.x.len() == runs * n && b.word_pos.len() == runs

@@ -128,7 +128,7 @@ impl Ctx<'_> {
         // of a covariance target's criteria.
         let point = self.point(params, &r);
         let mut warnings = r.warnings;
-        if self.target.set == CriteriaSetName::Covariance {
+        if self.target.criteria == CriteriaSetName::Covariance {
             warnings.retain(|w| !crate::analysis::bound_set_only(w));
         }
         let outcome = Outcome {
@@ -146,7 +146,7 @@ impl Ctx<'_> {
     }
 
     fn point(&self, params: &[(String, f64)], r: &AnalysisResult) -> Point {
-        let set = match self.target.set {
+        let set = match self.target.criteria {
             CriteriaSetName::Bound => &r.criteria.bound,
             CriteriaSetName::Covariance => &r.criteria.covariance,
         };

@@ -27,14 +27,17 @@ pub struct SynthesisRequest {
     pub mode: Mode,
 }
 
-/// The desired effect: `criterion` of `set`, weighted (3.25) or for one `state`
-/// (3.24), at least `threshold`.
+/// The desired effect: `criterion` of the `criteria` set, weighted (3.25) or for one
+/// `state` (3.24), at least `threshold`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Target {
     pub criterion: Criterion,
-    #[serde(default)]
-    pub set: CriteriaSetName,
+    /// Which criteria set the criterion is of (`bound` when absent). Also read as
+    /// `set`, its former name (a request's `set` is its parameter overrides); the two
+    /// together are refused, as a member given twice.
+    #[serde(default, alias = "set")]
+    pub criteria: CriteriaSetName,
     /// A state name; absent: the weighted criterion.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub state: Option<String>,
@@ -600,7 +603,7 @@ pub(super) fn crit_name(t: &Target) -> String {
         Criterion::Zx => "ZX",
         Criterion::Yx => "YX",
     };
-    let set = match t.set {
+    let set = match t.criteria {
         CriteriaSetName::Bound => "bound",
         CriteriaSetName::Covariance => "covariance",
     };

@@ -8,6 +8,10 @@ use std::collections::BTreeMap;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SynthesisResult {
+    /// The target as run; its criteria set is written as `criteria` and again as `set`,
+    /// the member's former name, for readers of earlier results
+    /// ([`target_with_former_name`]).
+    #[serde(with = "target_with_former_name")]
     pub target: Target,
     pub status: Status,
     /// One or two sentences: the answer, or why there is none and what to do.
@@ -130,4 +134,32 @@ pub struct GridCell {
 
 fn is_zero(n: &u64) -> bool {
     *n == 0
+}
+
+/// [`SynthesisResult::target`]'s JSON: the target, and `set` beside its `criteria`, the
+/// same value under the member's former name. Read back, `criteria` is taken, or a lone
+/// `set` (a result of an earlier version).
+mod target_with_former_name {
+    use super::super::request::{CriteriaSetName, Target};
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    #[derive(Serialize)]
+    struct Written<'a> {
+        #[serde(flatten)]
+        target: &'a Target,
+        set: CriteriaSetName,
+    }
+
+    pub fn serialize<S: Serializer>(target: &Target, s: S) -> Result<S::Ok, S::Error> {
+        let set = target.criteria;
+        Written { target, set }.serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Target, D::Error> {
+        let mut members = serde_json::Map::deserialize(d)?;
+        if members.contains_key("criteria") {
+            members.remove("set");
+        }
+        Target::deserialize(serde_json::Value::Object(members)).map_err(serde::de::Error::custom)
+    }
 }

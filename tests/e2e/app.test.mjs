@@ -101,22 +101,22 @@ test("a job that ended while the page was away shows its result; one the server 
 test('a reload during a server Monte Carlo follows its job again, to its cancel', async () => {
   await choosePreset(page, 'seed-example', 0);
   await page.fill('input[data-path="time.steps"]', '100000');
-  await page.click('#tab-simulation');
+  await page.click('#tab-monte-carlo');
   await page.fill('#mc-runs', '20000');
-  await page.waitForFunction(() => /^#model=.*&tab=simulation$/.test(location.hash)); // what the reload opens
+  await page.waitForFunction(() => /^#model=.*&tab=monte_carlo$/.test(location.hash)); // what the reload opens
   await page.check('input[name=mc-where][value=server]');
   await page.click('#mc-run');
   await page.waitForFunction(() => document.getElementById('mc-progress').value > 0, null, { timeout: 30000 });
-  const { id } = await keptJob('kea-job-simulation');
+  const { id } = await keptJob('kea-job-monte_carlo');
   await page.reload();
   await ready();
-  assert.equal(await page.isVisible('#simulation-panel'), true);
+  assert.equal(await page.isVisible('#monte-carlo-panel'), true);
   assert.equal(await page.isDisabled('#mc-cancel'), false);
   await page.waitForFunction(() => document.getElementById('mc-progress').value > 0, null, { timeout: 10000 });
   await page.keyboard.press('Escape');
   await page.waitForFunction(() => document.getElementById('mc-status').textContent === 'Cancelled.', null, { timeout: 10000 });
   assert.equal((await job(id)).status, 'cancelled');
-  assert.equal(await keptJob('kea-job-simulation'), null);
+  assert.equal(await keptJob('kea-job-monte_carlo'), null);
   await page.click('#tab-analysis');
 });
 
@@ -221,7 +221,7 @@ test("a synthesis on the bound set shows the warnings of its answer's analysis",
   await choosePreset(page, 'helicopter-range', 0);
   await page.click('#tab-synthesis');
   await page.selectOption('#syn-criterion', 'yx');
-  await page.selectOption('#syn-set', 'bound');
+  await page.selectOption('#syn-criteria', 'bound');
   await page.fill('#syn-threshold', '0.6');
   await page.selectOption('#syn-mode', 'seed_search');
   await page.selectOption('#syn-seed-param-0', 'sd');
@@ -235,7 +235,7 @@ test("a synthesis on the bound set shows the warnings of its answer's analysis",
   assert.match(await page.textContent('#syn-warnings'), /answer \(sd = 5\) warns — these bound figures may not describe the filter:.*bound \(modulus procedure\) grew far beyond/s);
   // The covariance set: the warnings about the bound set alone say nothing of its
   // criteria; the core leaves them out (docs/synthesis.md), and none are shown.
-  await page.selectOption('#syn-set', 'covariance');
+  await page.selectOption('#syn-criteria', 'covariance');
   await page.fill('#syn-threshold', '0.01');
   await page.click('#syn-run');
   await page.waitForFunction(() => document.querySelector('#syn-summary')?.textContent.includes('covariance') && !document.getElementById('syn-run').disabled, null, { timeout: 60000 });
@@ -266,7 +266,7 @@ test('times taken read alike: one format, 3 significant digits, in the browser a
     assert.ok(tookRule(computed) && tookRule(done), `${where}: computed in ${computed}, done in ${done}`);
   }
   await page.fill('input[data-path="time.steps"]', '2000');
-  await page.click('#tab-simulation');
+  await page.click('#tab-monte-carlo');
   await page.fill('#mc-runs', '50');
   for (const where of ['browser', 'server']) {
     await page.evaluate(() => delete document.getElementById('mc-result').dataset.where);
@@ -292,7 +292,7 @@ function chiPixels() {
 
 test('a Monte Carlo χ all beyond the top of the chart is not drawn; its legend says so', async () => {
   await choosePreset(page, 'helicopter-range', 0);
-  await page.click('#tab-simulation');
+  await page.click('#tab-monte-carlo');
   await page.fill('#mc-runs', '50');
   await page.check('input[name=mc-where][value=browser]');
   await page.evaluate(() => delete document.getElementById('mc-result').dataset.where);

@@ -36,7 +36,7 @@ test("a preset chosen in the picker fills the Synthesis tab with its example, an
   await page.click('#tab-synthesis');
   const f = await fields();
   assert.deepEqual(
-    [f.criterion, f.set, f.state, f.threshold, f.mode, f['bisect-param'], f['bisect-low'], f['bisect-high'], f['bisect-rel-tol'], f['bisect-probes']],
+    [f.criterion, f.criteria, f.state, f.threshold, f.mode, f['bisect-param'], f['bisect-low'], f['bisect-high'], f['bisect-rel-tol'], f['bisect-probes']],
     ['yx', 'covariance', 'position', '300', 'bisect', 'r', '0.05', '5', '0.001', '9'],
   );
   assert.ok(await page.isVisible('#syn-bisect-low'), "the example's mode is shown");
@@ -68,7 +68,7 @@ test('a #preset= link opens on its example (a grid); edits survive a reload, the
     await ready();
     const f = await fields(other);
     assert.deepEqual(
-      [f.criterion, f.set, f.state, f.threshold, f.mode],
+      [f.criterion, f.criteria, f.state, f.threshold, f.mode],
       ['yx', 'covariance', '', '40', 'grid'],
     );
     assert.deepEqual(
@@ -97,7 +97,7 @@ test('a #preset= link opens on its example (a grid); edits survive a reload, the
     await other.selectOption('#preset', 'cv-tracker');
     await other.waitForFunction(() => location.hash.startsWith('#preset=cv-tracker'));
     const g = await fields(other);
-    assert.deepEqual([g.set, g.state, g.threshold, g.mode, g['bisect-param']], ['covariance', 'position', '300', 'bisect', 'r']);
+    assert.deepEqual([g.criteria, g.state, g.threshold, g.mode, g['bisect-param']], ['covariance', 'position', '300', 'bisect', 'r']);
     assert.match(await other.textContent('#syn-example'), /Example for preset cv-tracker/);
   } finally {
     await other.context().close();
@@ -120,7 +120,7 @@ test('a model of your own (imported) keeps the generic choices: the params the e
   await choosePreset('seed-example');
   const g = await fields();
   assert.deepEqual(
-    [g.set, g.threshold, g.mode, g['grid-param-0'], g['grid-values-0'], g['grid-cheaper-0'], g['grid-param-1'], g['grid-values-1'], g['grid-cheaper-1']],
+    [g.criteria, g.threshold, g.mode, g['grid-param-0'], g['grid-values-0'], g['grid-cheaper-0'], g['grid-param-1'], g['grid-values-1'], g['grid-cheaper-1']],
     ['bound', '14', 'grid', 'f', '2, 4, 8', 'lower', 'c', '0.5, 0.25, 0.125', 'higher'],
   );
 });

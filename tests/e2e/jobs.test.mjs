@@ -71,10 +71,12 @@ async function openJob(id, { result, run, download }) {
 test('jobs of every kind are listed, opened with their model, request and result, and deleted', async () => {
   const model = tracker();
   const analysis = await submit({ kind: 'analysis', model, set: { q: 2 } });
+  // (`simulation`: the Monte Carlo kind's former name, still read as it)
   const simulation = await submit({ kind: 'simulation', model, runs: 20, seed: 7, truth: 'mean', model_error: 'constant', trace_points: 10 });
   const synthesis = await submit({
     kind: 'synthesis',
     model,
+    // (`set`: the criteria set's former name, still read as `criteria`)
     target: { criterion: 'yx', set: 'covariance', threshold: 1.5 },
     mode: { grid: { params: [{ name: 'q', values: [0.5, 2] }], cost_order: [{ name: 'q', cheaper: 'higher' }] } },
   });
@@ -107,7 +109,7 @@ test('jobs of every kind are listed, opened with their model, request and result
 
   // The Monte Carlo: its settings in the fields, its result.
   const mc = await openJob(simulation, { result: 'mc-result', run: 'mc-run', download: 'mc-download' });
-  assert.equal(await page.getAttribute('#tab-simulation', 'aria-selected'), 'true');
+  assert.equal(await page.getAttribute('#tab-monte-carlo', 'aria-selected'), 'true');
   assert.deepEqual(mc, expected[simulation]);
   assert.deepEqual(
     await page.evaluate(() => ['mc-runs', 'mc-seed', 'mc-truth', 'mc-model-error', 'mc-trace-points'].map((id) => document.getElementById(id).value)),
@@ -119,6 +121,7 @@ test('jobs of every kind are listed, opened with their model, request and result
   const syn = await openJob(synthesis, { result: 'syn-result', run: 'syn-run', download: 'syn-download' });
   assert.deepEqual(syn, expected[synthesis]);
   assert.equal(await page.inputValue('#syn-mode'), 'grid');
+  assert.equal(await page.inputValue('#syn-criteria'), 'covariance');
   assert.equal(await page.evaluate(() => document.getElementById('syn-result').classList.contains('stale')), false);
 
   // Run again: the Monte Carlo's stored request submitted as a new job and opened in
@@ -135,7 +138,7 @@ test('jobs of every kind are listed, opened with their model, request and result
   );
   const newest = (await call('GET', '/v1/jobs?limit=1')).json.items[0];
   assert.notEqual(newest.id, simulation);
-  assert.equal(newest.kind, 'simulation');
+  assert.equal(newest.kind, 'monte_carlo');
   assert.deepEqual((await call('GET', `/v1/jobs/${newest.id}/request`)).json, (await call('GET', `/v1/jobs/${simulation}/request`)).json);
   const [file] = await Promise.all([page.waitForEvent('download'), page.click('#mc-download')]);
   const rerun = JSON.parse(readFileSync(await file.path(), 'utf8'));
@@ -194,7 +197,7 @@ test('a result a server restart interrupted says from which step it went on', as
   await page.selectOption('#jobs-filter', ''); // (all: a test before chose one status)
   for (const [request, where, summary] of [
     [{ kind: 'analysis', model: tracker() }, { result: 'results', run: 'run' }, '#summary'],
-    [{ kind: 'simulation', model: tracker(), runs: 20 }, { result: 'mc-result', run: 'mc-run' }, '#mc-summary'],
+    [{ kind: 'monte_carlo', model: tracker(), runs: 20 }, { result: 'mc-result', run: 'mc-run' }, '#mc-summary'],
   ]) {
     const id = await submit(request);
     assert.equal((await finished(id)).status, 'succeeded');

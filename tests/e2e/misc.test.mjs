@@ -158,7 +158,7 @@ test('a run on a server that does not answer says so, on each tab', async () => 
     await p.click('#run');
     await p.waitForFunction(() => document.getElementById('status').classList.contains('error'), null, { timeout: 20000 });
     assert.match(await p.textContent('#status'), unanswered);
-    for (const [tab, prefix] of [['synthesis', 'syn'], ['simulation', 'mc']]) {
+    for (const [tab, prefix] of [['synthesis', 'syn'], ['monte-carlo', 'mc']]) {
       await p.click(`#tab-${tab}`);
       await p.check(`input[name=${prefix}-where][value=server]`);
       await p.click(`#${prefix}-run`);

@@ -73,12 +73,17 @@ test('an analysis gives the same bits through the CLI, a job and wasm', async ()
 test('a Monte Carlo gives the same bits through the CLI, a job and wasm', async () => {
   const request = { model: model(), runs: 40, seed: 11, truth: 'mean', model_error: 'constant', trace_points: 12 };
   const cli = JSON.parse(
-    kea('simulate', file('mc-model.json', request.model), '--runs', '40', '--seed', '11', '--truth', 'mean', '--model-error', 'constant', '--trace-points', '12', '--json'),
+    kea('monte-carlo', file('mc-model.json', request.model), '--runs', '40', '--seed', '11', '--truth', 'mean', '--model-error', 'constant', '--trace-points', '12', '--json'),
   );
-  const job = await viaJob('simulation', request);
-  const browser = viaWasm('simulation', request);
+  const job = await viaJob('monte_carlo', request);
+  const browser = viaWasm('monte_carlo', request);
   assert.equal(bits(job), bits(cli));
   assert.equal(bits(browser), bits(cli));
+  // `simulation` and `kea simulate`, the former names, are the same kind.
+  assert.equal(bits(await viaJob('simulation', request)), bits(cli));
+  assert.equal(bits(viaWasm('simulation', request)), bits(cli));
+  const aliased = kea('simulate', file('mc-model.json', request.model), '--runs', '40', '--seed', '11', '--truth', 'mean', '--model-error', 'constant', '--trace-points', '12', '--json');
+  assert.equal(bits(JSON.parse(aliased)), bits(cli));
 });
 
 test('a synthesis gives the same bits through the CLI, a job and wasm', async () => {

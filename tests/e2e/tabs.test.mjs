@@ -93,9 +93,9 @@ test('the tabs switch with the mouse and the arrow keys', async () => {
   assert.equal(await page.isVisible('#run'), false, "the analysis's Run button is hidden");
   await page.focus('#tab-synthesis');
   await page.keyboard.press('ArrowRight');
-  assert.equal(await page.getAttribute('#tab-simulation', 'aria-selected'), 'true');
-  assert.equal(await page.evaluate(() => document.activeElement.id), 'tab-simulation');
-  assert.equal(await page.isVisible('#simulation-panel'), true);
+  assert.equal(await page.getAttribute('#tab-monte-carlo', 'aria-selected'), 'true');
+  assert.equal(await page.evaluate(() => document.activeElement.id), 'tab-monte-carlo');
+  assert.equal(await page.isVisible('#monte-carlo-panel'), true);
   assert.equal(await page.isVisible('#synthesis-panel'), false);
   await page.keyboard.press('Home');
   assert.equal(await page.getAttribute('#tab-analysis', 'aria-selected'), 'true');
@@ -103,14 +103,14 @@ test('the tabs switch with the mouse and the arrow keys', async () => {
 });
 
 test('the tab is kept in the link', async () => {
-  await page.click('#tab-simulation');
-  await page.waitForFunction(() => /&tab=simulation$/.test(location.hash));
+  await page.click('#tab-monte-carlo');
+  await page.waitForFunction(() => /&tab=monte_carlo$/.test(location.hash));
   // A new page on that link opens on the Monte Carlo tab.
   const other = await page.context().newPage();
   await other.goto(page.url());
   await other.waitForSelector('body[data-ready=true]', { timeout: 30000 });
-  assert.equal(await other.getAttribute('#tab-simulation', 'aria-selected'), 'true');
-  assert.equal(await other.isVisible('#simulation-panel'), true);
+  assert.equal(await other.getAttribute('#tab-monte-carlo', 'aria-selected'), 'true');
+  assert.equal(await other.isVisible('#monte-carlo-panel'), true);
   await other.close();
   // Back on Analysis, the link has no tab.
   await page.click('#tab-analysis');
@@ -128,7 +128,7 @@ test('a synthesis grid gives the same table in the browser, on the server and in
   );
   await page.selectOption('#syn-mode', 'grid');
   await page.selectOption('#syn-criterion', 'yx');
-  await page.selectOption('#syn-set', 'bound');
+  await page.selectOption('#syn-criteria', 'bound');
   await page.selectOption('#syn-state', '');
   await page.fill('#syn-threshold', '10');
   await page.selectOption('#syn-grid-param-0', 'f');
@@ -154,7 +154,7 @@ test('a synthesis grid gives the same table in the browser, on the server and in
   await screenshot(page, '11-synthesis-grid-server');
 
   const request = {
-    target: { criterion: 'yx', set: 'bound', threshold: 10 },
+    target: { criterion: 'yx', criteria: 'bound', threshold: 10 },
     mode: { grid: { params: [{ name: 'f', values: [2, 4, 8] }, { name: 'c', values: [0.5, 0.25] }], cost_order: [{ name: 'f', cheaper: 'lower' }] } },
   };
   const requestFile = path.join(tmp, 'grid.json');
@@ -253,7 +253,7 @@ function mcCriteria() {
 
 test('a Monte Carlo run is bit-identical in the browser, on the server and in the CLI', async () => {
   const modelFile = await smallSeedExample();
-  await page.click('#tab-simulation');
+  await page.click('#tab-monte-carlo');
   await page.fill('#mc-runs', '200');
   await page.fill('#mc-seed', '7');
   await page.selectOption('#mc-truth', 'process');
@@ -266,7 +266,7 @@ test('a Monte Carlo run is bit-identical in the browser, on the server and in th
   const onServer = await runView('mc', 'server');
   const shownServer = await mcCriteria();
   const cliCsv = path.join(tmp, 'monte-carlo.csv');
-  const cli = JSON.parse(kea('simulate', modelFile, '--runs', '200', '--seed', '7', '--trace-points', '50', '--json', '--csv', cliCsv));
+  const cli = JSON.parse(kea('monte-carlo', modelFile, '--runs', '200', '--seed', '7', '--trace-points', '50', '--json', '--csv', cliCsv));
 
   const strip = (r) => ({ ...r, timing: null });
   assert.deepStrictEqual(strip(inBrowser), strip(onServer), 'browser and server: bit-identical');
@@ -361,12 +361,12 @@ test("a run's model error names the model's cell as the editor does, counting fr
   await page.waitForFunction(() => /^#preset=cv-tracker(&|$)/.test(location.hash));
   // Finite at t₀ (the model is valid), not past t = 50: only a run finds it, at system.a[1][0].
   await page.fill('input[data-path="system.a[1][0]"]', '0*sqrt(50 - t)');
-  await page.click('#tab-simulation');
+  await page.click('#tab-monte-carlo');
   await page.fill('#mc-runs', '20');
   await page.fill('#mc-trace-points', '');
   await page.click('#tab-synthesis');
   await page.selectOption('#syn-mode', 'grid');
-  for (const [tab, prefix] of [['simulation', 'mc'], ['synthesis', 'syn']]) {
+  for (const [tab, prefix] of [['monte-carlo', 'mc'], ['synthesis', 'syn']]) {
     await page.click(`#tab-${tab}`);
     for (const where of ['browser', 'server']) {
       await page.check(`input[name=${prefix}-where][value=${where}]`);
@@ -437,7 +437,7 @@ test('synthesis inputs are refused at their control, in words', async () => {
   await screenshot(page, '16-synthesis-override-error');
   // Without a cost order, the table's message names the control, not the API member.
   await page.fill('#syn-grid-values-0', '2, 4');
-  await page.selectOption('#syn-set', 'bound');
+  await page.selectOption('#syn-criteria', 'bound');
   await page.fill('#syn-threshold', '10'); // f = 4 meets it
   await runView('syn', 'browser');
   assert.equal(await page.$$eval('#synthesis-panel .control-error', (es) => es.length), 0, 'the marks went');
@@ -448,15 +448,15 @@ test('synthesis inputs are refused at their control, in words', async () => {
 
 test('a result of a model edited during its run is shown as stale, on both tabs', async () => {
   await smallSeedExample();
-  await page.click('#tab-simulation');
+  await page.click('#tab-monte-carlo');
   await page.fill('#mc-runs', '50');
   await page.fill('#mc-trace-points', '');
-  for (const [tab, prefix] of [['simulation', 'mc'], ['synthesis', 'syn']]) {
+  for (const [tab, prefix] of [['monte-carlo', 'mc'], ['synthesis', 'syn']]) {
     await page.click(`#tab-${tab}`);
     const jobs = await holdJobs(page); // the edit comes while the run is under way
     const run = runView(prefix, 'server');
     await jobs.reached;
-    await page.fill('input[data-path="params.c"]', tab === 'simulation' ? '0.6' : '0.7');
+    await page.fill('input[data-path="params.c"]', tab === 'monte-carlo' ? '0.6' : '0.7');
     await jobs.release();
     await run;
     assert.ok(await page.$eval(`#${prefix}-result`, (e) => e.classList.contains('stale')), `${tab}: the result is marked stale`);
@@ -468,7 +468,7 @@ test('at 390 px wide a Monte Carlo result does not overflow sideways, and no num
   await smallSeedExample();
   await page.setViewportSize({ width: 390, height: 844 });
   try {
-    await page.click('#tab-simulation');
+    await page.click('#tab-monte-carlo');
     await page.fill('#mc-runs', '50');
     await runView('mc', 'browser');
     const [scroll, inner] = await page.evaluate(() => [document.documentElement.scrollWidth, window.innerWidth]);
@@ -491,7 +491,7 @@ test('at 390 px wide a Monte Carlo result does not overflow sideways, and no num
 });
 
 test('a Monte Carlo of a model with no trace points says so instead of a chart', async () => {
-  await page.click('#tab-simulation');
+  await page.click('#tab-monte-carlo');
   await page.fill('#mc-runs', '50');
   await page.fill('#mc-trace-points', '');
   await page.fill('input[data-path="options.trace_points"]', '0');
@@ -504,7 +504,7 @@ test('a long Monte Carlo run is cancelled, in the browser and on the server', as
   await page.selectOption('#preset', 'seed-example');
   await page.waitForFunction(() => /^#preset=seed-example(&|$)/.test(location.hash));
   await page.fill('input[data-path="time.steps"]', '100000');
-  await page.click('#tab-simulation');
+  await page.click('#tab-monte-carlo');
   await page.fill('#mc-runs', '20000'); // 2e9 runs × steps: many seconds on either side; a chunk of 256 steps is quick
   for (const where of ['browser', 'server']) {
     await page.evaluate(() => (document.getElementById('mc-progress').value = 0));
@@ -520,7 +520,7 @@ test('a long Monte Carlo run is cancelled, in the browser and on the server', as
   }
   const jobs = await (await fetch(`${server.url}/v1/jobs`)).json();
   const items = jobs.items ?? jobs.jobs ?? jobs;
-  assert.ok(items.some((j) => j.kind === 'simulation' && j.status === 'cancelled'), JSON.stringify(items).slice(0, 500));
+  assert.ok(items.some((j) => j.kind === 'monte_carlo' && j.status === 'cancelled'), JSON.stringify(items).slice(0, 500));
 });
 
 test("the Synthesis and Monte Carlo tabs' fields are kept over a reload; stored values that do not fit are not", async () => {
@@ -529,13 +529,13 @@ test("the Synthesis and Monte Carlo tabs' fields are kept over a reload; stored 
   const ready = () => other.waitForSelector('body[data-ready=true]', { timeout: 30000 });
   // Every request field of the two tabs, by id.
   const fields = () =>
-    other.$$eval('#synthesis-panel form :is(input, select), #simulation-panel form :is(input, select)', (cs) => Object.fromEntries(cs.map((c) => [c.id, c.value])));
+    other.$$eval('#synthesis-panel form :is(input, select), #monte-carlo-panel form :is(input, select)', (cs) => Object.fromEntries(cs.map((c) => [c.id, c.value])));
   try {
     await other.goto(`${server.url}/#preset=seed-example&tab=synthesis`);
     await ready();
     const defaults = await fields();
     await other.selectOption('#syn-criterion', 'zx');
-    await other.selectOption('#syn-set', 'covariance');
+    await other.selectOption('#syn-criteria', 'covariance');
     await other.fill('#syn-threshold', '3.5');
     await other.selectOption('#syn-grid-param-1', 'c'); // a grid row, kept though another mode is shown
     await other.fill('#syn-grid-values-1', '0.1, 0.2');
@@ -544,7 +544,7 @@ test("the Synthesis and Monte Carlo tabs' fields are kept over a reload; stored 
     await other.fill('#syn-bisect-low', '0.5');
     await other.fill('#syn-bisect-high', '40');
     await other.fill('#syn-bisect-probes', '5');
-    await other.click('#tab-simulation');
+    await other.click('#tab-monte-carlo');
     await other.fill('#mc-runs', '321');
     await other.fill('#mc-seed', '42');
     await other.selectOption('#mc-truth', 'mean');
@@ -567,7 +567,7 @@ test("the Synthesis and Monte Carlo tabs' fields are kept over a reload; stored 
     // mode and a param that do not exist (the param's values go with it), a number where
     // text is kept. What fits is still taken.
     await other.evaluate(() => {
-      sessionStorage.setItem('kea-simulation', '{not json');
+      sessionStorage.setItem('kea-monte-carlo', '{not json');
       sessionStorage.setItem('kea-synthesis', JSON.stringify({
         'syn-criterion': 'yz', 'syn-mode': 'nope', 'syn-threshold': 7,
         'syn-bisect-param': 'no_such_param', 'syn-bisect-low': '1', 'syn-bisect-high': '2',

@@ -193,7 +193,7 @@ test('a Monte Carlo run gives the CLI\'s bits in the browser', async () => {
     return answer;
   }, request);
   assert.ok(inBrowser.ok, JSON.stringify(inBrowser.error));
-  const cli = JSON.parse(kea('simulate', 'preset:helicopter-angle', '--runs', '500', '--seed', '7', '--json'));
+  const cli = JSON.parse(kea('monte-carlo', 'preset:helicopter-angle', '--runs', '500', '--seed', '7', '--json'));
   const strip = (r) => ({ ...r, timing: null });
   assert.equal(cli.request.runs, 500);
   assert.deepStrictEqual(strip(inBrowser.ok), strip(cli), 'browser and CLI: bit-identical');
@@ -415,7 +415,7 @@ test('a new measurement measures the first unmeasured state, and the model runs'
 
 test('files that are not models are refused, and page messages show on every tab', async () => {
   await choosePreset(page, 'seed-example', 0);
-  await page.click('#tab-simulation');
+  await page.click('#tab-monte-carlo');
   for (const [name, text] of [['empty.json', '{}'], ['list.json', '[1,2]'], ['text.json', 'not json']]) {
     await page.setInputFiles('#import-model', { name, mimeType: 'application/json', buffer: Buffer.from(text) });
     await page.waitForFunction((n) => document.getElementById('page-status').textContent.startsWith(n), name);
@@ -572,15 +572,26 @@ test('a link opened in a tab where kea is open loads its model and its tab', asy
   const edited = new URL(page.url()).hash;
   await choosePreset(page, 'seed-example', 0);
   const open = (hash) => page.evaluate((h) => (location.hash = h), hash);
-  await open('#preset=cv-tracker&tab=simulation');
+  await open('#preset=cv-tracker&tab=monte_carlo');
   await page.waitForTimeout(600); // past the address's save delay: it is not written back over
   assert.equal(await page.inputValue('#preset'), 'cv-tracker');
-  assert.equal(await page.getAttribute('#tab-simulation', 'aria-selected'), 'true');
-  assert.equal(new URL(page.url()).hash, '#preset=cv-tracker&tab=simulation');
+  assert.equal(await page.getAttribute('#tab-monte-carlo', 'aria-selected'), 'true');
+  assert.equal(new URL(page.url()).hash, '#preset=cv-tracker&tab=monte_carlo');
   await open(edited);
   await page.waitForFunction(() => document.querySelector('input[data-path="params.r"]')?.value === '0.125', null, { timeout: 5000 });
   assert.equal(await page.inputValue('#preset'), '');
   assert.equal(await page.getAttribute('#tab-analysis', 'aria-selected'), 'true');
+  await choosePreset(page, 'seed-example', 0);
+});
+
+test('an older link to the Monte Carlo tab (`&tab=simulation`, its former name) opens it, and the address names it as it is now', async () => {
+  await choosePreset(page, 'seed-example', 0);
+  await page.evaluate(() => (location.hash = '#preset=cv-tracker&tab=simulation'));
+  await page.waitForFunction(() => document.getElementById('tab-monte-carlo').getAttribute('aria-selected') === 'true', null, { timeout: 5000 });
+  assert.equal(await page.inputValue('#preset'), 'cv-tracker');
+  assert.equal(await page.isVisible('#monte-carlo-panel'), true);
+  await page.waitForFunction(() => location.hash === '#preset=cv-tracker&tab=monte_carlo', null, { timeout: 5000 });
+  await page.click('#tab-analysis');
   await choosePreset(page, 'seed-example', 0);
 });
 
@@ -589,7 +600,7 @@ test('at 390 px wide the page does not overflow sideways, on every tab', async (
   try {
     await choosePreset(page, 'helicopter-range', 0);
     const overflow = () => page.evaluate(() => document.documentElement.scrollWidth - document.documentElement.clientWidth);
-    for (const tab of ['analysis', 'synthesis', 'simulation']) {
+    for (const tab of ['analysis', 'synthesis', 'monte-carlo']) {
       await page.click(`#tab-${tab}`);
       assert.equal(await overflow(), 0, `${tab}: no sideways overflow`);
     }
@@ -633,9 +644,9 @@ test('at 390 × 844 the Run button is in the window on load, on every tab, and c
     await phone.waitForFunction(() => document.querySelector('#summary')?.dataset.where === 'browser', null, { timeout: 60000 });
     assert.equal(await phone.evaluate(() => window.scrollY), 0, 'no scrolling was needed');
     await screenshot(phone, '09-narrow-run-bar');
-    for (const [tab, id] of [['synthesis', '#syn-run'], ['simulation', '#mc-run']]) {
+    for (const [tab, button, id] of [['synthesis', 'tab-synthesis', '#syn-run'], ['monte_carlo', 'tab-monte-carlo', '#mc-run']]) {
       await phone.evaluate((t) => (location.hash = `#preset=helicopter-range&tab=${t}`), tab);
-      await phone.waitForFunction((t) => document.getElementById(`tab-${t}`).getAttribute('aria-selected') === 'true', tab);
+      await phone.waitForFunction((b) => document.getElementById(b).getAttribute('aria-selected') === 'true', button);
       await inWindow(id);
     }
     // The bar covers no field for good: each of the editor's fields, focused in turn (as
@@ -654,7 +665,7 @@ test('at 390 × 844 the Run button is in the window on load, on every tab, and c
     assert.deepEqual(covered, []);
     // At the end of the page the bar is in its place, after the editor.
     await phone.evaluate(() => window.scrollTo(0, document.documentElement.scrollHeight));
-    const [bar, pane] = await phone.evaluate(() => [document.querySelector('#simulation-panel .run-controls').getBoundingClientRect().top, document.getElementById('editor-pane').getBoundingClientRect().bottom]);
+    const [bar, pane] = await phone.evaluate(() => [document.querySelector('#monte-carlo-panel .run-controls').getBoundingClientRect().top, document.getElementById('editor-pane').getBoundingClientRect().bottom]);
     assert.ok(bar >= pane, `the bar (top ${bar}) is below the editor (bottom ${pane})`);
   } finally {
     await phone.context().close();

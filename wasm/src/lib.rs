@@ -110,8 +110,9 @@ pub fn work(kind: &str, request_json: &str) -> Result<String, JsValue> {
     Ok(work_json(prepared.work()))
 }
 
-/// Run a request of the kind `kind` (`analysis`, `simulation`, `synthesis`: the
-/// server's job kinds, with the same request JSON) with the core's `Sequential`
+/// Run a request of the kind `kind` (`analysis`, `monte_carlo`, `synthesis`: the
+/// server's job kinds, or an alias such as `simulation`, with the same request JSON)
+/// with the core's `Sequential`
 /// executor; the result is bit-identical to the server's. `progress(fraction)` is
 /// called after about every millisecond of work; if it returns `false` the run stops
 /// and this throws a `cancelled` error. Errors carry the request's paths
@@ -149,10 +150,16 @@ pub fn synthesis_work(request_json: &str) -> Result<String, JsValue> {
     work("synthesis", request_json)
 }
 
-/// [`work`] of a Monte Carlo request (an alias kept for older pages).
+/// [`work`] of a Monte Carlo request.
+#[wasm_bindgen]
+pub fn monte_carlo_work(request_json: &str) -> Result<String, JsValue> {
+    work("monte_carlo", request_json)
+}
+
+/// [`monte_carlo_work`] under its former name (kept for older pages).
 #[wasm_bindgen]
 pub fn simulation_work(request_json: &str) -> Result<String, JsValue> {
-    work("simulation", request_json)
+    monte_carlo_work(request_json)
 }
 
 /// [`work`] of the analysis of a model with overrides, its errors at the model's
@@ -187,17 +194,24 @@ fn js_progress(progress: &js_sys::Function) -> impl FnMut(f64) -> ControlFlow<()
     }
 }
 
-/// The traces of a Monte Carlo result (as returned by [`simulate`]) as CSV, same as the CLI's.
+/// The traces of a Monte Carlo result (as [`run`] of `monte_carlo` returns it) as CSV,
+/// same as the CLI's.
 #[wasm_bindgen]
-pub fn simulation_csv(result_json: &str) -> Result<String, JsValue> {
-    let result: kea_core::monte_carlo::SimulationResult = serde_json::from_str(result_json)
+pub fn monte_carlo_csv(result_json: &str) -> Result<String, JsValue> {
+    let result: kea_core::monte_carlo::MonteCarloResult = serde_json::from_str(result_json)
         .map_err(|e| {
             to_js(&Error::invalid(
                 "",
-                format!("not a kea simulation result: {e}"),
+                format!("not a kea Monte Carlo result: {e}"),
             ))
         })?;
     Ok(kea_core::monte_carlo::traces_csv(&result))
+}
+
+/// [`monte_carlo_csv`] under its former name (kept for older pages).
+#[wasm_bindgen]
+pub fn simulation_csv(result_json: &str) -> Result<String, JsValue> {
+    monte_carlo_csv(result_json)
 }
 
 /// The traces of a result (as returned by [`analyze`]) as CSV, same as the CLI's.
@@ -281,9 +295,13 @@ mod tests {
         assert_eq!(out["limit"], kea_core::work::DEFAULT_MAX_WORK);
         let request = format!(r#"{{"model": {model}, "runs": 10}}"#);
         let sim: serde_json::Value =
-            serde_json::from_str(&simulation_work(&request).unwrap()).unwrap();
+            serde_json::from_str(&monte_carlo_work(&request).unwrap()).unwrap();
         assert!(sim["units"].as_f64().unwrap() > expected.units);
         assert_eq!(sim["path"], "runs");
+        // The former names, the kind's and the function's, give the same estimate.
+        let parsed = |text: String| serde_json::from_str::<serde_json::Value>(&text).unwrap();
+        assert_eq!(parsed(simulation_work(&request).unwrap()), sim);
+        assert_eq!(parsed(work("simulation", &request).unwrap()), sim);
     }
 
     #[test]

@@ -2,8 +2,8 @@
 //! core, and prints. Errors go to stderr as `path: message`, one per line.
 
 pub mod analyze;
+pub mod monte_carlo;
 pub mod presets;
-pub mod simulate;
 pub mod synthesize;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -284,7 +284,7 @@ pub struct KindRun<'a> {
     pub json: bool,
     pub csv: Option<&'a Path>,
     pub limit: &'a WorkLimit,
-    /// The input is a model file (`kea analyze`, `kea simulate`), not a request.
+    /// The input is a model file (`kea analyze`, `kea monte-carlo`), not a request.
     pub model_file: bool,
 }
 

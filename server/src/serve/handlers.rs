@@ -24,11 +24,16 @@ pub async fn health() -> Json<Value> {
 
 /// `GET /v1/limits`: what this server and the core accept — the server's own limits
 /// (its `kea serve` options, as started) and the model's, the Monte Carlo's and the
-/// synthesis's fixed ones — so a script or the web UI can check a request first.
+/// synthesis's fixed ones — so a script or the web UI can check a request first. The
+/// Monte Carlo's are also under `simulation`, the kind's former name, for older clients.
 pub async fn limits(State(state): State<AppState>) -> Json<Value> {
     use kea_core::model::limits;
     use kea_core::{expr, monte_carlo, synthesis};
     let l = &state.config.limits;
+    let monte_carlo_limits = json!({
+        "max_runs": monte_carlo::MAX_RUNS,
+        "max_work": monte_carlo::MAX_WORK,
+    });
     Json(json!({
         "server": {
             "max_body_bytes": l.max_body_bytes,
@@ -55,10 +60,8 @@ pub async fn limits(State(state): State<AppState>) -> Json<Value> {
             "max_time_expression_chars": expr::MAX_TIME_EXPRESSION_CHARS,
             "max_reported_errors": kea_core::error::MAX_REPORTED_ERRORS,
         },
-        "simulation": {
-            "max_runs": monte_carlo::MAX_RUNS,
-            "max_work": monte_carlo::MAX_WORK,
-        },
+        "monte_carlo": monte_carlo_limits,
+        "simulation": monte_carlo_limits,
         "synthesis": {
             "max_points": synthesis::MAX_POINTS,
             "max_grid_params": synthesis::MAX_GRID_PARAMS,

@@ -24,7 +24,7 @@ pub fn job_view(job: &JobRecord, live: Option<Snapshot>) -> Value {
     let progress = live.map_or(job.progress, |s| s.progress.max(job.progress));
     let mut v = json!({
         "id": job.id,
-        "kind": job.kind,
+        "kind": kind_name(&job.kind),
         "model_name": job.model_name,
         "status": job.status,
         "progress": progress,
@@ -38,6 +38,12 @@ pub fn job_view(job: &JobRecord, live: Option<Snapshot>) -> Value {
         v["error"] = serde_json::from_str(e).unwrap_or(Value::String(e.clone()));
     }
     v
+}
+
+/// A stored job's kind by its name: a job stored under a kind's former name (an alias,
+/// such as `simulation` for `monte_carlo`) is shown under the kind's name.
+fn kind_name(stored: &str) -> &str {
+    super::jobs::find(stored).unwrap_or(stored)
 }
 
 async fn load(state: &AppState, id: &str) -> Result<JobRecord, Problem> {
@@ -83,9 +89,10 @@ pub async fn submit(
             )]));
         }
     };
-    if super::jobs::find(&kind_name).is_none() {
+    // Stored under the kind's name, whether the request gave it or an alias.
+    let Some(kind_name) = super::jobs::find(&kind_name) else {
         return Err(Problem::from_core(kea_core::registry::unknown(&kind_name)));
-    }
+    };
     let stored = resolve_model_id(&state, &mut obj).await?;
     let model_name = obj
         .get("model")
@@ -94,7 +101,7 @@ pub async fn submit(
         .map(str::to_owned);
     let request = Value::Object(obj);
     let request_json = request.to_string();
-    let prepared = prepare(&kind_name, request, stored.as_deref()).await?;
+    let prepared = prepare(kind_name, request, stored.as_deref()).await?;
     let work = prepared.work();
     check_work(
         &work,
@@ -104,7 +111,7 @@ pub async fn submit(
     )?;
     let job = JobRecord {
         id: new_id(),
-        kind: kind_name,
+        kind: kind_name.to_string(),
         status: JobStatus::Queued,
         progress: 0.0,
         request_json,
@@ -250,13 +257,13 @@ async fn finished(state: &AppState, id: &str) -> Result<(String, Option<String>)
 }
 
 /// `GET /v1/jobs/{id}/request`: the request as stored — the submitted one with a
-/// `model_id` replaced by the model it named then — so that it can be read, opened
-/// or submitted again as it is.
+/// `model_id` replaced by the model it named then, and a `kind` given by an alias by
+/// the kind's name — so that it can be read, opened or submitted again as it is.
 pub async fn request(State(state): State<AppState>, JobId(id): JobId) -> Result<Response, Problem> {
     let job = load(&state, &id).await?;
     let mut stored: serde_json::Map<String, Value> = serde_json::from_str(&job.request_json)
         .map_err(|e| Problem::internal(format!("job {id}'s stored request: {e}")))?;
-    stored.insert("kind".into(), Value::String(job.kind));
+    stored.insert("kind".into(), kind_name(&job.kind).into());
     Ok(Json(Value::Object(stored)).into_response())
 }
 

@@ -90,6 +90,8 @@ pub struct ModelSummary {
 #[derive(Clone, Debug)]
 pub struct JobRecord {
     pub id: String,
+    /// The kind's name (`jobs::find`); a job stored by an earlier kea may have a
+    /// former name, an alias, which still reads as its kind (`simulation`).
     pub kind: String,
     pub status: JobStatus,
     pub progress: f64,

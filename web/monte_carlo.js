@@ -1,6 +1,6 @@
 // The Monte Carlo tab (docs/monte-carlo.md): R simulated runs of the current model,
 // in this browser (wasm, the core's Sequential executor: bit-identical to the server
-// for the same seed) or as a server job of kind `simulation`; the potential SKO √R_ii
+// for the same seed) or as a server job of kind `monte_carlo`; the potential SKO √R_ii
 // against the sample SKO of the filtered error (and the bound χ) per state, the
 // consistency verdicts (NEES, NIS, per state), and the criteria sets side by side.
 
@@ -22,7 +22,7 @@ const SERIES = [
   ['chi', 'bound χ', '#2ca02c', [6, 4]],
 ];
 
-export class SimulationView extends RunView {
+export class MonteCarloView extends RunView {
   /** `ctx`: {model(), showModelErrors(errors), download(name, type, text), fileStem()}. */
   constructor(root, ctx) {
     super();
@@ -61,7 +61,7 @@ export class SimulationView extends RunView {
         el('p', { class: 'help', text: 'Each run draws its own ChaCha8 stream of the seed: the same seed gives bit-identical results in the browser and on the server. Cost ∝ R × D × N².' }),
       ),
     );
-    this.bar = new RunBar({ prefix: 'mc', label: 'Run Monte Carlo', op: 'simulate', kind: 'simulation', onRun: (where, exec) => this.run(where, exec), onResume: (model, exec) => this.resume(model, exec) });
+    this.bar = new RunBar({ prefix: 'mc', label: 'Run Monte Carlo', op: 'simulate', kind: 'monte_carlo', onRun: (where, exec) => this.run(where, exec), onResume: (model, exec) => this.resume(model, exec) });
     this.out = el('div', { id: 'mc-result', class: 'view-result', hidden: true });
     this.stateSelect = el('select', { id: 'mc-state' });
     this.log = el('input', { type: 'checkbox', id: 'mc-log' });
@@ -71,7 +71,7 @@ export class SimulationView extends RunView {
     new ResizeObserver(() => this.plot?.setSize({ width: this.width(), height: 320 })).observe(this.chart);
     this.root.append(this.form, this.bar.root, this.out);
     // The fields as they were before a reload (they do not depend on the model).
-    this.kept = new KeptFields('kea-simulation', [[this.runs], [this.seed], [this.truth], [this.modelError], [this.tracePoints]]);
+    this.kept = new KeptFields('kea-monte-carlo', [[this.runs], [this.seed], [this.truth], [this.modelError], [this.tracePoints]]);
     this.kept.restore();
     for (const type of ['input', 'change']) this.form.addEventListener(type, () => this.kept.save());
   }
@@ -182,9 +182,9 @@ export class SimulationView extends RunView {
     this.draw();
   }
 
-  /** The traces as CSV, the same text as `kea simulate --csv` (the core's, via wasm). */
+  /** The traces as CSV, the same text as `kea monte-carlo --csv` (the core's, via wasm). */
   async downloadCsv() {
-    const csv = await wasmCall('simulation_csv', { result: JSON.stringify(this.result) });
+    const csv = await wasmCall('monte_carlo_csv', { result: JSON.stringify(this.result) });
     this.ctx.download(`${this.ctx.fileStem()}-monte-carlo-traces.csv`, 'text/csv', csv);
   }
 

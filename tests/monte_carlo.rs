@@ -8,7 +8,7 @@
 
 use kea_core::model::{Schedule, Steps, Value};
 use kea_core::monte_carlo::{
-    Executor, ModelError, Sequential, SimulationRequest, SimulationResult, Truth, Verdict, simulate,
+    Executor, ModelError, MonteCarloRequest, MonteCarloResult, Sequential, Truth, Verdict, simulate,
 };
 use kea_core::{Model, NoProgress, Overrides};
 use statrs::distribution::{ChiSquared, ContinuousCDF};
@@ -47,8 +47,8 @@ fn helicopter(steps: u64) -> Model {
     m
 }
 
-fn request(runs: u64, seed: u64, truth: Truth) -> SimulationRequest {
-    SimulationRequest {
+fn request(runs: u64, seed: u64, truth: Truth) -> MonteCarloRequest {
+    MonteCarloRequest {
         runs,
         seed,
         truth,
@@ -57,7 +57,7 @@ fn request(runs: u64, seed: u64, truth: Truth) -> SimulationRequest {
     }
 }
 
-fn sim(m: &Model, req: &SimulationRequest) -> SimulationResult {
+fn sim(m: &Model, req: &MonteCarloRequest) -> MonteCarloResult {
     simulate(m, &Overrides::new(), req, &Sequential, &mut NoProgress).unwrap()
 }
 
@@ -366,7 +366,7 @@ fn interval_schedule_matches_an_independent_nalgebra_filter() {
 #[test]
 fn requests_are_validated_with_field_paths() {
     let m = helicopter(100);
-    let bad = |req: SimulationRequest| {
+    let bad = |req: MonteCarloRequest| {
         simulate(&m, &Overrides::new(), &req, &Sequential, &mut NoProgress)
             .unwrap_err()
             .field_errors()
@@ -384,7 +384,7 @@ fn requests_are_validated_with_field_paths() {
     // number ≥ 0", though 0 and 1 are refused too).
     use serde_json::json;
     let read = |runs: serde_json::Value| {
-        kea_core::from_value_at::<SimulationRequest>(json!({ "runs": runs }), &[])
+        kea_core::from_value_at::<MonteCarloRequest>(json!({ "runs": runs }), &[])
             .map(|r| r.runs)
             .map_err(|e| e.to_string())
     };
@@ -484,4 +484,36 @@ fn the_traces_csv_reads_back_to_the_results_traces() {
             );
         }
     }
+}
+
+/// The kind's name in requests is `monte_carlo`; `simulation`, its former name, is
+/// still read as it (stored jobs, older scripts): the same kind, the same bits. The
+/// names listed to a client are the kinds' names only.
+#[test]
+fn the_former_kind_name_simulation_reads_as_the_monte_carlo() {
+    use kea_core::registry;
+    use serde_json::json;
+    assert_eq!(registry::find("monte_carlo"), Some("monte_carlo"));
+    assert_eq!(registry::find("simulation"), Some("monte_carlo"));
+    assert!(registry::NAMES.contains(&"monte_carlo"));
+    assert!(!registry::NAMES.contains(&"simulation"));
+    assert!(registry::ALIASES.contains(&("monte_carlo", &["simulation"][..])));
+    let model: serde_json::Value =
+        serde_json::from_str(kea_core::presets::get_json("cv-tracker").unwrap()).unwrap();
+    let request = json!({"model": model, "runs": 20, "seed": 3, "trace_points": 10});
+    let run = |kind: &str| {
+        let prepared = registry::prepare_checked(kind, request.clone()).unwrap();
+        let outcome = prepared
+            .run(&Sequential, &mut NoProgress, &kea_core::exec::Forgetful)
+            .unwrap();
+        (outcome.to_json(), outcome.csv())
+    };
+    assert_eq!(run("simulation"), run("monte_carlo"));
+    let unknown = registry::prepare("simulations", request.clone())
+        .err()
+        .unwrap();
+    assert_eq!(
+        unknown.field_errors()[0].message,
+        "unknown job kind `simulations`; known: analysis, monte_carlo, synthesis"
+    );
 }

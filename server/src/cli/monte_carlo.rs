@@ -1,9 +1,9 @@
-//! `kea simulate MODEL.json|preset:NAME [--runs R] [--seed S] [--truth process|mean]
+//! `kea monte-carlo MODEL.json|preset:NAME [--runs R] [--seed S] [--truth process|mean]
 //! [--model-error white|constant] [--trace-points ROWS] [--set name=value]… [--threads T]
 //! [--max-work UNITS] [--json] [--csv FILE|-]`: the Monte Carlo of METHOD §1.8 — real
 //! (simulated) against potential (Riccati) accuracy. R is 1000 unless given. The report
 //! is text, or JSON with `--json`; `--csv` also writes the traces to a file (or, as
-//! `-`, to stdout in place of the text).
+//! `-`, to stdout in place of the text). `kea simulate`, its former name, is an alias.
 
 use crate::Run;
 use crate::parallel::Rayon;
@@ -95,7 +95,7 @@ impl Run for Args {
             request["trace_points"] = rows.into();
         }
         let run = super::KindRun {
-            kind: "simulation",
+            kind: "monte_carlo",
             input: &self.model,
             json: self.json,
             csv: self.csv.as_deref(),

@@ -13,7 +13,7 @@
 use super::model::{Data, Discrete, Partial, Prior, PriorAt};
 use crate::error::{Error, FieldError};
 use crate::numerics::householder::{differentiate, triangularise};
-use crate::numerics::linalg::{cholesky, solve_lower};
+use crate::numerics::linalg::{cholesky, cholesky_solve, solve_lower};
 
 /// ln 2π, the Gaussian density's constant per scalar measurement.
 const LN_2PI: f64 = 1.837_877_066_409_345_5;
@@ -34,6 +34,10 @@ pub struct Likelihood {
     /// ∂J/∂θ_i for each [`Partial`] given (empty without): the data part Σ eᵀ∂e and
     /// the model part ½ tr(R⁻¹∂R) + Σ ∂R̂_ii/R̂_ii − Σ ∂R̃_ii/R̃_ii per step (§2.5).
     pub gradient: Vec<f64>,
+    /// The sample Fisher information (np × np, row-major; empty without partials):
+    /// Σ_k [∂_iνᵀS⁻¹∂_jν + ½ tr(S⁻¹∂_iS S⁻¹∂_jS)] (seed (2.3.2) with the expected
+    /// values replaced by the computed ones; Harvey's form).
+    pub fisher_sample: Vec<f64>,
 }
 
 impl Likelihood {
@@ -74,6 +78,10 @@ pub struct Srif {
     r_mask: Vec<bool>,
     r_ln_det: f64,
     m_r: Vec<f64>,
+    /// Per parameter K (ma × ma) and U∂ν (ma) of a step's information term.
+    k_info: Vec<f64>,
+    k_tmp: Vec<f64>,
+    a_info: Vec<f64>,
     d_r_sub: Vec<f64>,
     tr_r: Vec<f64>,
     d_h_w: Vec<f64>,
@@ -134,7 +142,7 @@ impl Srif {
             m,
             np,
             info: vec![0.0; n * w],
-            meas: vec![0.0; (n + m) * w],
+            meas: vec![0.0; (n + m) * (n + 1 + m) * (1 + np)],
             time: vec![0.0; (l + n) * tw],
             phi_inv,
             phi_inv_g,
@@ -149,6 +157,9 @@ impl Srif {
             r_ln_det: 0.0,
             m_r: vec![0.0; np * m * m],
             d_r_sub: vec![0.0; m * m],
+            k_info: vec![0.0; np * m * m],
+            k_tmp: vec![0.0; m * m],
+            a_info: vec![0.0; np * m],
             tr_r: vec![0.0; np],
             d_h_w: vec![0.0; np * m * n],
             avail: Vec::with_capacity(m),
@@ -178,6 +189,7 @@ impl Srif {
             model_part: 0.0,
             measurements: 0,
             gradient: vec![0.0; self.np],
+            fisher_sample: vec![0.0; self.np * self.np],
         };
         let m = self.m;
         for k in 0..data.rows() {
@@ -270,23 +282,38 @@ impl Srif {
         solve_lower(&self.r_chol, &mut self.h_w[..ma * n], ma, n);
         solve_lower(&self.r_chol, &mut self.z_w[..ma], ma, 1);
         let rows = n + ma;
-        let a = &mut self.meas[..rows * w];
-        a[..n * w].copy_from_slice(&self.info);
+        // With parameters, ma columns [0; I] ride along: T applied to them gives
+        // [T12; T22], T22 the factor of the whitened S⁻¹ (T22ᵀT22 = S̄⁻¹) that the
+        // sample information needs.
+        let extra = if np > 0 { ma } else { 0 };
+        let mc = ic + extra;
+        let mw = mc * (1 + np);
+        let a = &mut self.meas[..rows * mw];
+        a.fill(0.0);
+        for i in 0..n {
+            for b in 0..=np {
+                a[i * mw + b * mc..i * mw + b * mc + ic]
+                    .copy_from_slice(&self.info[i * w + b * ic..i * w + b * ic + ic]);
+            }
+        }
         // −Σ ln|R̃_ii| and its derivatives, from the array before the update.
-        let ln_det_prior: f64 = (0..n).map(|i| a[i * w + i].abs().ln()).sum();
+        let ln_det_prior: f64 = (0..n).map(|i| a[i * mw + i].abs().ln()).sum();
         for d in 0..np {
-            let off = ic * (1 + d);
+            let off = mc * (1 + d);
             out.gradient[d] -= (0..n)
-                .map(|i| a[i * w + off + i] / a[i * w + i])
+                .map(|i| a[i * mw + off + i] / a[i * mw + i])
                 .sum::<f64>();
         }
         for r in 0..ma {
-            let row = &mut a[(n + r) * w..(n + r + 1) * w];
+            let row = &mut a[(n + r) * mw..(n + r + 1) * mw];
             row[..n].copy_from_slice(&self.h_w[r * n..r * n + n]);
             row[n] = self.z_w[r];
+            if extra > 0 {
+                row[ic + r] = 1.0;
+            }
             // ∂H̄ = L⁻¹∂H − M H̄, ∂z̄ = −M z̄ (M lower triangular)
             for d in 0..np {
-                let off = ic * (1 + d);
+                let off = mc * (1 + d);
                 let mr = &self.m_r[d * m * m..];
                 for c in 0..n {
                     let mh: f64 = (0..=r).map(|s| mr[r * ma + s] * self.h_w[s * n + c]).sum();
@@ -295,19 +322,108 @@ impl Srif {
                 row[off + n] = -(0..=r).map(|s| mr[r * ma + s] * self.z_w[s]).sum::<f64>();
             }
         }
-        triangularise(a, rows, w, n);
-        differentiate(a, rows, ic, n, np, &mut self.y, &mut self.omega);
-        let e2: f64 = (n..rows).map(|r| a[r * w + n] * a[r * w + n]).sum();
-        let ln_det_post: f64 = (0..n).map(|i| a[i * w + i].abs().ln()).sum();
+        triangularise(a, rows, mw, n);
+        differentiate(a, rows, mc, n, np, &mut self.y, &mut self.omega);
+        let e2: f64 = (n..rows).map(|r| a[r * mw + n] * a[r * mw + n]).sum();
+        let ln_det_post: f64 = (0..n).map(|i| a[i * mw + i].abs().ln()).sum();
         for d in 0..np {
-            let off = ic * (1 + d);
-            let de: f64 = (n..rows).map(|r| a[r * w + n] * a[r * w + off + n]).sum();
-            let dr: f64 = (0..n).map(|i| a[i * w + off + i] / a[i * w + i]).sum();
+            let off = mc * (1 + d);
+            let de: f64 = (n..rows).map(|r| a[r * mw + n] * a[r * mw + off + n]).sum();
+            let dr: f64 = (0..n).map(|i| a[i * mw + off + i] / a[i * mw + i]).sum();
             out.gradient[d] += de + 0.5 * self.tr_r[d] + dr;
         }
-        self.info.copy_from_slice(&a[..n * w]);
+        if np > 0 {
+            self.add_information((ma, mw, mc), (k, t), out)?;
+        }
+        for i in 0..n {
+            for b in 0..=np {
+                self.info[i * w + b * ic..i * w + b * ic + ic]
+                    .copy_from_slice(&self.meas[i * mw + b * mc..i * mw + b * mc + ic]);
+            }
+        }
         out.data_part += 0.5 * e2;
         out.model_part += 0.5 * (self.r_ln_det + 2.0 * ln_det_post - 2.0 * ln_det_prior);
+        Ok(())
+    }
+
+    /// A step's term of the sample information (seed (2.3.2), Harvey's form):
+    /// Σ ∂_iνᵀS⁻¹∂_jν + ½ tr(S⁻¹∂_iS S⁻¹∂_jS), from the updated array alone. With
+    /// U = T22 L⁻¹ (UᵀU = S⁻¹, e = Uν) and K = ∂U U⁻¹ = (∂T22 − T22 M) T22⁻¹:
+    /// U∂ν = ∂e − K e, and U ∂S Uᵀ = −(K + Kᵀ). (The bottom rows' free rotation
+    /// changes U, not these terms.) T22⁻¹ = (T22ᵀT22)⁻¹T22ᵀ, by Cholesky.
+    fn add_information(
+        &mut self,
+        (ma, mw, mc): (usize, usize, usize),
+        (k_step, t): (usize, f64),
+        out: &mut Likelihood,
+    ) -> Result<(), Error> {
+        let (n, m, np) = (self.n, self.m, self.np);
+        let ic = n + 1;
+        let a = &self.meas;
+        let t22 = |r: usize, c: usize| a[(n + r) * mw + ic + c];
+        // G = T22ᵀT22 = S̄⁻¹, factored.
+        let g = &mut self.sq[..ma * ma];
+        for r in 0..ma {
+            for c in 0..ma {
+                g[r * ma + c] = (0..ma).map(|s| t22(s, r) * t22(s, c)).sum();
+            }
+        }
+        if !cholesky(g, ma) {
+            return Err(Error::Numerical {
+                step: k_step as u64 + 1,
+                t,
+                path: "data".into(),
+                message: "the innovation covariance of a step is singular to working precision; its information cannot be formed".into(),
+            });
+        }
+        for d in 0..np {
+            let off = mc * (1 + d);
+            let mr = &self.m_r[d * m * m..];
+            // Xᵀ, X = ∂T22 − T22 M, into k (ma × ma), then G⁻¹Xᵀ = (X G⁻¹)ᵀ.
+            let k = &mut self.k_info[d * m * m..d * m * m + ma * ma];
+            for r in 0..ma {
+                for c in 0..ma {
+                    let tm: f64 = (c..ma).map(|s| t22(r, s) * mr[s * ma + c]).sum();
+                    k[c * ma + r] = a[(n + r) * mw + off + ic + c] - tm;
+                }
+            }
+            cholesky_solve(g, k, ma, ma);
+            // K = (X G⁻¹) T22ᵀ: K[r][c] = Σ_s (X G⁻¹)[r][s] T22[c][s]
+            let kk = &mut self.k_tmp[..ma * ma];
+            for r in 0..ma {
+                for c in 0..ma {
+                    kk[r * ma + c] = (0..ma).map(|s| k[s * ma + r] * t22(c, s)).sum();
+                }
+            }
+            k.copy_from_slice(kk);
+            // a = ∂e − K e
+            for r in 0..ma {
+                let ke: f64 = (0..ma).map(|s| k[r * ma + s] * a[(n + s) * mw + n]).sum();
+                self.a_info[d * m + r] = a[(n + r) * mw + off + n] - ke;
+            }
+        }
+        for i in 0..np {
+            for j in 0..=i {
+                let ai = &self.a_info[i * m..i * m + ma];
+                let aj = &self.a_info[j * m..j * m + ma];
+                let mut v: f64 = ai.iter().zip(aj).map(|(x, y)| x * y).sum();
+                // ½ tr(W_i W_j), W = −(K + Kᵀ)
+                let (ki, kj) = (&self.k_info[i * m * m..], &self.k_info[j * m * m..]);
+                let mut tr = 0.0;
+                for r in 0..ma {
+                    for c in 0..ma {
+                        let wi = ki[r * ma + c] + ki[c * ma + r];
+                        let wj = kj[c * ma + r] + kj[r * ma + c];
+                        tr += wi * wj;
+                    }
+                }
+                v += 0.5 * tr;
+                out.fisher_sample[i * np + j] += v;
+                if i != j {
+                    out.fisher_sample[j * np + i] += v;
+                }
+            }
+        }
         Ok(())
     }
 

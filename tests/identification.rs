@@ -533,3 +533,190 @@ fn sample_information_matches_the_50_digit_reference() {
         }
     }
 }
+
+/// Vector measurements (m = 2, correlated R, some cells missing) against a second
+/// route: a covariance filter with the sensitivity equations (nalgebra, double
+/// precision; fine on this well-conditioned model): J, the gradient and the sample
+/// information, over a parameter in each of Φ, G, Q, H and R.
+#[test]
+fn vector_measurements_match_a_covariance_filter_with_sensitivities() {
+    use nalgebra::{DMatrix, DVector};
+    let case = Case::load("case_b_oscillator");
+    let one = case.data();
+    let d = one.rows();
+    let mut z = Vec::with_capacity(2 * d);
+    for k in 0..d {
+        let a = if k % 11 == 5 { f64::NAN } else { one.z[k] };
+        let b = if k % 7 == 3 {
+            f64::NAN
+        } else {
+            0.4 * one.z[k] - 0.3 * one.z[(k + 1) % d]
+        };
+        z.extend([a, b]);
+    }
+    let data = Data {
+        m: 2,
+        t: one.t.clone(),
+        z,
+    };
+    // θ = (r, g12, sw, h22, rho): Φ = r·rot(0.3), G = [[1, g12], [0, 1]],
+    // Q = sw²·I, H = [[1, 0], [0.5, h22]], R = [[0.25, rho], [rho, 0.16]]
+    let th = [0.93, 0.2, 0.3, 0.8, 0.05];
+    let (c, s) = (0.3f64.cos(), 0.3f64.sin());
+    let model = |t: &[f64; 5]| Discrete {
+        n: 2,
+        l: 2,
+        m: 2,
+        phi: vec![t[0] * c, t[0] * s, -t[0] * s, t[0] * c],
+        u: vec![0.05, 0.0],
+        g: vec![1.0, t[1], 0.0, 1.0],
+        q: vec![t[2] * t[2], 0.0, 0.0, t[2] * t[2]],
+        h: vec![1.0, 0.0, 0.5, t[3]],
+        r: vec![0.25, t[4], t[4], 0.16],
+    };
+    let m0 = model(&th);
+    let zero = Partial::zero(&m0);
+    let partials = vec![
+        Partial {
+            phi: vec![c, s, -s, c],
+            ..zero.clone()
+        },
+        Partial {
+            g: vec![0.0, 1.0, 0.0, 0.0],
+            ..zero.clone()
+        },
+        Partial {
+            q: vec![2.0 * th[2], 0.0, 0.0, 2.0 * th[2]],
+            ..zero.clone()
+        },
+        Partial {
+            h: vec![0.0, 0.0, 0.0, 1.0],
+            ..zero.clone()
+        },
+        Partial {
+            r: vec![0.0, 1.0, 1.0, 0.0],
+            ..zero.clone()
+        },
+    ];
+    let prior = Prior {
+        x0: vec![0.1, 0.0],
+        p0: vec![1.0, 0.2, 0.2, 0.7],
+        at: PriorAt::T0,
+    };
+    let got = likelihood_and_gradient(&m0, &partials, &prior, &data).unwrap();
+
+    // The second route.
+    let mat = |v: &[f64], r: usize, c: usize| DMatrix::from_row_slice(r, c, v);
+    let (phi, g, q, h, rr) = (
+        mat(&m0.phi, 2, 2),
+        mat(&m0.g, 2, 2),
+        mat(&m0.q, 2, 2),
+        mat(&m0.h, 2, 2),
+        mat(&m0.r, 2, 2),
+    );
+    let u = DVector::from_column_slice(&m0.u);
+    let dm: Vec<[DMatrix<f64>; 5]> = partials
+        .iter()
+        .map(|p| {
+            [
+                mat(&p.phi, 2, 2),
+                mat(&p.g, 2, 2),
+                mat(&p.q, 2, 2),
+                mat(&p.h, 2, 2),
+                mat(&p.r, 2, 2),
+            ]
+        })
+        .collect();
+    let np = partials.len();
+    let mut x = DVector::from_column_slice(&prior.x0);
+    let mut p = mat(&prior.p0, 2, 2);
+    let mut dx = vec![DVector::zeros(2); np];
+    let mut dp = vec![DMatrix::zeros(2, 2); np];
+    let (mut j, mut grad, mut info) = (0.0, vec![0.0; np], vec![0.0; np * np]);
+    for k in 0..d {
+        // predict (the prior sits at t0)
+        let (x_new, p_new) = (
+            &phi * &x + &u,
+            &phi * &p * phi.transpose() + &g * &q * g.transpose(),
+        );
+        for i in 0..np {
+            let [dphi, dg, dq, _, _] = &dm[i];
+            let ddx = dphi * &x + &phi * &dx[i];
+            let ddp = dphi * &p * phi.transpose()
+                + &phi * &dp[i] * phi.transpose()
+                + &phi * &p * dphi.transpose()
+                + dg * &q * g.transpose()
+                + &g * dq * g.transpose()
+                + &g * &q * dg.transpose();
+            dx[i] = ddx;
+            dp[i] = ddp;
+        }
+        (x, p) = (x_new, p_new);
+        let avail: Vec<usize> = (0..2).filter(|&a| !data.z[k * 2 + a].is_nan()).collect();
+        let sel = |mm: &DMatrix<f64>, rows: bool| -> DMatrix<f64> {
+            if rows {
+                DMatrix::from_fn(avail.len(), mm.ncols(), |a, b| mm[(avail[a], b)])
+            } else {
+                DMatrix::from_fn(avail.len(), avail.len(), |a, b| mm[(avail[a], avail[b])])
+            }
+        };
+        let (ha, ra) = (sel(&h, true), sel(&rr, false));
+        let za = DVector::from_iterator(avail.len(), avail.iter().map(|&a| data.z[k * 2 + a]));
+        let nu = &za - &ha * &x;
+        let sm = &ha * &p * ha.transpose() + &ra;
+        let si = sm.clone().try_inverse().unwrap();
+        j += 0.5
+            * ((nu.transpose() * &si * &nu)[(0, 0)]
+                + sm.determinant().ln()
+                + avail.len() as f64 * std::f64::consts::TAU.ln());
+        let kg = &p * ha.transpose() * &si;
+        let mut dnu = Vec::new();
+        let mut ds = Vec::new();
+        for i in 0..np {
+            let (dh, dr) = (sel(&dm[i][3], true), sel(&dm[i][4], false));
+            dnu.push(-(&dh * &x) - &ha * &dx[i]);
+            ds.push(
+                &dh * &p * ha.transpose()
+                    + &ha * &dp[i] * ha.transpose()
+                    + &ha * &p * dh.transpose()
+                    + dr,
+            );
+        }
+        for i in 0..np {
+            grad[i] += (dnu[i].transpose() * &si * &nu)[(0, 0)] + 0.5 * (&si * &ds[i]).trace()
+                - 0.5 * (nu.transpose() * &si * &ds[i] * &si * &nu)[(0, 0)];
+            for l in 0..np {
+                info[i * np + l] += (dnu[i].transpose() * &si * &dnu[l])[(0, 0)]
+                    + 0.5 * (&si * &ds[i] * &si * &ds[l]).trace();
+            }
+        }
+        let x_up = &x + &kg * &nu;
+        let p_up = &p - &kg * &sm * kg.transpose();
+        for i in 0..np {
+            let dh = sel(&dm[i][3], true);
+            let dk = (&dp[i] * ha.transpose() + &p * dh.transpose() - &kg * &ds[i]) * &si;
+            let ddx = &dx[i] + &dk * &nu + &kg * &dnu[i];
+            let ddp = &dp[i]
+                - &dk * &sm * kg.transpose()
+                - &kg * &ds[i] * kg.transpose()
+                - &kg * &sm * dk.transpose();
+            dx[i] = ddx;
+            dp[i] = ddp;
+        }
+        (x, p) = (x_up, p_up);
+    }
+    close(got.j, j, 1e-9 * j.abs(), "J");
+    let gs = grad.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    for i in 0..np {
+        close(got.gradient[i], grad[i], 1e-9 * gs, &format!("∂J/∂θ{i}"));
+    }
+    let is = info.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    for i in 0..np * np {
+        close(
+            got.fisher_sample[i],
+            info[i],
+            1e-9 * is,
+            &format!("M[{}][{}]", i / np, i % np),
+        );
+    }
+}

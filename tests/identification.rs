@@ -115,6 +115,15 @@ impl Case {
 }
 
 impl Case {
+    /// The unknowns' names, in the order of the references' vectors and matrices.
+    fn names(&self) -> Vec<String> {
+        let names = self.expected["theta_names"].as_array().unwrap();
+        names
+            .iter()
+            .map(|v| v.as_str().unwrap().to_string())
+            .collect()
+    }
+
     /// ∂(model, prior)/∂θ_i of every entry, by central differences of the case's
     /// expressions with one Richardson step (error O(h⁴): ~1e-13 here) — the entries'
     /// derivatives only, independent of the SRIF's derivative arrays under test.
@@ -391,12 +400,7 @@ fn gradient_from_the_srif_derivatives_matches_the_50_digit_reference() {
         for at in ["gradient_at_theta_initial", "gradient_at_theta_true"] {
             let g = &case.expected[at];
             let theta = &g["theta"];
-            let names: Vec<String> = case.expected["theta_names"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|v| v.as_str().unwrap().to_string())
-                .collect();
+            let names = case.names();
             let params = case.params(Some(theta));
             let (model, prior) = case.model(&params);
             let partials = case.partials(&params, &names);
@@ -504,12 +508,7 @@ fn sample_information_matches_the_50_digit_reference() {
         let case = Case::load(name);
         let data = case.data();
         let at = &case.expected["at_theta_hat"];
-        let names: Vec<String> = case.expected["theta_names"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_str().unwrap().to_string())
-            .collect();
+        let names = case.names();
         let params = case.params(Some(&at["theta"]));
         let (model, prior) = case.model(&params);
         let partials = case.partials(&params, &names);

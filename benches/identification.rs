@@ -1,12 +1,14 @@
-//! The identification's SRIF (METHOD §3): J alone, and J with its gradient over three
-//! parameters, on the damped oscillator of `tests/data/identification/case_b` (N = 2,
-//! one measurement), its 1000 measurements repeated to D steps.
+//! The identification's SRIF (METHOD §3): J alone, J with its gradient over three
+//! parameters, and both with the sample information, on the damped oscillator of
+//! `tests/data/identification/case_b` (N = 2, one measurement), its 1000 measurements
+//! repeated to D steps.
 //!
 //! `cargo bench -p kea-core --bench identification` (D = 10⁵; `KEA_BENCH_STEPS`
 //! changes it), median of 5 after a warm-up.
 
 use kea_core::identification::{
     Data, Discrete, Partial, Prior, PriorAt, likelihood, likelihood_and_gradient,
+    likelihood_gradient_information,
 };
 use std::time::Instant;
 
@@ -83,6 +85,11 @@ fn main() {
             likelihood_and_gradient(&model, &partials, &prior, &data).expect("runs"),
         );
     });
+    let gi = median(&|| {
+        std::hint::black_box(
+            likelihood_gradient_information(&model, &partials, &prior, &data).expect("runs"),
+        );
+    });
     println!(
         "identification J, N = 2, D = {d}:              median {j:.4} s ({:.0} ns/step)",
         j / d as f64 * 1e9
@@ -90,5 +97,9 @@ fn main() {
     println!(
         "identification J + gradient (3 params), D = {d}: median {g:.4} s ({:.0} ns/step)",
         g / d as f64 * 1e9
+    );
+    println!(
+        "identification J + gradient + information, D = {d}: median {gi:.4} s ({:.0} ns/step)",
+        gi / d as f64 * 1e9
     );
 }

@@ -35,10 +35,10 @@ macro_rules! kinds {
 
         /// The kind a request's `kind` names (its name or an alias), as its name.
         pub fn find(name: &str) -> Option<&'static str> {
-            $(if name == <$kind as Kind>::NAME || <$kind as Kind>::ALIASES.contains(&name) {
-                return Some(<$kind as Kind>::NAME);
-            })*
-            None
+            ALIASES
+                .iter()
+                .find(|(kind, former)| *kind == name || former.contains(&name))
+                .map(|(kind, _)| *kind)
         }
 
         /// Read and compile a request of the kind `kind` (a name or an alias); its kind's

@@ -6,6 +6,7 @@
 use kea_core::expr::{Value, compile_const};
 use kea_core::identification::{
     Data, Discrete, Partial, Prior, PriorAt, likelihood, likelihood_and_gradient,
+    likelihood_gradient_information,
 };
 use serde_json::Value as Json;
 use std::collections::BTreeMap;
@@ -512,7 +513,7 @@ fn sample_information_matches_the_50_digit_reference() {
         let params = case.params(Some(&at["theta"]));
         let (model, prior) = case.model(&params);
         let partials = case.partials(&params, &names);
-        let got = likelihood_and_gradient(&model, &partials, &prior, &data).unwrap();
+        let got = likelihood_gradient_information(&model, &partials, &prior, &data).unwrap();
         let want: Vec<f64> = at["fisher_sample"]["decimal50"]
             .as_array()
             .unwrap()
@@ -602,7 +603,7 @@ fn vector_measurements_match_a_covariance_filter_with_sensitivities() {
         p0: vec![1.0, 0.2, 0.2, 0.7],
         at: PriorAt::T0,
     };
-    let got = likelihood_and_gradient(&m0, &partials, &prior, &data).unwrap();
+    let got = likelihood_gradient_information(&m0, &partials, &prior, &data).unwrap();
 
     // The second route.
     let mat = |v: &[f64], r: usize, c: usize| DMatrix::from_row_slice(r, c, v);

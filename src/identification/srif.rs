@@ -34,7 +34,7 @@ pub struct Likelihood {
     /// ∂J/∂θ_i for each [`Partial`] given (empty without): the data part Σ eᵀ∂e and
     /// the model part ½ tr(R⁻¹∂R) + Σ ∂R̂_ii/R̂_ii − Σ ∂R̃_ii/R̃_ii per step (§2.5).
     pub gradient: Vec<f64>,
-    /// The sample Fisher information (np × np, row-major; empty without partials):
+    /// The sample Fisher information (np × np, row-major; empty unless asked for):
     /// Σ_k [∂_iνᵀS⁻¹∂_jν + ½ tr(S⁻¹∂_iS S⁻¹∂_jS)] (seed (2.3.2) with the expected
     /// values replaced by the computed ones; Harvey's form).
     pub fisher_sample: Vec<f64>,
@@ -53,8 +53,10 @@ pub struct Srif {
     n: usize,
     l: usize,
     m: usize,
-    /// The parameters (derivative blocks).
+    /// The parameters (derivative blocks), and whether the sample information is
+    /// formed beside the gradient.
     np: usize,
+    information: bool,
     /// [R̃ | z̃] (N × (N + 1)), then each parameter's [∂R̃ | ∂z̃], side by side.
     info: Vec<f64>,
     /// The measurement-update array: (N + m) rows, as wide as `info`.
@@ -96,10 +98,11 @@ pub struct Srif {
 }
 
 impl Srif {
-    /// The filter for `model` and the parameters whose `partials` are given, with Φ⁻¹
-    /// and R_w made (the time update (2.1.13) needs both: Φ must be invertible and Q
-    /// positive definite).
-    pub fn new(model: &Discrete, partials: &[Partial]) -> Result<Srif, Error> {
+    /// The filter for `model` and the parameters whose `partials` are given (with
+    /// `information`, also the sample information over them), with Φ⁻¹ and R_w made
+    /// (the time update (2.1.13) needs both: Φ must be invertible and Q positive
+    /// definite).
+    pub fn new(model: &Discrete, partials: &[Partial], information: bool) -> Result<Srif, Error> {
         let (n, l, m, np) = (model.n, model.l, model.m, partials.len());
         let phi_inv = invert(&model.phi, n).ok_or_else(|| {
             model_error(
@@ -141,6 +144,7 @@ impl Srif {
             l,
             m,
             np,
+            information: information && np > 0,
             info: vec![0.0; n * w],
             meas: vec![0.0; (n + m) * (n + 1 + m) * (1 + np)],
             time: vec![0.0; (l + n) * tw],
@@ -189,7 +193,11 @@ impl Srif {
             model_part: 0.0,
             measurements: 0,
             gradient: vec![0.0; self.np],
-            fisher_sample: vec![0.0; self.np * self.np],
+            fisher_sample: if self.information {
+                vec![0.0; self.np * self.np]
+            } else {
+                Vec::new()
+            },
         };
         let m = self.m;
         for k in 0..data.rows() {
@@ -282,10 +290,10 @@ impl Srif {
         solve_lower(&self.r_chol, &mut self.h_w[..ma * n], ma, n);
         solve_lower(&self.r_chol, &mut self.z_w[..ma], ma, 1);
         let rows = n + ma;
-        // With parameters, ma columns [0; I] ride along: T applied to them gives
+        // For the information, ma columns [0; I] ride along: T applied to them gives
         // [T12; T22], T22 the factor of the whitened S⁻¹ (T22ᵀT22 = S̄⁻¹) that the
         // sample information needs.
-        let extra = if np > 0 { ma } else { 0 };
+        let extra = if self.information { ma } else { 0 };
         let mc = ic + extra;
         let mw = mc * (1 + np);
         let a = &mut self.meas[..rows * mw];
@@ -332,7 +340,7 @@ impl Srif {
             let dr: f64 = (0..n).map(|i| a[i * mw + off + i] / a[i * mw + i]).sum();
             out.gradient[d] += de + 0.5 * self.tr_r[d] + dr;
         }
-        if np > 0 {
+        if self.information {
             self.add_information((ma, mw, mc), (k, t), out)?;
         }
         for i in 0..n {
@@ -552,7 +560,7 @@ fn accumulate(
 
 /// The likelihood of `data` under `model` from `prior` (a filter made for the call).
 pub fn likelihood(model: &Discrete, prior: &Prior, data: &Data) -> Result<Likelihood, Error> {
-    Srif::new(model, &[])?.run(model, &[], prior, data)
+    Srif::new(model, &[], false)?.run(model, &[], prior, data)
 }
 
 /// The likelihood and its gradient over the parameters whose `partials` are given.
@@ -562,7 +570,18 @@ pub fn likelihood_and_gradient(
     prior: &Prior,
     data: &Data,
 ) -> Result<Likelihood, Error> {
-    Srif::new(model, partials)?.run(model, partials, prior, data)
+    Srif::new(model, partials, false)?.run(model, partials, prior, data)
+}
+
+/// The likelihood, its gradient and the sample information over the parameters whose
+/// `partials` are given.
+pub fn likelihood_gradient_information(
+    model: &Discrete,
+    partials: &[Partial],
+    prior: &Prior,
+    data: &Data,
+) -> Result<Likelihood, Error> {
+    Srif::new(model, partials, true)?.run(model, partials, prior, data)
 }
 
 fn model_error(path: &str, message: &str) -> Error {

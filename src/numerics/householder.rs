@@ -63,7 +63,6 @@ pub fn triangularise(a: &mut [f64], rows: usize, cols: usize, p: usize) {
 /// ∂R = (L_Yᵀ + D_Y + U_Y) R is upper triangular (2.4.8)), Ω12 = −Ω21ᵀ, Ω22 = 0 (the
 /// rows under R are free up to a rotation; the seed's W22 = 0). No inverse of A.
 /// `y` (rows × p) and `omega` (rows × rows) are work buffers. R must be non-singular.
-#[allow(clippy::too_many_arguments)]
 pub fn differentiate(
     a: &mut [f64],
     rows: usize,

@@ -13,7 +13,8 @@
 //!
 //! This module holds what every kind's state shares: f64s kept as their bits ([`F`],
 //! and the serde `with` modules [`f64_bits`], [`f64s`] and [`columns`] for the loops'
-//! own structs, which are their states). The states are their kinds':
+//! own structs, which are their states; [`same_shape`], whether a kept state has the
+//! sizes of a fresh one). The states are their kinds':
 //! `analysis::state`, `monte_carlo::state`.
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -100,5 +101,43 @@ pub(crate) mod columns {
         Ok(b.into_iter()
             .map(|c| c.into_iter().map(|x| x.map(|f| f.0)).collect())
             .collect())
+    }
+}
+
+/// Whether a kept state `got` (as JSON) has the shape of `fresh`, a state made for
+/// the run at hand: the same members, and arrays of the same lengths, recursively. A
+/// member null in either (an `Option` not set) is not compared.
+pub fn same_shape(got: &serde_json::Value, fresh: &serde_json::Value) -> bool {
+    use serde_json::Value;
+    match (got, fresh) {
+        (Value::Null, _) | (_, Value::Null) => true,
+        (Value::Array(a), Value::Array(b)) => {
+            a.len() == b.len() && a.iter().zip(b).all(|(x, y)| same_shape(x, y))
+        }
+        (Value::Object(a), Value::Object(b)) => {
+            a.len() == b.len()
+                && b.iter()
+                    .all(|(k, v)| a.get(k).is_some_and(|g| same_shape(g, v)))
+        }
+        (a, b) => std::mem::discriminant(a) == std::mem::discriminant(b),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::same_shape;
+    use serde_json::json;
+
+    #[test]
+    fn a_shorter_vector_or_a_missing_member_is_another_shape() {
+        let fresh = json!({"y": [0, 0], "joseph": {"r": [0, 0, 0, 0]}, "frozen_at": null});
+        let kept = json!({"y": [7, 8], "joseph": {"r": [1, 2, 3, 4]}, "frozen_at": 12});
+        assert!(same_shape(&kept, &fresh));
+        let short = json!({"y": [7], "joseph": {"r": [1, 2, 3, 4]}, "frozen_at": 12});
+        assert!(!same_shape(&short, &fresh));
+        let inner = json!({"y": [7, 8], "joseph": {"r": [1, 2, 3]}, "frozen_at": null});
+        assert!(!same_shape(&inner, &fresh));
+        let missing = json!({"y": [7, 8], "frozen_at": null});
+        assert!(!same_shape(&missing, &fresh));
     }
 }

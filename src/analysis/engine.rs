@@ -139,7 +139,7 @@ impl<'m, const N: usize> Engine<'m, N> {
         let earlier = (!self.covariance_only)
             .then(|| self.memo.recall(STATE_KEY))
             .flatten()
-            .and_then(|text| LoopState::from_text(&text, self.steps, (n, nm), &mut dec));
+            .and_then(|text| LoopState::from_text(&text, self.steps, m, (n, nm), &mut dec));
         let resumed_from = earlier.as_ref().map(|s| s.k);
         let mut st = earlier.unwrap_or_else(|| LoopState::new(m, n, nm));
         let first = st.k + 1;

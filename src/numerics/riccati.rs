@@ -70,22 +70,6 @@ impl SequentialJoseph {
         }
     }
 
-    /// Whether a kept state is one for N states and `nm` measurements.
-    pub(crate) fn fits(&self, n: usize, nm: usize) -> bool {
-        let f = SequentialJoseph::new(n, nm);
-        [
-            (self.u.len(), f.u.len()),
-            (self.s.len(), f.s.len()),
-            (self.kt.len(), f.kt.len()),
-            (self.r_pred.len(), f.r_pred.len()),
-            (self.gain_t.len(), f.gain_t.len()),
-            (self.ht.len(), f.ht.len()),
-            (self.row.len(), f.row.len()),
-        ]
-        .iter()
-        .all(|(got, want)| got == want)
-    }
-
     /// One step: from R_{k−1} (`big_r`, overwritten with R_k), A_{k−1} = I + E with E
     /// given by its non-zeros, B_{k−1}, and the prepared measurements. Returns false
     /// if an innovation variance is not positive (q_k singular).

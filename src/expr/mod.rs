@@ -34,6 +34,7 @@ pub use value::Value;
 pub const LANES: usize = 16;
 
 pub mod block;
+pub mod dual;
 mod lex;
 mod limits;
 mod time_matrix;
@@ -190,15 +191,7 @@ pub fn compile_entry(
         ));
     }
     let (plain, literals) = translate(text, params, path, allow_t)?;
-    let expr = ScalarEx::parse(&plain).map_err(|e| {
-        FieldError::new(
-            path,
-            format!(
-                "cannot parse expression \"{text}\": {}",
-                describe(&e.to_string())
-            ),
-        )
-    })?;
+    let expr = ScalarEx::parse(&plain).map_err(|e| cannot_parse(text, path, &e))?;
     let mut vars = Vec::with_capacity(expr.var_names().len());
     let mut t_slot = None;
     for (i, name) in expr.var_names().iter().enumerate() {
@@ -233,15 +226,7 @@ pub fn compile_entry(
         Some(t_slot) => {
             // The same text over blocks parses whenever the f64 parse did (the
             // operator sets are the same, `expr_block`'s test); checked all the same.
-            let block = BlockEx::parse(&plain).map_err(|e| {
-                FieldError::new(
-                    path,
-                    format!(
-                        "cannot parse expression \"{text}\": {}",
-                        describe(&e.to_string())
-                    ),
-                )
-            })?;
+            let block = BlockEx::parse(&plain).map_err(|e| cannot_parse(text, path, &e))?;
             Ok(Entry::Time(Box::new(TimeFn {
                 expr: Arc::new(expr),
                 vars,
@@ -263,6 +248,64 @@ pub fn compile_const(
         Entry::Const(x) => Ok(x),
         Entry::Time(_) => Err(FieldError::new(path, "must not depend on t")),
     }
+}
+
+/// exmex's refusal of a translated `text`, at `path`.
+fn cannot_parse(text: &str, path: &str, e: &exmex::ExError) -> FieldError {
+    FieldError::new(
+        path,
+        format!(
+            "cannot parse expression \"{text}\": {}",
+            describe(&e.to_string())
+        ),
+    )
+}
+
+/// A constant entry's value, bit for bit [`compile_const`]'s, and its exact partial
+/// derivatives with respect to the params `wrt` (forward-mode dual numbers,
+/// [`dual`]). Every name in `wrt` is a param. Bad entries give `compile_const`'s
+/// errors; a derivative that is not finite (`sqrt(q)` at q = 0) is an error at `path`.
+/// A number, or a text that does not name `wrt[i]`, has derivative 0 there, exactly.
+pub fn compile_const_with_derivatives(
+    value: &Value,
+    params: &BTreeMap<String, f64>,
+    wrt: &[&str],
+    path: &str,
+) -> Result<(f64, Vec<f64>), FieldError> {
+    debug_assert!(
+        wrt.iter().all(|name| params.contains_key(*name)),
+        "{wrt:?} are not all params"
+    );
+    let x = compile_const(value, params, path)?;
+    let mut derivatives = vec![0.0; wrt.len()];
+    let Value::Expr(text) = value else {
+        return Ok((x, derivatives));
+    };
+    let used = names(text);
+    let (slots, directions): (Vec<usize>, Vec<&str>) = wrt
+        .iter()
+        .enumerate()
+        .filter(|(_, name)| used.iter().any(|u| u == *name))
+        .map(|(i, name)| (i, *name))
+        .unzip();
+    if directions.is_empty() {
+        return Ok((x, derivatives));
+    }
+    let duals = dual::along(text, params, &directions, path)?;
+    for ((slot, name), d) in slots.into_iter().zip(directions).zip(duals) {
+        debug_assert_eq!(d.v.to_bits(), x.to_bits(), "{text}");
+        if !d.d.is_finite() {
+            return Err(FieldError::new(
+                path,
+                format!(
+                    "the derivative of \"{text}\" with respect to {name} is not finite at {name} = {}",
+                    params[name]
+                ),
+            ));
+        }
+        derivatives[slot] = d.d;
+    }
+    Ok((x, derivatives))
 }
 
 /// The names a text uses — params, `t`, constants, functions — each once, in the

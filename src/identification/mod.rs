@@ -6,9 +6,11 @@
 //! (issue 38): the model format's discrete form, the entries' derivatives from the
 //! expressions, data CSVs, the minimisers, and the kind in the registry.
 
+pub mod data;
 pub mod model;
 pub mod srif;
 
+pub use data::{Grid, from_csv, from_rows, to_csv};
 pub use model::{Data, Discrete, Partial, Prior, PriorAt};
 pub use srif::{
     Likelihood, Srif, likelihood, likelihood_and_gradient, likelihood_gradient_information,

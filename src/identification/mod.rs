@@ -6,6 +6,7 @@
 //! (issue 38): the model format's discrete form, the entries' derivatives from the
 //! expressions, data CSVs, the minimisers, and the kind in the registry.
 
+pub mod minimise;
 pub mod model;
 pub mod srif;
 

@@ -127,6 +127,7 @@ kinds! {
     Analysis => crate::analysis::kind::Analysis,
     MonteCarlo => crate::monte_carlo::kind::MonteCarlo,
     Synthesis => crate::synthesis::kind::Synthesis,
+    Identification => crate::identification::kind::Identification,
 }
 
 /// The error for a `kind` that names none (at the request's `kind`).

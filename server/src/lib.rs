@@ -51,6 +51,8 @@ commands! {
     MonteCarlo(cli::monte_carlo::Args),
     /// Synthesis: the error levels that reach a desired filtering effect.
     Synthesize(cli::synthesize::Args),
+    /// Identification: the maximum-likelihood params of a model from measured data.
+    Identify(cli::identify::Args),
     /// Run the HTTP service (API, jobs, web UI).
     Serve(serve::Args),
 }

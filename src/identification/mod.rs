@@ -1,14 +1,25 @@
 //! Identification (METHOD §3, seed 003): the maximum-likelihood parameters of a
-//! linear model from measured data, with a square-root information filter.
+//! linear discrete-time model from measured data, with a square-root information
+//! filter.
 //!
-//! Built so far: the discrete-time model at one θ ([`model`]), and the SRIF's
-//! likelihood J(θ), its gradient and its sample information ([`srif`]). To come
-//! (issue 38): the model format's discrete form, the entries' derivatives from the
-//! expressions, data CSVs, the minimisers, and the kind in the registry.
+//! From the bottom up: the model at one θ ([`model`]) and from kea's model format with
+//! the entries' derivatives ([`discrete`]); the measurements ([`data`]); the SRIF's
+//! likelihood, gradient and sample information ([`srif`]); the minimisers
+//! ([`minimise`]); the request ([`request`]), the fit and its statistics ([`fit`]),
+//! the result ([`result`]), its report ([`report`]), its work estimate ([`work`]) and
+//! the kind ([`kind`]).
 
 pub mod data;
+pub mod discrete;
+pub mod fit;
+pub mod kind;
+pub mod minimise;
 pub mod model;
+pub mod report;
+pub mod request;
+pub mod result;
 pub mod srif;
+pub mod work;
 
 pub use data::{Grid, from_csv, from_rows, to_csv};
 pub use model::{Data, Discrete, Partial, Prior, PriorAt};

@@ -23,16 +23,7 @@ pub struct Discrete {
     pub r: Vec<f64>,
 }
 
-/// Where the initial state x ~ N(x0, P0) sits.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PriorAt {
-    /// At t0, one transition before the first measurement at t_1 (kea's convention,
-    /// as in the analysis).
-    T0,
-    /// At the first measurement itself: x_1 ~ N(x0, P0) (statsmodels' and Durbin and
-    /// Koopman's convention, and the identification references').
-    FirstMeasurement,
-}
+pub use crate::model::PriorAt;
 
 /// The initial state's distribution.
 #[derive(Clone, Debug, PartialEq)]

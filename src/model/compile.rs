@@ -6,7 +6,7 @@ use crate::error::{MAX_REPORTED_ERRORS, omitted_entry};
 use crate::expr::{ExprBudget, TimeMatrix, compile_const};
 use crate::model::Overrides;
 use crate::model::limits::*;
-use crate::model::{MODEL_FORMAT_VERSION, Model, Steps};
+use crate::model::{MODEL_FORMAT_VERSION, Model, PriorAt, Steps};
 use crate::text::{is_identifier, num};
 
 mod blind;
@@ -16,7 +16,7 @@ mod names;
 mod noise;
 use blind::blind_measurements;
 use criteria::weights;
-use matrices::{check_shape, const_vector, time_matrix, time_vector};
+use matrices::{check_shape, const_matrix, const_vector, time_matrix, time_vector};
 use names::check_names;
 use noise::noise_cov;
 
@@ -40,6 +40,10 @@ pub struct CompiledModel {
     pub steps: StepPlan,
     /// a(t), N×N.
     pub a: TimeMatrix,
+    /// Φ, N×N, of a discrete model ([`compile_discrete`]; `a` is then zero).
+    pub transition: Option<Vec<f64>>,
+    /// Where the initial state (y0, η0) sits.
+    pub prior_at: PriorAt,
     /// u(t), N×1.
     pub u: TimeMatrix,
     /// b(t), N×L.
@@ -141,8 +145,28 @@ impl Errors {
     }
 }
 
-/// Validate and compile a model with parameter overrides.
+/// A model's form: continuous (`system.a`, discretised by the analysis, METHOD §1.2)
+/// or discrete (`system.transition`, Φ per step, METHOD §3 (1.4.1)).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Form {
+    Continuous,
+    Discrete,
+}
+
+/// Validate and compile a continuous model (`system.a`) with parameter overrides: the
+/// analysis's, the Monte Carlo's and the synthesis's.
 pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
+    compile_form(model, set, Form::Continuous)
+}
+
+/// Validate and compile a discrete model (`system.transition`) with parameter
+/// overrides: the identification's. Its Φ is [`CompiledModel::transition`]; `a` is
+/// zero.
+pub fn compile_discrete(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
+    compile_form(model, set, Form::Discrete)
+}
+
+fn compile_form(model: &Model, set: &Overrides, form: Form) -> Result<CompiledModel, Error> {
     let mut errs = Errors(Vec::new());
 
     if model.kea_model != MODEL_FORMAT_VERSION {
@@ -364,17 +388,59 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
 
     // What the model's distinct time-dependent expressions use (expr::MAX_TIME_*).
     let mut exprs = ExprBudget::default();
-    let a = time_matrix(
-        &sys.a,
-        n,
-        Some(n),
-        "system.a",
-        "N",
-        &params,
-        t0,
-        &mut exprs,
-        &mut errs,
-    );
+    let (a, transition) = match form {
+        Form::Continuous => {
+            if sys.transition.is_some() {
+                errs.at(
+                    "system.transition",
+                    "a discrete-time model (transition, Φ) is read by the identification only; the analysis, the Monte Carlo and the synthesis need the continuous a",
+                );
+            } else if sys.a.is_empty() {
+                errs.at("system.a", "missing: give a (N×N)");
+            }
+            if sys.prior_at == Some(PriorAt::FirstMeasurement) {
+                errs.at(
+                    "system.prior_at",
+                    "\"first_measurement\" is for a discrete model (transition); a continuous model's initial state is at t0",
+                );
+            }
+            let a = if sys.a.is_empty() {
+                TimeMatrix::constant(n, n, vec![0.0; n * n])
+            } else {
+                time_matrix(
+                    &sys.a,
+                    n,
+                    Some(n),
+                    "system.a",
+                    "N",
+                    &params,
+                    t0,
+                    &mut exprs,
+                    &mut errs,
+                )
+            };
+            (a, None)
+        }
+        Form::Discrete => {
+            if !sys.a.is_empty() {
+                errs.at(
+                    "system.a",
+                    "a discrete model gives transition (Φ, N×N), not a: give one of them",
+                );
+            }
+            let transition = match &sys.transition {
+                None => {
+                    errs.at(
+                        "system.transition",
+                        "missing: give transition (Φ, N×N: x_k = Φ x_{k−1} + u + b F)",
+                    );
+                    None
+                }
+                Some(m) => Some(const_matrix(m, n, "system.transition", &params, &mut errs)),
+            };
+            (TimeMatrix::constant(n, n, vec![0.0; n * n]), transition)
+        }
+    };
     let u = match &sys.u {
         Some(u) => time_vector(u, n, "system.u", "N", &params, t0, &mut exprs, &mut errs),
         None => TimeMatrix::constant(n, 1, vec![0.0; n]),
@@ -657,6 +723,8 @@ pub fn compile(model: &Model, set: &Overrides) -> Result<CompiledModel, Error> {
         t_end: t.t_end,
         steps,
         a,
+        transition,
+        prior_at: sys.prior_at.unwrap_or_default(),
         u,
         b,
         c,

@@ -145,8 +145,16 @@ fn default_auto_max() -> u64 {
 pub struct System {
     /// State names; their count is N.
     pub states: Vec<String>,
-    /// N×N.
+    /// N×N, the continuous model's a(t); absent in a discrete model (`transition`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub a: Vec<Vec<Value>>,
+    /// Φ (N×N) of a discrete-time model, in place of `a`: x_k = Φ x_{k−1} + u + b F,
+    /// F ~ N(0, W), with no Δt scaling (METHOD §3 (1.4.1)). Read by the identification.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub transition: Option<Vec<Vec<Value>>>,
+    /// Where the initial state (y0, η0) sits; absent: at t0 ([`PriorAt::T0`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior_at: Option<PriorAt>,
     /// N; zero when absent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub u: Option<Vec<Value>>,
@@ -164,6 +172,20 @@ pub struct System {
     /// Full model-error covariance W (L×L), instead of `phi`.
     #[serde(default, rename = "W", skip_serializing_if = "Option::is_none")]
     pub w: Option<Vec<Vec<Value>>>,
+}
+
+/// Where the initial state x ~ N(y0, diag η0²) sits.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PriorAt {
+    /// At t0, one transition before the first measurement at t_1 (kea's convention,
+    /// as in the analysis).
+    #[default]
+    T0,
+    /// At the first measurement itself: x_1 ~ N(y0, diag η0²) (statsmodels' and Durbin
+    /// and Koopman's convention, and the identification references'). Discrete models
+    /// only.
+    FirstMeasurement,
 }
 
 /// The measurements Z = C y + Γ(t) Φ (1.2).

@@ -8,7 +8,7 @@ pub mod limits;
 pub mod params;
 pub mod schedule;
 
-pub use compile::{CompiledModel, compile};
+pub use compile::{CompiledModel, Form, compile, compile_discrete};
 
 /// Validate a model without running it; every problem found is returned.
 pub fn check(model: &Model, set: &Overrides) -> Result<(), Error> {

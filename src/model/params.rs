@@ -12,6 +12,8 @@ use std::collections::BTreeMap;
 pub enum Member {
     /// `system.a` (N×N).
     A,
+    /// `system.transition` (N×N, Φ of a discrete model).
+    Transition,
     /// `system.u` (N).
     U,
     /// `system.b` (N×L).
@@ -43,6 +45,7 @@ impl Member {
     pub fn path(self) -> &'static str {
         match self {
             Member::A => "system.a",
+            Member::Transition => "system.transition",
             Member::U => "system.u",
             Member::B => "system.b",
             Member::Y0 => "system.y0",
@@ -75,6 +78,7 @@ impl EntryRef {
         let m = self.member.path();
         match self.member {
             Member::A
+            | Member::Transition
             | Member::B
             | Member::W
             | Member::C
@@ -95,6 +99,7 @@ impl EntryRef {
         let vector = |x: Option<&'m Vec<Value>>| x?.get(self.row);
         match self.member {
             Member::A => matrix(Some(&s.a)),
+            Member::Transition => matrix(s.transition.as_ref()),
             Member::U => vector(s.u.as_ref()),
             Member::B => matrix(Some(&s.b)),
             Member::Y0 => vector(s.y0.as_ref()),
@@ -147,6 +152,7 @@ fn expressions(model: &Model) -> Vec<(EntryRef, &str)> {
     let (s, m) = (&model.system, &model.measurement);
     let matrices = [
         (Member::A, Some(&s.a)),
+        (Member::Transition, s.transition.as_ref()),
         (Member::B, Some(&s.b)),
         (Member::W, s.w.as_ref()),
         (Member::C, Some(&m.c)),

@@ -563,6 +563,21 @@ pub fn cholesky_solve(l: &[f64], x: &mut [f64], m: usize, p: usize) {
     }
 }
 
+/// The inverse of a symmetric positive-definite m×m matrix, by its Cholesky factor;
+/// None when it is not positive definite (made once per result, not per step).
+pub fn inverse_spd(a: &[f64], m: usize) -> Option<Vec<f64>> {
+    let mut l = a.to_vec();
+    if !cholesky(&mut l, m) {
+        return None;
+    }
+    let mut x = vec![0.0; m * m];
+    for i in 0..m {
+        x[i * m + i] = 1.0;
+    }
+    cholesky_solve(&l, &mut x, m, m);
+    Some(x)
+}
+
 /// Solve L Y = S in place for Y (m×p), L lower triangular (the lower triangle of `l`,
 /// as [`cholesky`] leaves it): Y = L⁻¹ S, e.g. S whitened by its covariance's factor.
 #[inline(always)]

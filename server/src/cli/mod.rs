@@ -2,6 +2,7 @@
 //! core, and prints. Errors go to stderr as `path: message`, one per line.
 
 pub mod analyze;
+pub mod identify;
 pub mod monte_carlo;
 pub mod presets;
 pub mod synthesize;

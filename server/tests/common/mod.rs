@@ -340,3 +340,28 @@ pub fn long_model(steps: u64) -> Value {
     m["options"]["steady_state_shortcut"] = false.into();
     m
 }
+
+/// A small identification job: an AR(1) x_k = a x_{k−1} + F, z = x + Φ, with a and the
+/// process noise's SKO q estimated from 60 inline rows (a fixed, deterministic series).
+pub fn identification_job() -> Value {
+    let rows: Vec<Value> = (1..=60)
+        .map(|k| {
+            let k = k as f64;
+            serde_json::json!([k, 0.8 * (1.7 * k).sin() + 0.3 * (0.37 * k).cos()])
+        })
+        .collect();
+    serde_json::json!({
+        "kind": "identification",
+        "model": {
+            "kea_model": 1,
+            "name": "ar1",
+            "params": {"a": 0.5, "q": 0.5},
+            "time": {"t0": 0, "t_end": 60, "steps": 60},
+            "system": {"states": ["x"], "transition": [["a"]], "b": [[1]], "phi": ["q"],
+                       "eta0": [1]},
+            "measurement": {"names": ["z"], "c": [[1]], "gamma": [[1]], "psi": [0.3]}
+        },
+        "data": {"rows": rows},
+        "estimate": {"a": {"initial": 0.5, "min": -0.99, "max": 0.99}, "q": {"initial": 0.5, "min": 0.01}}
+    })
+}

@@ -161,3 +161,26 @@ pub(super) fn const_vector(
         })
         .collect()
 }
+
+/// A constant rows × rows matrix (params allowed, `t` not), row-major: a discrete
+/// model's Φ.
+pub(super) fn const_matrix(
+    m: &[Vec<Value>],
+    n: usize,
+    path: &str,
+    params: &BTreeMap<String, f64>,
+    errs: &mut Errors,
+) -> Vec<f64> {
+    let mut out = vec![0.0; n * n];
+    if check_shape(m, n, Some(n), path, "N", "N", errs) {
+        for i in 0..n {
+            for j in 0..n {
+                match compile_const(&m[i][j], params, &format!("{path}[{i}][{j}]")) {
+                    Ok(x) => out[i * n + j] = x,
+                    Err(e) => errs.push(e),
+                }
+            }
+        }
+    }
+    out
+}

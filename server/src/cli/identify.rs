@@ -1,0 +1,126 @@
+//! `kea identify REQUEST.json [--model FILE|preset:NAME] [--method M] [--json]
+//! [--max-work UNITS]`: the maximum-likelihood params of a discrete
+//! model from measured data (METHOD §3). The request's `data.csv` names a CSV file
+//! relative to the request file; it is read here and sent to the core as
+//! `data.csv_text`.
+
+use crate::Run;
+use crate::parallel::Rayon;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum MethodArg {
+    Scoring,
+    Gradient,
+    Conjugate,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The identification request (JSON: `model`, `data`, `estimate`, `method`); see
+    /// docs/identification.md. `-` reads it from stdin.
+    pub request: String,
+    /// Take the model from this file, or `preset:NAME` (replaces the request's `model`).
+    #[arg(long)]
+    pub model: Option<String>,
+    /// The minimiser (replaces the request's `method`; default scoring).
+    #[arg(long, value_enum)]
+    pub method: Option<MethodArg>,
+    /// Print the whole result as JSON instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub limit: super::WorkLimit,
+}
+
+impl Run for Args {
+    fn run(self) -> ExitCode {
+        let mut value = match super::read_json(&self.request) {
+            Ok(v) => v,
+            Err(c) => return c,
+        };
+        let Value::Object(obj) = &mut value else {
+            return super::report_error(&kea_core::Error::invalid(
+                "",
+                "an identification request is a JSON object ({\"model\": …, \"data\": …, \"estimate\": …}, docs/identification.md)",
+            ));
+        };
+        if let Some(arg) = &self.model {
+            match super::read_json(arg) {
+                Ok(m) => {
+                    obj.insert("model".into(), m);
+                }
+                Err(c) => return c,
+            }
+        }
+        if let Some(Value::String(name)) = obj.get("model")
+            && let Some(preset) = name.strip_prefix("preset:")
+        {
+            match super::read_json(&format!("preset:{preset}")) {
+                Ok(m) => {
+                    obj.insert("model".into(), m);
+                }
+                Err(c) => return c,
+            }
+        }
+        if let Some(m) = self.method {
+            let name = match m {
+                MethodArg::Scoring => "scoring",
+                MethodArg::Gradient => "gradient",
+                MethodArg::Conjugate => "conjugate",
+            };
+            obj.insert("method".into(), name.into());
+        }
+        if let Err(code) = read_csv(obj, &self.request) {
+            return code;
+        }
+        let exec = match Rayon::new(Some(1)) {
+            Ok(x) => x,
+            Err(e) => {
+                eprintln!("{e}");
+                return ExitCode::from(super::EXIT_FAILURE);
+            }
+        };
+        let run = super::KindRun {
+            kind: "identification",
+            input: &self.request,
+            json: self.json,
+            csv: None,
+            limit: &self.limit,
+            model_file: false,
+        };
+        run.run(value, &exec)
+    }
+}
+
+/// `data.csv`, a path relative to the request file (or to the working directory for a
+/// request on stdin), read into `data.csv_text`.
+fn read_csv(obj: &mut serde_json::Map<String, Value>, request: &str) -> Result<(), ExitCode> {
+    let Some(Value::Object(data)) = obj.get_mut("data") else {
+        return Ok(());
+    };
+    let Some(Value::String(file)) = data.get("csv") else {
+        return Ok(());
+    };
+    let base = match Path::new(request).parent() {
+        Some(dir) if request != "-" && !request.starts_with("preset:") => dir.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let path = base.join(file);
+    let text = std::fs::read(&path)
+        .map_err(|e| {
+            eprintln!("data.csv: cannot read {}: {e}", path.display());
+            ExitCode::from(super::EXIT_INVALID)
+        })
+        .and_then(|bytes| {
+            String::from_utf8(bytes).map_err(|_| {
+                eprintln!("data.csv: {} is not UTF-8 text", path.display());
+                ExitCode::from(super::EXIT_INVALID)
+            })
+        })?;
+    data.remove("csv");
+    data.insert("csv_text".into(), text.into());
+    Ok(())
+}

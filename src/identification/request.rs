@@ -1,0 +1,276 @@
+//! An identification request, read strictly once: `{model, set?, data, estimate,
+//! method?, max_iterations?}` (docs/identification.md). Every problem is named at its
+//! path; the data are read against the model's grid and measurement names.
+
+use super::data::{Grid, MAX_ROWS, from_csv, from_rows};
+use super::minimise::Method;
+use super::model::Data;
+use crate::error::{Error, FieldError, got, member_path};
+use crate::model::{Model, Overrides};
+use crate::request;
+use serde_json::{Map, Value};
+
+/// The most iterations a request may ask for.
+pub const MAX_ITERATIONS: u64 = 10_000;
+/// The iterations when the request does not say.
+pub const DEFAULT_MAX_ITERATIONS: usize = 100;
+
+/// One estimated param: its initial value and bounds (±∞ when not given).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Estimate {
+    pub name: String,
+    pub initial: f64,
+    pub min: f64,
+    pub max: f64,
+}
+
+/// An identification request, read and checked.
+#[derive(Clone, Debug)]
+pub struct IdentificationRequest {
+    pub model: Model,
+    /// The fixed overrides (`set`); the estimated params are not among them.
+    pub set: Overrides,
+    /// In name order (the order of the result's vectors and matrices).
+    pub estimate: Vec<Estimate>,
+    pub method: Method,
+    pub max_iterations: usize,
+    pub data: Data,
+}
+
+impl IdentificationRequest {
+    /// The estimated params' names, in order.
+    pub fn names(&self) -> Vec<&str> {
+        self.estimate.iter().map(|e| e.name.as_str()).collect()
+    }
+
+    /// `set` with the estimated params at `theta`.
+    pub fn params_at(&self, theta: &[f64]) -> Overrides {
+        let mut p = self.set.clone();
+        for (e, x) in self.estimate.iter().zip(theta) {
+            p.insert(e.name.clone(), *x);
+        }
+        p
+    }
+}
+
+/// Read a request object (its members already checked against the kind's list).
+pub fn read(obj: &Map<String, Value>) -> Result<IdentificationRequest, Error> {
+    let mut errors = Vec::new();
+    let (model, set) = request::model_and_set(obj, &mut errors);
+    let method = match request::choice(
+        obj,
+        "method",
+        &[
+            ("scoring", "Fisher scoring with a line search, the default"),
+            ("gradient", "gradient descent with step halving"),
+            (
+                "conjugate",
+                "conjugate directions, restarted every p iterations",
+            ),
+        ],
+        &mut errors,
+    ) {
+        Some(1) => Method::Gradient,
+        Some(2) => Method::Conjugate,
+        _ => Method::Scoring,
+    };
+    let max_iterations = match request::whole(
+        obj,
+        "max_iterations",
+        &format!("a whole number of iterations, 1 to {MAX_ITERATIONS}"),
+        &mut errors,
+    ) {
+        Some(k) if (1..=MAX_ITERATIONS).contains(&k) => k as usize,
+        Some(k) => {
+            errors.push(FieldError::new(
+                "max_iterations",
+                format!("expected 1 to {MAX_ITERATIONS} iterations, got {k}"),
+            ));
+            DEFAULT_MAX_ITERATIONS
+        }
+        None => DEFAULT_MAX_ITERATIONS,
+    };
+    let Some(model) = model else {
+        return Err(Error::Invalid(errors));
+    };
+    let estimate = estimates(obj.get("estimate"), &model, &set, &mut errors);
+    if !errors.is_empty() {
+        return Err(Error::Invalid(errors));
+    }
+    // The model at the initial values: its errors under `model.`, its grid and names
+    // for the data.
+    let mut at_initial = set.clone();
+    for e in &estimate {
+        at_initial.insert(e.name.clone(), e.initial);
+    }
+    let compiled = crate::model::compile_discrete(&model, &at_initial).map_err(request::locate)?;
+    if compiled.max_steps() > MAX_ROWS as u64 {
+        return Err(Error::invalid(
+            "model.time.steps",
+            format!(
+                "{} steps: the identification's data hold at most {MAX_ROWS} steps",
+                compiled.max_steps()
+            ),
+        ));
+    }
+    let grid = Grid::new(compiled.t0, compiled.t_end, compiled.max_steps() as usize);
+    let data = data(obj.get("data"), &compiled.measurements, &grid)?;
+    Ok(IdentificationRequest {
+        model,
+        set,
+        estimate,
+        method,
+        max_iterations,
+        data,
+    })
+}
+
+/// `estimate`: an object of params, each `{initial?, min?, max?}` (or `{}`: from the
+/// model's value, unbounded).
+fn estimates(
+    v: Option<&Value>,
+    model: &Model,
+    set: &Overrides,
+    errors: &mut Vec<FieldError>,
+) -> Vec<Estimate> {
+    let example =
+        "an object of the params to estimate, e.g. {\"q\": {\"initial\": 0.5, \"min\": 0}}";
+    let obj = match v {
+        None => {
+            errors.push(FieldError::new("estimate", format!("missing: {example}")));
+            return Vec::new();
+        }
+        Some(Value::Object(o)) if !o.is_empty() => o,
+        Some(other) => {
+            errors.push(FieldError::new(
+                "estimate",
+                format!("expected {example}, got {}", got(other)),
+            ));
+            return Vec::new();
+        }
+    };
+    let mut out = Vec::new();
+    for (name, spec) in obj {
+        let path = member_path("estimate", name);
+        let Some(value) = model.params.get(name) else {
+            let known: Vec<&str> = model.params.keys().map(String::as_str).collect();
+            errors.push(FieldError::new(
+                &path,
+                format!(
+                    "no parameter \"{name}\" in the model (params: {})",
+                    if known.is_empty() {
+                        "none".into()
+                    } else {
+                        known.join(", ")
+                    }
+                ),
+            ));
+            continue;
+        };
+        if set.contains_key(name) {
+            errors.push(FieldError::new(
+                &path,
+                format!("\"{name}\" is both estimated and fixed by set.{name}: give it once"),
+            ));
+            continue;
+        }
+        let Value::Object(spec) = spec else {
+            errors.push(FieldError::new(
+                &path,
+                format!(
+                    "expected {{\"initial\": x, \"min\": lo, \"max\": hi}} (each optional), got {}",
+                    got(spec)
+                ),
+            ));
+            continue;
+        };
+        let before = errors.len();
+        for k in spec.keys() {
+            if !["initial", "min", "max"].contains(&k.as_str()) {
+                errors.push(FieldError::new(
+                    member_path(&path, k),
+                    "unknown member; expected one of: initial, min, max",
+                ));
+            }
+        }
+        let mut number = |k: &str, default: f64| match spec.get(k) {
+            None => default,
+            Some(v) => match v.as_f64() {
+                Some(x) if x.is_finite() => x,
+                _ => {
+                    errors.push(FieldError::new(
+                        member_path(&path, k),
+                        format!("expected a finite number, got {}", got(v)),
+                    ));
+                    default
+                }
+            },
+        };
+        let initial = number("initial", *value);
+        let min = number("min", f64::NEG_INFINITY);
+        let max = number("max", f64::INFINITY);
+        if errors.len() == before {
+            if min >= max {
+                errors.push(FieldError::new(
+                    member_path(&path, "max"),
+                    format!("max ({max}) must be greater than min ({min})"),
+                ));
+            } else if !(min..=max).contains(&initial) {
+                errors.push(FieldError::new(
+                    member_path(&path, "initial"),
+                    format!("the initial value {initial} is outside [min, max] = [{min}, {max}]"),
+                ));
+            }
+        }
+        out.push(Estimate {
+            name: name.clone(),
+            initial,
+            min,
+            max,
+        });
+    }
+    out
+}
+
+/// `data`: `{"rows": [[t, z1, …], …]}` or `{"csv_text": "t,z1,…\n…"}` (a file's
+/// content; the command line reads `{"csv": PATH}` into it).
+fn data(v: Option<&Value>, names: &[String], grid: &Grid) -> Result<Data, Error> {
+    let forms = "{\"rows\": [[t, z1, …], …]} or {\"csv_text\": \"t,z1,…\"} (the command line also reads {\"csv\": \"FILE\"})";
+    let obj = match v {
+        None => {
+            return Err(Error::invalid(
+                "data",
+                format!("missing: the measurements, as {forms}"),
+            ));
+        }
+        Some(Value::Object(o)) => o,
+        Some(other) => {
+            return Err(Error::invalid(
+                "data",
+                format!("expected {forms}, got {}", got(other)),
+            ));
+        }
+    };
+    let keys: Vec<&str> = obj.keys().map(String::as_str).collect();
+    match keys.as_slice() {
+        ["rows"] => from_rows(&obj["rows"], names, grid, "data.rows"),
+        ["csv_text"] => match &obj["csv_text"] {
+            Value::String(text) => from_csv(text, names, grid, "data.csv_text"),
+            other => Err(Error::invalid(
+                "data.csv_text",
+                format!(
+                    "expected the CSV file's content as a string, got {}",
+                    got(other)
+                ),
+            )),
+        },
+        ["csv"] => Err(Error::invalid(
+            "data.csv",
+            "a file is read by the command line (kea identify); in a request sent to the server or the browser, give the file's content as data.csv_text",
+        )),
+        _ => Err(Error::invalid(
+            "data",
+            format!("expected exactly one of rows, csv_text: {forms}"),
+        )),
+    }
+}

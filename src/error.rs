@@ -113,7 +113,7 @@ impl Error {
     }
 
     /// The error with every path mapped by `f`.
-    fn map_paths(self, f: impl Fn(&str) -> String) -> Self {
+    pub fn map_paths(self, f: impl Fn(&str) -> String) -> Self {
         self.map(f, |m| m)
     }
 

@@ -883,3 +883,64 @@ fn a_grid_no_cell_of_which_meets_the_target_is_not_found() {
         assert_eq!(v["status"], status, "threshold {threshold}");
     }
 }
+
+/// `kea identify` on the example request: its CSV read relative to the request file,
+/// the optimum and standard errors an independent implementation found for this data
+/// (tests/data/identification/case_b_oscillator.expected.json: θ̂ and the sample
+/// information's standard errors); `--method` replaces the request's; a CSV that is not
+/// there, or a bad cell in it, is input to fix (exit 2) with the file, row and column.
+#[test]
+fn identify_reads_the_request_and_its_csv() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let example = root.join("examples/identification/oscillator.json");
+    let example = example.to_str().unwrap();
+    let (code, out, err) = kea(&["identify", example, "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let r: Value = serde_json::from_str(&out).unwrap();
+    let reference = [
+        ("r", 0.9634378830434038, 0.006262557695822333),
+        ("w", 0.30180822241345795, 0.007310165276882946),
+        ("sv", 0.5323224117654461, 0.015918323695359088),
+    ];
+    for (name, value, se) in reference {
+        let e = &r["estimate"][name];
+        assert!(
+            (e["value"].as_f64().unwrap() - value).abs() < 1e-6,
+            "{name}: {e}"
+        );
+        assert!(
+            (e["std_error"].as_f64().unwrap() - se).abs() < 1e-5 * se,
+            "{name}: {e}"
+        );
+    }
+    assert_eq!(
+        (&r["converged"], &r["method"]),
+        (&json!(true), &json!("scoring"))
+    );
+    let (code, out, err) = kea(&["identify", example, "--method", "conjugate"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("conjugate directions: converged"), "{out}");
+    // The data file missing, then a bad cell in it.
+    let dir = tempfile::tempdir().unwrap();
+    let mut request: Value =
+        serde_json::from_str(&std::fs::read_to_string(example).unwrap()).unwrap();
+    request["data"] = json!({"csv": "data.csv"});
+    let file = dir.path().join("request.json");
+    std::fs::write(&file, request.to_string()).unwrap();
+    let (code, _, err) = kea(&["identify", file.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(err.starts_with("data.csv: cannot read"), "{err}");
+    std::fs::write(
+        dir.path().join("data.csv"),
+        "t,position_meas\n1,0.5\n2,abc\n",
+    )
+    .unwrap();
+    let (code, _, err) = kea(&["identify", file.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains(
+            "data.csv_text: line 3 (data row 2), column \"position_meas\": \"abc\" is not a number"
+        ),
+        "{err}"
+    );
+}

@@ -1106,7 +1106,7 @@ fn limits_sync_work_and_absurd_work() {
     let limits = s.get("/v1/limits").json();
     assert_eq!(limits["server"]["sync_work"], 1e5);
     assert_eq!(limits["server"]["max_work"], 1e8);
-    assert_eq!(limits["server"]["max_body_bytes"], 2 * 1024 * 1024);
+    assert_eq!(limits["server"]["max_body_bytes"], 8 * 1024 * 1024);
     let max_steps = limits["model"]["max_steps"].as_u64().unwrap();
     let r = s.post(
         "/v1/jobs",

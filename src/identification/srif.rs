@@ -305,7 +305,7 @@ impl Srif {
             }
         }
         // −Σ ln|R̃_ii| and its derivatives, from the array before the update.
-        let ln_det_prior: f64 = (0..n).map(|i| a[i * mw + i].abs().ln()).sum();
+        let ln_det_prior: f64 = (0..n).map(|i| libm::log(a[i * mw + i].abs())).sum();
         for d in 0..np {
             let off = mc * (1 + d);
             out.gradient[d] -= (0..n)
@@ -333,7 +333,7 @@ impl Srif {
         triangularise(a, rows, mw, n);
         differentiate(a, rows, mc, n, np, &mut self.y, &mut self.omega);
         let e2: f64 = (n..rows).map(|r| a[r * mw + n] * a[r * mw + n]).sum();
-        let ln_det_post: f64 = (0..n).map(|i| a[i * mw + i].abs().ln()).sum();
+        let ln_det_post: f64 = (0..n).map(|i| libm::log(a[i * mw + i].abs())).sum();
         for d in 0..np {
             let off = mc * (1 + d);
             let de: f64 = (n..rows).map(|r| a[r * mw + n] * a[r * mw + off + n]).sum();
@@ -463,7 +463,9 @@ impl Srif {
                 message: "the measurement noise's covariance R (of the measurements available at this step) is not positive definite; the likelihood needs R⁻¹".into(),
             });
         }
-        self.r_ln_det = (0..ma).map(|i| 2.0 * self.r_chol[i * ma + i].ln()).sum();
+        self.r_ln_det = (0..ma)
+            .map(|i| 2.0 * libm::log(self.r_chol[i * ma + i]))
+            .sum();
         let dr = &mut self.d_r_sub;
         for (d, p) in partials.iter().enumerate() {
             sub(&p.r, dr, &self.avail);

@@ -10,9 +10,15 @@ pub mod schedule;
 
 pub use compile::{CompiledModel, Form, compile, compile_discrete};
 
-/// Validate a model without running it; every problem found is returned.
+/// Validate a model without running it, in its form (a discrete model, with
+/// `system.transition`, as the identification reads it); every problem found is
+/// returned.
 pub fn check(model: &Model, set: &Overrides) -> Result<(), Error> {
-    compile(model, set).map(|_| ())
+    match model.system.transition {
+        Some(_) => compile_discrete(model, set),
+        None => compile(model, set),
+    }
+    .map(|_| ())
 }
 
 /// Parameter overrides (`--set name=value`, a request's `set`): each must name one

@@ -33,19 +33,48 @@ struct Likelihoods<'a> {
 impl Likelihoods<'_> {
     /// J (and its gradient and sample information) at θ.
     fn at(&self, theta: &[f64], gradient: bool, information: bool) -> Result<Likelihood, Error> {
+        self.at_recording(theta, gradient, information, false)
+    }
+
+    /// [`Self::at`], the innovations recorded when `record`.
+    fn at_recording(
+        &self,
+        theta: &[f64],
+        gradient: bool,
+        information: bool,
+        record: bool,
+    ) -> Result<Likelihood, Error> {
         let (model, prior, partials) = discrete::at(
             &self.request.model,
             &self.request.params_at(theta),
             &self.names,
         )?;
         let partials = if gradient { partials } else { Vec::new() };
-        Srif::new(&model, &partials, information)?.run(
-            &model,
-            &partials,
-            &prior,
-            &self.request.data,
-        )
+        Srif::new(&model, &partials, information)
+            .map(|s| if record { s.recording() } else { s })
+            .and_then(|mut s| s.run(&model, &partials, &prior, &self.request.data))
+            .map_err(|e| noise_paths(e, &self.request.model))
     }
+}
+
+/// The SRIF names Q and R as `system.w` and `measurement.v`: here, the member the
+/// model gives them by (`phi` or `W`, `psi` or `V`).
+fn noise_paths(e: Error, model: &crate::model::Model) -> Error {
+    let q = if model.system.w.is_some() {
+        "system.W"
+    } else {
+        "system.phi"
+    };
+    let r = if model.measurement.v.is_some() {
+        "measurement.V"
+    } else {
+        "measurement.psi"
+    };
+    e.map_paths(|p| match p {
+        "system.w" => q.to_string(),
+        "measurement.v" => r.to_string(),
+        other => other.to_string(),
+    })
 }
 
 impl Objective for Likelihoods<'_> {
@@ -91,7 +120,11 @@ pub fn identify(
     };
     let outcome = minimise::minimise(&mut objective, &theta0, &bounds, request.method, &options)?;
     let theta = outcome.theta.clone();
-    let at_hat = objective.at(&theta, true, true)?;
+    let at_hat = objective.at_recording(&theta, true, true, true)?;
+    let compiled = crate::model::compile_discrete(&request.model, &request.params_at(&theta))?;
+    let innovations = (at_hat.measurements > 0).then(|| {
+        super::innovations::check(&at_hat.innovations, &at_hat.nis, &compiled.measurements)
+    });
     let observed = observed_information(&objective, &theta);
     let evaluations = objective.evaluations;
     let _ = objective.progress.report(1.0);
@@ -158,6 +191,7 @@ pub fn identify(
         observed_information: observed.map(|m| rows(&m, p)),
         correlation,
         identifiability,
+        innovations,
         method: request.method,
         converged: outcome.converged,
         stop_reason: outcome.stop.describe().to_string(),

@@ -12,6 +12,7 @@
 pub mod data;
 pub mod discrete;
 pub mod fit;
+pub mod innovations;
 pub mod kind;
 pub mod minimise;
 pub mod model;

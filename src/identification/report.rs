@@ -2,7 +2,7 @@
 //! intervals, J, the verdict, how the minimiser stopped.
 
 use super::result::IdentificationResult;
-use crate::text::{CELL, cell, num, short};
+use crate::text::{CELL, cell, short};
 
 /// The plain-text report (`kea identify`'s).
 pub fn text(r: &IdentificationResult) -> String {
@@ -32,7 +32,7 @@ pub fn text(r: &IdentificationResult) -> String {
     let grad = r
         .parameters
         .iter()
-        .map(|n| format!("{n} {}", num(r.gradient[n])))
+        .map(|n| format!("{n} {:.2e}", r.gradient[n]))
         .collect::<Vec<_>>()
         .join(", ");
     out += &format!(
@@ -42,6 +42,34 @@ pub fn text(r: &IdentificationResult) -> String {
         r.steps
     );
     out += &format!("{}\n", r.identifiability.verdict);
+    if let Some(i) = &r.innovations {
+        out += &format!(
+            "innovations: NIS mean {} (95 % band [{}, {}]): {}\n",
+            cell(Some(i.nis_mean)).trim(),
+            cell(Some(i.nis_band[0])).trim(),
+            cell(Some(i.nis_band[1])).trim(),
+            if i.nis_consistent {
+                "consistent"
+            } else {
+                "NOT consistent: the model's noise levels do not fit the data"
+            }
+        );
+        for w in &i.whiteness {
+            out += &format!(
+                "  {}: {} (Ljung–Box Q = {} {} {} at 95 %, {} lags)\n",
+                w.measurement,
+                if w.white {
+                    "white"
+                } else {
+                    "NOT white: the innovations are correlated, the model misses dynamics"
+                },
+                cell(Some(w.ljung_box)).trim(),
+                if w.white { "≤" } else { ">" },
+                cell(Some(w.critical)).trim(),
+                w.lags
+            );
+        }
+    }
     out += &format!(
         "{}: {} after {} iterations ({} evaluations of J): {}\n",
         method_name(r),

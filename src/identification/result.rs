@@ -26,6 +26,9 @@ pub struct IdentificationResult {
     /// is singular.
     pub correlation: Option<Vec<Vec<f64>>>,
     pub identifiability: Identifiability,
+    /// Does the model at θ̂ fit the data: the innovations' NIS and whiteness (null
+    /// when nothing was measured).
+    pub innovations: Option<super::innovations::InnovationCheck>,
     pub method: Method,
     pub converged: bool,
     pub stop: Stop,

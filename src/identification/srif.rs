@@ -38,6 +38,13 @@ pub struct Likelihood {
     /// Σ_k [∂_iνᵀS⁻¹∂_jν + ½ tr(S⁻¹∂_iS S⁻¹∂_jS)] (seed (2.3.2) with the expected
     /// values replaced by the computed ones; Harvey's form).
     pub fisher_sample: Vec<f64>,
+    /// With [`Srif::recording`]: each step's standardized innovations ν_j/√S_jj
+    /// (D × m, row-major; NaN where the measurement is missing), from the information
+    /// array before the update (x̃ = R̃⁻¹z̃, S = H P̃ Hᵀ + R, P̃ = R̃⁻¹R̃⁻ᵀ).
+    pub innovations: Vec<f64>,
+    /// With [`Srif::recording`]: each step's NIS νᵀS⁻¹ν = ‖e_k‖² (NaN where nothing
+    /// was measured), χ² with as many degrees of freedom as measurements.
+    pub nis: Vec<f64>,
 }
 
 impl Likelihood {
@@ -95,6 +102,11 @@ pub struct Srif {
     y: Vec<f64>,
     omega: Vec<f64>,
     sq: Vec<f64>,
+    /// Whether [`Srif::run`] records the innovations ([`Srif::recording`]), and its
+    /// buffers (N each).
+    record: bool,
+    rec_x: Vec<f64>,
+    rec_y: Vec<f64>,
 }
 
 impl Srif {
@@ -172,6 +184,9 @@ impl Srif {
             y: vec![0.0; (n + m.max(l)) * (n + l)],
             omega: vec![0.0; (n + m.max(l)).pow(2)],
             sq,
+            record: false,
+            rec_x: vec![0.0; n],
+            rec_y: vec![0.0; n],
         })
     }
 
@@ -198,7 +213,13 @@ impl Srif {
             } else {
                 Vec::new()
             },
+            innovations: Vec::new(),
+            nis: Vec::new(),
         };
+        if self.record {
+            out.innovations = vec![f64::NAN; data.rows() * self.m];
+            out.nis = vec![f64::NAN; data.rows()];
+        }
         let m = self.m;
         for k in 0..data.rows() {
             if k > 0 || prior.at == PriorAt::T0 {
@@ -208,8 +229,15 @@ impl Srif {
             self.avail.clear();
             self.avail.extend((0..m).filter(|&j| !z[j].is_nan()));
             if !self.avail.is_empty() {
+                if self.record {
+                    self.record_innovations(model, z, k, &mut out);
+                }
+                let before = out.data_part;
                 self.measurement_update(model, partials, z, data.t[k], k, &mut out)?;
                 out.measurements += self.avail.len();
+                if self.record {
+                    out.nis[k] = 2.0 * (out.data_part - before);
+                }
             }
             if !(out.data_part.is_finite() && out.model_part.is_finite()) {
                 return Err(Error::Numerical {
@@ -262,6 +290,38 @@ impl Srif {
         triangularise(&mut self.info, n, w, n);
         differentiate(&mut self.info, n, ic, n, np, &mut self.y, &mut self.omega);
         Ok(())
+    }
+
+    /// The filter recording each step's innovations and NIS ([`Likelihood::innovations`],
+    /// [`Likelihood::nis`]): the fit's diagnostics at θ̂, one pass.
+    pub fn recording(mut self) -> Srif {
+        self.record = true;
+        self
+    }
+
+    /// Step k's standardized innovations, from the array before its update: x̃ by
+    /// back-substitution in R̃ x̃ = z̃, ν_j = z_j − h_j x̃, and S_jj = ‖R̃⁻ᵀh_jᵀ‖² + R_jj
+    /// (forward substitution in R̃ᵀ y = h_jᵀ).
+    fn record_innovations(&mut self, model: &Discrete, z: &[f64], k: usize, out: &mut Likelihood) {
+        let (n, m) = (self.n, self.m);
+        let w = (n + 1) * (1 + self.np);
+        let r = |i: usize, j: usize| self.info[i * w + j];
+        let x = &mut self.rec_x;
+        for i in (0..n).rev() {
+            let s: f64 = (i + 1..n).map(|j| r(i, j) * x[j]).sum();
+            x[i] = (r(i, n) - s) / r(i, i);
+        }
+        for &j in &self.avail {
+            let h = &model.h[j * n..j * n + n];
+            let y = &mut self.rec_y;
+            for i in 0..n {
+                let s: f64 = (0..i).map(|q| r(q, i) * y[q]).sum();
+                y[i] = (h[i] - s) / r(i, i);
+            }
+            let s = y.iter().map(|v| v * v).sum::<f64>() + model.r[j * m + j];
+            let nu = z[j] - (0..n).map(|i| h[i] * self.rec_x[i]).sum::<f64>();
+            out.innovations[k * m + j] = nu / s.sqrt();
+        }
     }
 
     /// The measurement update (2.1.10)–(2.1.12) with the available measurements:

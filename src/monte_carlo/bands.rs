@@ -24,7 +24,7 @@ pub fn chi2_band(dof: f64, scale: f64) -> [f64; 2] {
 /// [`gamma_p`]) so that wasm gives the native bits: statrs' quantile iterates on the
 /// standard library's functions, which differ between the C library and wasm, and its
 /// bands differed around the 13th digit.
-fn chi2_quantile(dof: f64, p: f64) -> f64 {
+pub(crate) fn chi2_quantile(dof: f64, p: f64) -> f64 {
     let a = dof / 2.0;
     // Far beyond any quantile the band uses (mean dof, standard deviation √(2 dof)).
     let hi = dof + 40.0 * (2.0 * dof).sqrt() + 100.0;

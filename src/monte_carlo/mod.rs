@@ -55,7 +55,7 @@ use crate::resume::{F, bits, put};
 pub use state::STATE_KEY;
 use state::{MonteCarloStamp, MonteCarloState};
 
-mod bands;
+pub(crate) mod bands;
 pub mod kind;
 mod plan;
 pub mod report;

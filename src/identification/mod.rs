@@ -19,6 +19,7 @@ pub mod model;
 pub mod report;
 pub mod request;
 pub mod result;
+pub mod simulate;
 pub mod srif;
 pub mod work;
 

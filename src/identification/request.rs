@@ -114,7 +114,12 @@ pub fn read(obj: &Map<String, Value>) -> Result<IdentificationRequest, Error> {
         ));
     }
     let grid = Grid::new(compiled.t0, compiled.t_end, compiled.max_steps() as usize);
-    let data = data(obj.get("data"), &compiled.measurements, &grid)?;
+    let data = data(
+        obj.get("data"),
+        &compiled.measurements,
+        &grid,
+        (&model, &set),
+    )?;
     Ok(IdentificationRequest {
         model,
         set,
@@ -234,8 +239,13 @@ fn estimates(
 
 /// `data`: `{"rows": [[t, z1, …], …]}` or `{"csv_text": "t,z1,…\n…"}` (a file's
 /// content; the command line reads `{"csv": PATH}` into it).
-fn data(v: Option<&Value>, names: &[String], grid: &Grid) -> Result<Data, Error> {
-    let forms = "{\"rows\": [[t, z1, …], …]} or {\"csv_text\": \"t,z1,…\"} (the command line also reads {\"csv\": \"FILE\"})";
+fn data(
+    v: Option<&Value>,
+    names: &[String],
+    grid: &Grid,
+    (model, set): (&Model, &Overrides),
+) -> Result<Data, Error> {
+    let forms = "{\"rows\": [[t, z1, …], …]}, {\"csv_text\": \"t,z1,…\"} or {\"simulate\": {\"seed\": 1, \"set\": {…}}} (the command line also reads {\"csv\": \"FILE\"})";
     let obj = match v {
         None => {
             return Err(Error::invalid(
@@ -264,13 +274,76 @@ fn data(v: Option<&Value>, names: &[String], grid: &Grid) -> Result<Data, Error>
                 ),
             )),
         },
+        ["simulate"] => simulated(&obj["simulate"], grid, model, set),
         ["csv"] => Err(Error::invalid(
             "data.csv",
             "a file is read by the command line (kea identify); in a request sent to the server or the browser, give the file's content as data.csv_text",
         )),
         _ => Err(Error::invalid(
             "data",
-            format!("expected exactly one of rows, csv_text: {forms}"),
+            format!("expected exactly one of rows, csv_text, simulate: {forms}"),
         )),
     }
+}
+
+/// `data.simulate`: `{"seed": s, "set": {...}}`, data drawn from the model at its params
+/// with `set` and then the truth's own `set` (the estimated params' initial values play
+/// no part: the truth is what the fit should find).
+fn simulated(v: &Value, grid: &Grid, model: &Model, set: &Overrides) -> Result<Data, Error> {
+    let path = "data.simulate";
+    let Value::Object(obj) = v else {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "expected {{\"seed\": 1, \"set\": {{…}}}} (both optional), got {}",
+                got(v)
+            ),
+        ));
+    };
+    let mut errors = request::unknown_members(obj, &["seed", "set"])
+        .into_iter()
+        .map(|e| FieldError::new(member_path(path, &e.path), e.message))
+        .collect::<Vec<_>>();
+    let seed = request::whole(
+        obj,
+        "seed",
+        "a whole number ≥ 0 (the random stream's seed)",
+        &mut errors,
+    )
+    .unwrap_or(1);
+    let truth = match request::overrides(obj.get("set")) {
+        Ok(t) => t,
+        Err(e) => {
+            errors.extend(
+                e.into_iter()
+                    .map(|e| FieldError::new(format!("{path}.{}", e.path), e.message)),
+            );
+            Overrides::new()
+        }
+    };
+    for name in truth.keys() {
+        if !model.params.contains_key(name) {
+            errors.push(FieldError::new(
+                format!("{path}.{}", member_path("set", name)),
+                format!("no parameter \"{name}\" in the model"),
+            ));
+        }
+    }
+    if !errors.is_empty() {
+        return Err(Error::Invalid(
+            errors
+                .into_iter()
+                .map(|mut e| {
+                    if e.path == "seed" {
+                        e.path = format!("{path}.seed");
+                    }
+                    e
+                })
+                .collect(),
+        ));
+    }
+    let mut at = set.clone();
+    at.extend(truth);
+    let (discrete, prior, _) = super::discrete::at(model, &at, &[]).map_err(request::locate)?;
+    super::simulate::simulate(&discrete, &prior, grid, seed).map_err(request::locate)
 }

@@ -944,3 +944,44 @@ fn identify_reads_the_request_and_its_csv() {
         "{err}"
     );
 }
+
+/// `kea identify --data-csv FILE` writes the data the fit used — here simulated by the
+/// request's `data.simulate` — in the format `data.csv` reads, to the bit: fitting that
+/// file gives the same result document as fitting the simulation.
+#[test]
+fn identify_writes_its_simulated_data_as_a_csv_that_reads_back_to_the_same_fit() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let example = root.join("examples/identification/oscillator.json");
+    let mut request: Value =
+        serde_json::from_str(&std::fs::read_to_string(example).unwrap()).unwrap();
+    request["data"] = json!({"simulate": {"seed": 11}});
+    let dir = tempfile::tempdir().unwrap();
+    let simulated = dir.path().join("simulated.json");
+    std::fs::write(&simulated, request.to_string()).unwrap();
+    let csv = dir.path().join("data.csv");
+    let args = [
+        "identify",
+        simulated.to_str().unwrap(),
+        "--json",
+        "--data-csv",
+        csv.to_str().unwrap(),
+    ];
+    let (code, first, err) = kea(&args);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        std::fs::read_to_string(&csv)
+            .unwrap()
+            .starts_with("t,position_meas\n1,")
+    );
+    request["data"] = json!({"csv": "data.csv"});
+    let from_file = dir.path().join("from_file.json");
+    std::fs::write(&from_file, request.to_string()).unwrap();
+    let (code, second, err) = kea(&["identify", from_file.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let strip = |text: &str| {
+        let mut v: Value = serde_json::from_str(text).unwrap();
+        v.as_object_mut().unwrap().remove("timing");
+        v
+    };
+    assert_eq!(strip(&first), strip(&second));
+}

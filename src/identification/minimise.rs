@@ -508,6 +508,16 @@ struct Found {
 
 impl<O: Objective> Line<'_, O> {
     /// `None` when θ(α) = θ in floating point.
+    /// Whether every param of `t` on a bound has a gradient pushing outward (J falls
+    /// beyond the bound): the bound holds it for a reason.
+    fn active(&self, t: &Trial) -> bool {
+        let (b, e) = (self.bounds, t.e.as_ref().expect("evaluated"));
+        (0..t.theta.len()).all(|i| {
+            let g = e.gradient[i];
+            (t.theta[i] > b.min[i] || g > 0.0) && (t.theta[i] < b.max[i] || g < 0.0)
+        })
+    }
+
     /// The largest α with θ + αd inside the box (∞ when no bound is in the way).
     fn to_boundary(&self, at: &Point, d: &[f64]) -> f64 {
         let b = self.bounds;
@@ -565,15 +575,17 @@ impl<O: Objective> Line<'_, O> {
             };
             let (mut t, mut evaluations) = (t, halving + 1);
             // A step cut by a bound may land on a stationary point that the bound makes
-            // (J even in a param bounded at 0: case b's w): the step that stops short
-            // of the bound, at 0.9 of the way, is tried too, and the lower J kept.
+            // (J even in a param bounded at 0: case b's w, where ∂J/∂w = 0): the step
+            // that stops short of the bound, at 0.9 of the way, is tried too, and kept
+            // unless the cut step is lower and its bounds are active — the gradient
+            // there pushes outward, so the optimum may well be on them.
             if t.clipped {
                 let short = 0.9 * self.to_boundary(at, d);
                 if short > 0.0 && short < alpha {
                     evaluations += 1;
                     if let Some(inner) = self.trial(at, d, short)?
                         && let Some(j2) = armijo(&inner, at)
-                        && j2 < j
+                        && !(j < j2 && self.active(&t))
                     {
                         (t, j, alpha) = (inner, j2, short);
                     }

@@ -43,6 +43,11 @@ impl IdentificationRequest {
         self.estimate.iter().map(|e| e.name.as_str()).collect()
     }
 
+    /// The model's measurement names, the data's columns after `t`.
+    pub fn measurement_names(&self) -> Vec<String> {
+        self.model.measurement.names.clone()
+    }
+
     /// `set` with the estimated params at `theta`.
     pub fn params_at(&self, theta: &[f64]) -> Overrides {
         let mut p = self.set.clone();

@@ -1,5 +1,5 @@
 //! `kea identify REQUEST.json [--model FILE|preset:NAME] [--method M] [--json]
-//! [--max-work UNITS]`: the maximum-likelihood params of a discrete
+//! [--data-csv FILE] [--max-work UNITS]`: the maximum-likelihood params of a discrete
 //! model from measured data (METHOD §3). The request's `data.csv` names a CSV file
 //! relative to the request file; it is read here and sent to the core as
 //! `data.csv_text`.
@@ -31,6 +31,10 @@ pub struct Args {
     /// Print the whole result as JSON instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Also write the measurements the fit uses — read, or simulated by the request's
+    /// `data.simulate` — as CSV to this file (the format `data.csv` reads), before the fit.
+    #[arg(long, value_name = "FILE")]
+    pub data_csv: Option<PathBuf>,
     #[command(flatten)]
     pub limit: super::WorkLimit,
 }
@@ -91,7 +95,21 @@ impl Run for Args {
             limit: &self.limit,
             model_file: false,
         };
-        run.run(value, &exec)
+        let write_data = |prepared: &kea_core::registry::Prepared| {
+            let (Some(path), kea_core::registry::Prepared::Identification(r)) =
+                (&self.data_csv, prepared)
+            else {
+                return Ok(());
+            };
+            let names = r.measurement_names();
+            super::Csv::open(Some(path), &self.request, false)?
+                .expect("a path was given")
+                .write(&kea_core::identification::to_csv(&r.data, &names))
+        };
+        match run.outcome_with(value, &exec, write_data) {
+            Ok(_) => ExitCode::SUCCESS,
+            Err(code) => code,
+        }
     }
 }
 

@@ -309,8 +309,20 @@ impl KindRun<'_> {
         request: serde_json::Value,
         exec: &E,
     ) -> Result<kea_core::registry::Outcome, ExitCode> {
+        self.outcome_with(request, exec, |_| Ok(()))
+    }
+
+    /// [`KindRun::outcome`], with `inspect` given the prepared request before its work
+    /// is checked (`kea identify --data-csv` writes the data it read or simulated).
+    pub fn outcome_with<E: kea_core::exec::Executor>(
+        &self,
+        request: serde_json::Value,
+        exec: &E,
+        inspect: impl FnOnce(&kea_core::registry::Prepared) -> Result<(), ExitCode>,
+    ) -> Result<kea_core::registry::Outcome, ExitCode> {
         let prepared = kea_core::registry::prepare(self.kind, request)
             .map_err(|e| report_error(&self.located(e)))?;
+        inspect(&prepared)?;
         self.limit.check(Ok(prepared.work()))?;
         // (After the work: a run too large is told so first, whatever else it asks.)
         prepared

@@ -549,3 +549,39 @@ fn standard_errors_are_calibrated_over_simulated_data_sets() {
         );
     }
 }
+
+/// Several starting points (`starts`): on case a2, from the initial values and from
+/// (0.6, 0.9), the fit lists both optima the reference found, the global one first and
+/// the estimate, the local one 0.632 above it, each with the starts that reached it.
+#[test]
+fn starts_list_every_distinct_optimum_lowest_first() {
+    let case = Case::load("case_a2_seed_diag");
+    let mut request = case.request("scoring", None);
+    request["starts"] = json!([{"phi11": 0.6, "phi22": 0.9}, {"phi11": 0.95, "phi22": 0.95}]);
+    let r = identify(request).unwrap();
+    let optima = r["optima"].as_array().unwrap();
+    assert_eq!(optima.len(), 2, "{optima:?}");
+    let j: Vec<f64> = optima
+        .iter()
+        .map(|o| o["neg_log_likelihood"].as_f64().unwrap())
+        .collect();
+    assert!((j[0] - case.j_hat()).abs() < 1e-8, "{j:?}");
+    assert!((j[1] - j[0] - 0.632).abs() < 1e-3, "{j:?}");
+    assert_eq!(optima[0]["starts"], json!([0]));
+    assert_eq!(
+        optima[1]["starts"],
+        json!([1, 2]),
+        "the reference's Newton went there from both"
+    );
+    assert_eq!(r["neg_log_likelihood"].as_f64().unwrap(), j[0]);
+    for n in ["phi11", "phi22"] {
+        assert_eq!(r["estimate"][n]["value"], optima[0]["params"][n]);
+    }
+    let mut bad = case.request("scoring", None);
+    bad["starts"] = json!([{"phi11": "x"}, {"q": 1}]);
+    let Err(Error::Invalid(v)) = registry::prepare("identification", bad) else {
+        panic!("accepted");
+    };
+    let paths: Vec<&str> = v.iter().map(|e| e.path.as_str()).collect();
+    assert_eq!(paths, ["starts[0].phi11", "starts[1].q"]);
+}

@@ -6,7 +6,9 @@
 use super::discrete;
 use super::minimise::{self, Bounds, Evaluation, Failure, Objective, Options};
 use super::request::IdentificationRequest;
-use super::result::{Identifiability, IdentificationResult, IterationRecord, ParamEstimate};
+use super::result::{
+    Identifiability, IdentificationResult, IterationRecord, Optimum, ParamEstimate,
+};
 use super::srif::{Likelihood, Srif};
 use crate::error::Error;
 use crate::kind::Timing;
@@ -116,9 +118,25 @@ pub fn identify(
         names: names.clone(),
         progress,
         evaluations: 0,
-        expected: 4.0 * request.max_iterations as f64,
+        expected: 4.0 * request.max_iterations as f64 * (1 + request.starts.len()) as f64,
     };
-    let outcome = minimise::minimise(&mut objective, &theta0, &bounds, request.method, &options)?;
+    // From the initial values, then from every other start (`starts`); the lowest J
+    // is the estimate, and every distinct optimum is listed.
+    let mut outcomes = Vec::with_capacity(1 + request.starts.len());
+    for start in std::iter::once(&theta0).chain(&request.starts) {
+        let o = minimise::minimise(&mut objective, start, &bounds, request.method, &options)?;
+        outcomes.push(o);
+    }
+    let optima = distinct_optima(&outcomes, &names);
+    let best = (0..outcomes.len())
+        .min_by(|&a, &b| {
+            outcomes[a]
+                .evaluation
+                .j
+                .total_cmp(&outcomes[b].evaluation.j)
+        })
+        .expect("one start at least");
+    let outcome = outcomes.swap_remove(best);
     let theta = outcome.theta.clone();
     let at_hat = objective.at_recording(&theta, true, true, true)?;
     let compiled = crate::model::compile_discrete(&request.model, &request.params_at(&theta))?;
@@ -192,6 +210,7 @@ pub fn identify(
         correlation,
         identifiability,
         innovations,
+        optima,
         method: request.method,
         converged: outcome.converged,
         stop_reason: outcome.stop.describe().to_string(),
@@ -202,6 +221,39 @@ pub fn identify(
         measurements: at_hat.measurements,
         timing: Timing::default(),
     })
+}
+
+/// The distinct optima the starts reached, by J: two are one where every param agrees
+/// to 1e-6·max(|θ_i|, 1) (mirror optima, ±w, are two). Each with the starts (by index:
+/// 0 the initial values, i the i-th of `starts`) that reached it.
+fn distinct_optima(outcomes: &[minimise::Outcome], names: &[&str]) -> Vec<Optimum> {
+    let mut out: Vec<(Vec<f64>, Optimum)> = Vec::new();
+    for (k, o) in outcomes.iter().enumerate() {
+        let same = |t: &Vec<f64>| {
+            t.iter()
+                .zip(&o.theta)
+                .all(|(a, b)| (a - b).abs() <= 1e-6 * a.abs().max(1.0))
+        };
+        match out.iter_mut().find(|(t, _)| same(t)) {
+            Some((_, opt)) => opt.starts.push(k),
+            None => out.push((
+                o.theta.clone(),
+                Optimum {
+                    params: names
+                        .iter()
+                        .zip(&o.theta)
+                        .map(|(n, x)| (n.to_string(), *x))
+                        .collect(),
+                    neg_log_likelihood: o.evaluation.j,
+                    converged: o.converged,
+                    starts: vec![k],
+                },
+            )),
+        }
+    }
+    let mut optima: Vec<Optimum> = out.into_iter().map(|(_, o)| o).collect();
+    optima.sort_by(|a, b| a.neg_log_likelihood.total_cmp(&b.neg_log_likelihood));
+    optima
 }
 
 fn rows(m: &[f64], p: usize) -> Vec<Vec<f64>> {

@@ -27,6 +27,7 @@ impl Kind for Identification {
         "estimate",
         "method",
         "max_iterations",
+        "starts",
     ];
     type Request = IdentificationRequest;
     type Outcome = IdentificationResult;

@@ -34,6 +34,8 @@ pub struct IdentificationRequest {
     pub estimate: Vec<Estimate>,
     pub method: Method,
     pub max_iterations: usize,
+    /// Further starting points (`starts`), each in `estimate`'s order.
+    pub starts: Vec<Vec<f64>>,
     pub data: Data,
 }
 
@@ -99,6 +101,7 @@ pub fn read(obj: &Map<String, Value>) -> Result<IdentificationRequest, Error> {
         return Err(Error::Invalid(errors));
     };
     let estimate = estimates(obj.get("estimate"), &model, &set, &mut errors);
+    let starts = starts(obj.get("starts"), &estimate, &mut errors);
     if !errors.is_empty() {
         return Err(Error::Invalid(errors));
     }
@@ -131,6 +134,7 @@ pub fn read(obj: &Map<String, Value>) -> Result<IdentificationRequest, Error> {
         estimate,
         method,
         max_iterations,
+        starts,
         data,
     })
 }
@@ -351,4 +355,71 @@ fn simulated(v: &Value, grid: &Grid, model: &Model, set: &Overrides) -> Result<D
     at.extend(truth);
     let (discrete, prior, _) = super::discrete::at(model, &at, &[]).map_err(request::locate)?;
     super::simulate::simulate(&discrete, &prior, grid, seed).map_err(request::locate)
+}
+
+/// The most further starts a request may give.
+pub const MAX_STARTS: usize = 100;
+
+/// `starts`: `[{"PARAM": x, …}, …]`, each a further starting point; a param it leaves
+/// out starts at its `initial`. Each value inside the param's bounds.
+fn starts(v: Option<&Value>, estimate: &[Estimate], errors: &mut Vec<FieldError>) -> Vec<Vec<f64>> {
+    let Some(v) = v else {
+        return Vec::new();
+    };
+    let Value::Array(list) = v else {
+        errors.push(FieldError::new(
+            "starts",
+            format!("expected an array of starting points, e.g. [{{\"q\": 0.1}}, {{\"q\": 10}}], got {}", got(v)),
+        ));
+        return Vec::new();
+    };
+    if list.len() > MAX_STARTS {
+        errors.push(FieldError::new(
+            "starts",
+            format!("{} starts: at most {MAX_STARTS}", list.len()),
+        ));
+        return Vec::new();
+    }
+    let mut out = Vec::new();
+    for (k, s) in list.iter().enumerate() {
+        let path = format!("starts[{k}]");
+        let Value::Object(s) = s else {
+            errors.push(FieldError::new(
+                &path,
+                format!("expected an object of param values, got {}", got(s)),
+            ));
+            continue;
+        };
+        for name in s.keys() {
+            if !estimate.iter().any(|e| &e.name == name) {
+                errors.push(FieldError::new(
+                    member_path(&path, name),
+                    "not an estimated param: a start gives values of the params in `estimate`",
+                ));
+            }
+        }
+        let point: Vec<f64> = estimate
+            .iter()
+            .map(|e| match s.get(&e.name) {
+                None => e.initial,
+                Some(v) => match v.as_f64() {
+                    Some(x) if x.is_finite() && (e.min..=e.max).contains(&x) => x,
+                    _ => {
+                        errors.push(FieldError::new(
+                            member_path(&path, &e.name),
+                            format!(
+                                "expected a number in [min, max] = [{}, {}], got {}",
+                                e.min,
+                                e.max,
+                                got(v)
+                            ),
+                        ));
+                        e.initial
+                    }
+                },
+            })
+            .collect();
+        out.push(point);
+    }
+    out
 }

@@ -29,6 +29,9 @@ pub struct IdentificationResult {
     /// Does the model at θ̂ fit the data: the innovations' NIS and whiteness (null
     /// when nothing was measured).
     pub innovations: Option<super::innovations::InnovationCheck>,
+    /// Every distinct optimum the starts reached (the initial values, then `starts`),
+    /// lowest J first: the estimate is the first.
+    pub optima: Vec<Optimum>,
     pub method: Method,
     pub converged: bool,
     pub stop: Stop,
@@ -84,4 +87,13 @@ pub struct IterationRecord {
     pub gradient_norm: f64,
     /// The step length accepted (0 for the initial point).
     pub step: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Optimum {
+    pub params: BTreeMap<String, f64>,
+    pub neg_log_likelihood: f64,
+    pub converged: bool,
+    /// The starts that reached it: 0 the initial values, i the i-th of `starts`.
+    pub starts: Vec<usize>,
 }

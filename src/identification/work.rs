@@ -19,11 +19,12 @@ pub fn identification_work(r: &IdentificationRequest) -> Work {
     // The time update's Householder pass over (L + N) rows of (L + N + 1)(1 + p)
     // columns dominates; ≈ 1100 ns at N = L = 2, m = 1, p = 3 (BENCHMARKS.md).
     let step = 2.0 * (n + l + 1.0).powi(2) * (n + l + m + 1.0) * (1.0 + p) + 50.0;
-    let evaluations = EVALUATIONS_PER_ITERATION * r.max_iterations as f64 + 4.0 * p + 1.0;
+    let starts = (1 + r.starts.len()) as f64;
+    let evaluations = starts * EVALUATIONS_PER_ITERATION * r.max_iterations as f64 + 4.0 * p + 1.0;
     Work {
         units: d * step * evaluations,
         explain: format!(
-            "D = {d} steps × {} per SRIF step × {evaluations} evaluations (max_iterations = {})",
+            "D = {d} steps × {} per SRIF step × {evaluations} evaluations (max_iterations = {} from each of {starts} starts)",
             crate::text::short(step),
             r.max_iterations
         ),

@@ -5,7 +5,7 @@
 // job's id are kept for the browser tab only (sessionStorage), over a reload, and so is
 // a change the URL has not caught up with yet when the page is left (see saveToUrl).
 
-import { ModelEditor, modelProblem } from './editor.js';
+import { ModelEditor, isDiscrete, modelProblem } from './editor.js';
 import { api } from './api.js';
 import { BrowserRunner, ServerRunner, WasmWorker, problemOf } from './runner.js';
 import { TraceChart, criteriaTable, duration, finalTable, fmt, resumedText, scrollHint } from './results.js';
@@ -199,7 +199,8 @@ function scheduleCheck() {
 
 async function check() {
   const seq = ++state.checkSeq;
-  const errors = await service.call('check', { model: modelJson(), set: '' });
+  // A discrete model (the Identification tab's) is checked as the identification reads it.
+  const errors = await service.call('check', { model: modelJson(), set: '', discrete: isDiscrete(editor.model) });
   if (seq === state.checkSeq) editor.showErrors(errors);
   return errors;
 }

@@ -270,6 +270,11 @@ export class IdentificationView extends RunView {
     }
   }
 
+  /** The tab is shown: the data read against the model as it is now. */
+  shown() {
+    this.data.check();
+  }
+
   markStale() {
     this.edits++;
     if (!this.out.hidden) this.out.classList.add('stale');
@@ -370,7 +375,8 @@ export class IdentificationView extends RunView {
   /** The charts: J against the iteration, and the param chosen's path with its bounds and estimate. */
   draw() {
     const r = this.result;
-    if (!r || this.out.hidden || !this.root.offsetParent) return;
+    // Drawn when the tab is shown (tabs.js calls draw): a hidden chart would have no width.
+    if (!r || this.out.hidden || this.root.hidden) return;
     for (const p of this.plots) p.destroy();
     const steps = r.iterations;
     const width = this.width();

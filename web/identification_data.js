@@ -125,6 +125,9 @@ export class DataBox {
   }
 
   async probeCore(seq, found) {
+    // Not while the tab is hidden (each edit of the model would send the data again): the
+    // tab shown checks them (IdentificationView.shown).
+    if (this.text.offsetParent === null) return;
     const request = this.probe();
     if (!request) return;
     let problems = [];

@@ -328,3 +328,29 @@ test("a script's identification job, with inline rows, opens in the tab from the
   assert.equal(result.measurements, 999);
   assert.deepEqual(consoleErrors, []);
 });
+
+test("the tab's fields and data are kept over a reload, and the tab in the link", async () => {
+  await loadExample();
+  await page.selectOption('#id-method', 'conjugate');
+  await page.fill('#id-max-iterations', '50');
+  await page.fill('#id-max-2', '3'); // sv ≤ 3
+  await page.waitForFunction(() => /&tab=identification$/.test(location.hash));
+  const data = await page.inputValue('#id-data');
+  await page.reload();
+  await page.waitForSelector('body[data-ready=true]', { timeout: 30000 });
+  assert.equal(await page.isVisible('#identification-panel'), true);
+  assert.equal(await page.inputValue('#id-data'), data);
+  assert.equal(await page.inputValue('#id-method'), 'conjugate');
+  assert.equal(await page.inputValue('#id-max-iterations'), '50');
+  const rows = await page.$$eval('#id-params tbody tr', (trs) =>
+    trs.map((tr) => [tr.dataset.param, tr.querySelector('input[type=checkbox]').checked, ...[...tr.querySelectorAll('input:not([type=checkbox])')].map((i) => i.value)]),
+  );
+  assert.deepEqual(rows, [
+    ['r', true, '0.8', '0', '1'],
+    ['w', true, '0.5', '0', ''],
+    ['sv', true, '1', '0', '3'],
+    ['sw', false, '', '', ''],
+  ]);
+  await page.waitForFunction(() => /read on the model’s grid/.test(document.getElementById('id-data-summary').textContent), null, { timeout: 30000 });
+  assert.deepEqual(consoleErrors, []);
+});

@@ -5,7 +5,7 @@
 // job's id are kept for the browser tab only (sessionStorage), over a reload, and so is
 // a change the URL has not caught up with yet when the page is left (see saveToUrl).
 
-import { ModelEditor, modelProblem } from './editor.js';
+import { ModelEditor, isDiscrete, modelProblem } from './editor.js';
 import { api } from './api.js';
 import { BrowserRunner, ServerRunner, WasmWorker, problemOf } from './runner.js';
 import { TraceChart, criteriaTable, duration, finalTable, fmt, resumedText, scrollHint } from './results.js';
@@ -199,7 +199,8 @@ function scheduleCheck() {
 
 async function check() {
   const seq = ++state.checkSeq;
-  const errors = await service.call('check', { model: modelJson(), set: '' });
+  // A discrete model (the Identification tab's) is checked as the identification reads it.
+  const errors = await service.call('check', { model: modelJson(), set: '', discrete: isDiscrete(editor.model) });
   if (seq === state.checkSeq) editor.showErrors(errors);
   return errors;
 }
@@ -337,7 +338,7 @@ function mode() {
 }
 
 /**
- * "Run in" is one setting for the three tabs, though each run bar shows it: a choice
+ * "Run in" is one setting for the four tabs, though each run bar shows it: a choice
  * made in one is made in all, and kept over a reload for this browser tab
  * (sessionStorage, as the Synthesis and Monte Carlo fields are). A server that does
  * not answer (its choices disabled) leaves it in the browser.
@@ -627,6 +628,12 @@ async function main() {
   }
   const tabs = mountTabs({
     model: () => editor.model,
+    // A model from a tab (the Identification tab's example), shown as an import is: a
+    // model of one's own stays one Undo, or Back, away.
+    loadModel: async (model, label) => {
+      const own = await replaceModel(() => loadModel(model, null, { label }));
+      setPageStatus(`Loaded ${label}; ${own ? 'Undo or the browser’s Back brings your model back' : 'Undo brings the preset back'}.`);
+    },
     pendingModelErrors: () => editor.localErrors(),
     example: () => (state.preset && state.example ? { preset: state.preset, ...state.example } : null),
     showModelErrors: (errors) => editor.showErrors(errors),

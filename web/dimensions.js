@@ -16,7 +16,9 @@ export const MAX_DIMENSION = 200;
  */
 const MEMBERS = [
   { at: ['system', 'states'], axes: ['N'], fill: (i) => `y${i + 1}`, create: () => true },
-  { at: ['system', 'a'], axes: ['N', 'N'], create: () => true },
+  // A discrete model (the identification's) has Φ, `transition`, in place of a.
+  { at: ['system', 'a'], axes: ['N', 'N'], create: (m) => m.system.transition === undefined },
+  { at: ['system', 'transition'], axes: ['N', 'N'] },
   { at: ['system', 'b'], axes: ['N', 'L'], create: () => true },
   { at: ['system', 'u'], axes: ['N'] },
   { at: ['system', 'y0'], axes: ['N'] },

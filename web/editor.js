@@ -13,6 +13,14 @@ import { History, apply, diff, pathText } from './history.js';
 
 export { parseCell };
 
+/**
+ * Whether `model` is in the discrete form (`system.transition`, Φ per step), which only
+ * the identification reads (METHOD §3); the analysis's form has the continuous `a`.
+ */
+export function isDiscrete(model) {
+  return model?.system?.transition !== undefined;
+}
+
 function showValue(v) {
   return v === undefined || v === null ? '' : String(v);
 }
@@ -216,7 +224,7 @@ function gFromGamma(c, gamma, { N, n, M }) {
 
 /** The model's matrices and vectors whose cells may be expressions in the params. */
 const EXPRESSION_PATHS = [
-  'system.a', 'system.b', 'system.u', 'system.y0', 'system.eta0', 'system.phi', 'system.W',
+  'system.a', 'system.transition', 'system.b', 'system.u', 'system.y0', 'system.eta0', 'system.phi', 'system.W',
   'measurement.c', 'measurement.g', 'measurement.gamma', 'measurement.psi', 'measurement.V',
 ];
 
@@ -373,7 +381,8 @@ function shownMembers(model) {
   return {
     '': ['kea_model', 'name', 'description', 'params', 'time', 'system', 'measurement', 'criteria', 'options'],
     time: ['t0', 't_end', 'steps'],
-    system: ['states', 'a', 'b', 'u', 'y0', 'eta0', s.W ? 'W' : 'phi'],
+    // A discrete model (isDiscrete) shows Φ and where its prior is in place of a.
+    system: ['states', s.transition !== undefined ? 'transition' : 'a', 'b', 'u', 'y0', 'eta0', s.W ? 'W' : 'phi', ...(s.transition !== undefined ? ['prior_at'] : [])],
     measurement: ['names', 'c', m.g ? 'g' : 'gamma', m.V ? 'V' : 'psi'],
     criteria: ['confidence'],
     options: ['trace_points', 'steady_state_shortcut'],
@@ -409,6 +418,11 @@ const OTHER_MEMBERS = {
   'time.auto': {
     label: 'Step-size selection (time.auto)',
     help: '{"tolerance": 1e-9, "initial_steps": 1000, "max_steps": 4096000}; used when Steps D is auto',
+  },
+  'system.a': { label: 'a (system.a) beside Φ', help: 'the model is discrete (transition Φ, per step): give Φ or the continuous a, not both; remove the one not wanted' },
+  'system.prior_at': {
+    label: 'Prior at (system.prior_at)',
+    help: 'where the prior (y₀, η₀) is: "t0" (the default) or, for a discrete model only, "first_measurement"',
   },
   'system.phi': { label: 'φ (system.phi) beside W', help: 'the model errors are given as W: give φ or W, not both; remove the one not wanted' },
   'system.W': { label: 'W (system.W) beside φ', help: 'the model errors are given as φ: give φ or W, not both; remove the one not wanted' },
@@ -1444,10 +1458,18 @@ export class ModelEditor {
       errorForm === 'W'
         ? this.grid({ title: 'W (L×L)', path: 'system.W', obj: s, key: 'W', rows: L, cols: L, rowLabels: lcols, colLabels: lcols, create: () => resizeMat([], L, L) })
         : this.grid({ title: 'φ model-error SKOs (L)', path: 'system.phi', obj: s, key: 'phi', rows: L, cols: 0, rowLabels: lcols, create: () => zeros(L) });
+    // A discrete model (the identification's form) has Φ per step in place of a, and
+    // says where its prior is; a model cannot be switched between the forms here (Φ is
+    // not a's cells: Φ = exp(a Δt)).
+    const discrete = isDiscrete(this.model);
+    const dynamics = discrete
+      ? this.grid({ title: 'Φ transition per step (N×N)', path: 'system.transition', obj: s, key: 'transition', rows: N, cols: N, rowLabels: states, colLabels: states, rowNames: 'system.states', colNames: 'system.states', create: () => resizeMat([], N, N) })
+      : this.grid({ title: 'a (N×N)', path: 'system.a', obj: s, key: 'a', rows: N, cols: N, rowLabels: states, colLabels: states, rowNames: 'system.states', colNames: 'system.states', create: () => resizeMat([], N, N) });
     return el(
       'fieldset',
       { class: 'section' },
-      el('legend', { text: 'System  dY/dt = a Y + u + b F' }),
+      el('legend', { text: discrete ? 'System (discrete)  Y_k = Φ Y_{k−1} + u + b F' : 'System  dY/dt = a Y + u + b F' }),
+      discrete ? el('p', { class: 'help', text: 'A discrete-time model: the Identification tab reads it; the analysis, the synthesis and the Monte Carlo need the continuous a.' }) : null,
       this.undoNote('system'),
       el(
         'div',
@@ -1463,7 +1485,7 @@ export class ModelEditor {
           create: () => [],
           rowAction: (i) => this.removeButton('N', i, N, states),
         }),
-        this.grid({ title: 'a (N×N)', path: 'system.a', obj: s, key: 'a', rows: N, cols: N, rowLabels: states, colLabels: states, rowNames: 'system.states', colNames: 'system.states', create: () => resizeMat([], N, N) }),
+        dynamics,
         this.grid({ title: 'b (N×L)', path: 'system.b', obj: s, key: 'b', rows: N, cols: L, rowLabels: states, colLabels: lcols, rowNames: 'system.states', create: () => resizeMat([], N, L) }),
         this.grid({ title: 'u (N)', path: 'system.u', obj: s, key: 'u', rows: N, cols: 0, rowLabels: states, rowNames: 'system.states', create: () => zeros(N) }),
         this.grid({ title: 'y₀ (N)', path: 'system.y0', obj: s, key: 'y0', rows: N, cols: 0, rowLabels: states, rowNames: 'system.states', create: () => zeros(N) }),
@@ -1478,9 +1500,26 @@ export class ModelEditor {
           ),
           errorsGrid,
         ),
+        discrete ? this.priorChoice(s) : null,
       ),
       ...this.otherMembers('system'),
     );
+  }
+
+  /** A discrete model's `system.prior_at`: at t₀ (absent: the default) or at the first measurement. */
+  priorChoice(s) {
+    const options = [
+      ['t0', 'at t₀, one transition before the first measurement'],
+      ['first_measurement', 'at the first measurement'],
+    ];
+    const known = options.some(([v]) => v === (s.prior_at ?? 't0'));
+    // A value the format does not have is shown as it is, for the core's message at it.
+    if (!known) options.push([String(s.prior_at), `“${String(s.prior_at)}”`]);
+    const choice = this.formChoice('Prior (y₀, η₀)', 'system-prior', options, String(s.prior_at ?? 't0'), (v) => (s.prior_at = v));
+    const select = choice.querySelector('select');
+    select.dataset.path = 'system.prior_at';
+    this.register('system.prior_at', select, choice);
+    return el('div', { class: 'stack' }, choice);
   }
 
   sectionMeasurement({ N, n, M }) {
@@ -1770,7 +1809,7 @@ export function modelPlace(path) {
   const param = paramOf(path ?? '');
   if (param) return `${param.name ? 'name of ' : ''}parameter “${param.param}”: `;
   const names = {
-    'system.a': 'a', 'system.b': 'b', 'system.u': 'u', 'system.y0': 'y₀', 'system.eta0': 'η₀',
+    'system.a': 'a', 'system.transition': 'Φ', 'system.prior_at': 'prior at', 'system.b': 'b', 'system.u': 'u', 'system.y0': 'y₀', 'system.eta0': 'η₀',
     'system.phi': 'φ', 'system.W': 'W', 'measurement.c': 'C', 'measurement.gamma': 'Γ',
     'measurement.g': 'g', 'measurement.psi': 'ψ', 'measurement.V': 'V',
     'system.states': 'state names', 'measurement.names': 'measurement names',

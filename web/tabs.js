@@ -1,15 +1,17 @@
-// The tabs of the run pane: Analysis (app.js), Synthesis (synthesis.js) and Monte
-// Carlo (monte_carlo.js), all on the model in the editor, and Server: the models
-// (models.js) and jobs (jobs.js) the kea server keeps.
+// The tabs of the run pane: Analysis (app.js), Synthesis (synthesis.js), Monte Carlo
+// (monte_carlo.js) and Identification (identification.js), all on the model in the
+// editor, and Server: the models (models.js) and jobs (jobs.js) the kea server keeps.
 // Arrow keys move between the tabs; Ctrl+Enter runs and Esc cancels in the tab shown.
 
+import { IdentificationView } from './identification.js';
 import { JobsView, KINDS } from './jobs.js';
 import { ModelsView } from './models.js';
 import { MonteCarloView } from './monte_carlo.js';
 import { SynthesisView } from './synthesis.js';
 
 /**
- * `ctx`: {model(), example() (a loaded preset's synthesis example), showModelErrors(errors),
+ * `ctx`: {model(), loadModel(model, label) (into the editor, one Undo away), example() (a
+ * loaded preset's synthesis example), showModelErrors(errors),
  * download(name, type, text), fileStem(), server: whether a kea server answers,
  * openJob(job), openModel(record) (app.js), analysisBusy()}. Returns {current() (the name
  * of the tab shown), show(name), open(kind, id, request, model, body) (a server job in
@@ -25,6 +27,7 @@ export function mountTabs(ctx) {
   const views = {
     synthesis: new SynthesisView(document.getElementById('synthesis-panel'), ctx),
     monte_carlo: new MonteCarloView(document.getElementById('monte-carlo-panel'), ctx),
+    identification: new IdentificationView(document.getElementById('identification-panel'), ctx),
   };
   if (!ctx.server) {
     for (const v of Object.values(views)) v.bar.disableServer('No kea server answers here (open the page through `kea serve`).');

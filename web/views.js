@@ -5,7 +5,7 @@
 
 import { ServerRunner, WasmWorker, WorkGate } from './runner.js';
 import { duration, fmt, scrollHint, scrollHintText, when } from './results.js';
-import { modelPlace } from './editor.js';
+import { isDiscrete, modelPlace } from './editor.js';
 
 export { duration, fmt, scrollHint, scrollHintText, when };
 
@@ -339,10 +339,12 @@ const inModel = (e) => ({ path: e.path ? `model${e.path.startsWith('[') ? '' : '
 /**
  * The core's validation of a model, with the editor's own (`pending`: fields it could
  * not read), as errors at `model.…` paths: a run of an invalid model is refused here,
- * without a request.
+ * without a request. `discrete`: checked in the identification's form (Φ,
+ * `system.transition`); by default a discrete model is, and the run of another kind
+ * says what the core says of it.
  */
-export async function checkModel(model, pending = []) {
-  const errors = await wasmCall('check', { model: JSON.stringify(model), set: '' });
+export async function checkModel(model, pending = [], { discrete = isDiscrete(model) } = {}) {
+  const errors = await wasmCall('check', { model: JSON.stringify(model), set: '', discrete });
   const own = new Set(pending.map((e) => e.path));
   return [...pending, ...errors.filter((e) => !own.has(e.path))].map(inModel);
 }
@@ -354,11 +356,12 @@ export async function checkModel(model, pending = []) {
  */
 export async function checkOverrides(model, checks) {
   const json = JSON.stringify(model);
+  const discrete = isDiscrete(model); // in the model's own form, as checkModel: the run says what the core says of it
   const out = [];
   for (const { name, values, path } of checks) {
     for (const value of values.slice(0, 64)) {
       if (!Number.isFinite(value)) continue;
-      const errors = await wasmCall('check', { model: json, set: JSON.stringify({ [name]: value }) });
+      const errors = await wasmCall('check', { model: json, set: JSON.stringify({ [name]: value }), discrete });
       if (errors.length) {
         const first = errors[0];
         out.push({ path, message: `${name} = ${value} makes the model invalid: ${modelPlace(first.path)}${first.message}` });

@@ -1,7 +1,8 @@
 // The wasm build of kea-core, in a Web Worker so the page never freezes.
 //
 // Messages in:  {id, op: 'presets' | 'preset' | 'presetSynthesis' | 'check' | 'analyze' | 'analysis_work' | 'traces_csv', ...args}
-//               or {id, op: 'synthesize' | 'simulate' | 'synthesis_work' | 'monte_carlo_work', request}
+//               ('check' with `discrete: true`: a discrete model, as the identification reads it)
+//               or {id, op: 'synthesize' | 'simulate' | 'identify' | 'synthesis_work' | 'monte_carlo_work' | 'identification_work', request}
 //               or {id, op: 'monte_carlo_csv', result} | {id, op: 'parse', bytes}
 // Messages out: {id, progress} while analysing (at most every 50 ms), then
 //               {id, ok: <value>} or {id, error: {kind, title, errors:[{path, message}]}}.
@@ -35,6 +36,8 @@ const KINDS = {
   synthesis_work: 'synthesis',
   simulate: 'monte_carlo',
   monte_carlo_work: 'monte_carlo',
+  identify: 'identification',
+  identification_work: 'identification',
 };
 
 self.onmessage = async (event) => {
@@ -63,11 +66,12 @@ self.onmessage = async (event) => {
         value = JSON.parse(kea.analysis_work(event.data.model, event.data.set ?? ''));
         break;
       case 'synthesis_work':
-      case 'monte_carlo_work': // the core's work(kind, request), as for a server job of that kind
+      case 'monte_carlo_work':
+      case 'identification_work': // the core's work(kind, request), as for a server job of that kind
         value = JSON.parse(kea.work(KINDS[op], event.data.request));
         break;
-      case 'check':
-        value = JSON.parse(kea.check(event.data.model, event.data.set ?? ''));
+      case 'check': // a discrete model (system.transition) is checked in the identification's form
+        value = JSON.parse((event.data.discrete ? kea.check_discrete : kea.check)(event.data.model, event.data.set ?? ''));
         break;
       case 'analyze': {
         let last = 0;
@@ -83,9 +87,11 @@ self.onmessage = async (event) => {
         break;
       }
       case 'synthesize':
-      case 'simulate': {
-        // Synthesis and Monte Carlo (web/synthesis.js, web/monte_carlo.js): one request
-        // JSON, run by the core's run(kind, request) as a server job of that kind is.
+      case 'simulate':
+      case 'identify': {
+        // Synthesis, Monte Carlo and identification (web/synthesis.js, web/monte_carlo.js,
+        // web/identification.js): one request JSON, run by the core's run(kind, request)
+        // as a server job of that kind is.
         let last = 0;
         const text = kea.run(KINDS[op], event.data.request, (fraction) => {
           const now = performance.now();

@@ -94,3 +94,16 @@ test('a synthesis gives the same bits through the CLI, a job and wasm', async ()
   assert.equal(bits(job), bits(cli));
   assert.equal(bits(browser), bits(cli));
 });
+
+test('an identification gives the same bits through the CLI, a job and wasm', async () => {
+  const dir = path.join(ROOT, 'examples', 'identification');
+  const example = JSON.parse(readFileSync(path.join(dir, 'oscillator.json'), 'utf8'));
+  // The CLI reads the CSV file the request names; a job and the browser send its text.
+  const request = { ...example, data: { csv_text: readFileSync(path.join(dir, example.data.csv), 'utf8') } };
+  const cli = JSON.parse(kea('identify', path.join(dir, 'oscillator.json'), '--json'));
+  const job = await viaJob('identification', request);
+  const browser = viaWasm('identification', request);
+  assert.equal(bits(job), bits(cli));
+  assert.equal(bits(browser), bits(cli));
+  assert.equal(cli.converged, true);
+});

@@ -9,7 +9,7 @@ import { readFile } from 'node:fs/promises';
 import path from 'node:path';
 import { ROOT, launchBrowser, newPage } from './lib.mjs';
 
-const TYPES = { '.html': 'text/html', '.js': 'text/javascript', '.css': 'text/css', '.wasm': 'application/wasm', '.json': 'application/json' };
+const TYPES = { '.html': 'text/html', '.js': 'text/javascript', '.css': 'text/css', '.wasm': 'application/wasm', '.json': 'application/json', '.csv': 'text/csv' };
 const WEB = path.join(ROOT, 'web');
 
 let server;
@@ -69,5 +69,17 @@ test('without a kea server the page runs in the browser and says what needs the 
   assert.match(await page.textContent('#jobs-status'), /No kea server answers here/);
   assert.equal(await page.$('#models-table'), null);
   assert.equal(await page.$('#jobs-table'), null);
+  assert.deepEqual(consoleErrors, []);
+});
+
+test('without a kea server the Identification tab loads its example, shipped with the page, and runs it in the browser', async () => {
+  await page.click('#tab-identification');
+  assert.equal(await page.isDisabled('input[name=id-where][value=server]'), true);
+  await page.click('#id-example');
+  await page.waitForFunction(() => /read on the model’s grid/.test(document.getElementById('id-data-summary').textContent), null, { timeout: 30000 });
+  await page.click('#id-run');
+  await page.waitForFunction(() => document.getElementById('id-result').dataset.where === 'browser', null, { timeout: 60000 });
+  assert.match(await page.textContent('#id-summary'), /on the browser \(wasm\)$/);
+  assert.equal(await page.$$eval('#id-estimates tbody tr', (trs) => trs.length), 3);
   assert.deepEqual(consoleErrors, []);
 });

@@ -600,7 +600,7 @@ test('at 390 px wide the page does not overflow sideways, on every tab', async (
   try {
     await choosePreset(page, 'helicopter-range', 0);
     const overflow = () => page.evaluate(() => document.documentElement.scrollWidth - document.documentElement.clientWidth);
-    for (const tab of ['analysis', 'synthesis', 'monte-carlo']) {
+    for (const tab of ['analysis', 'synthesis', 'monte-carlo', 'identification', 'jobs']) {
       await page.click(`#tab-${tab}`);
       assert.equal(await overflow(), 0, `${tab}: no sideways overflow`);
     }
@@ -644,7 +644,7 @@ test('at 390 × 844 the Run button is in the window on load, on every tab, and c
     await phone.waitForFunction(() => document.querySelector('#summary')?.dataset.where === 'browser', null, { timeout: 60000 });
     assert.equal(await phone.evaluate(() => window.scrollY), 0, 'no scrolling was needed');
     await screenshot(phone, '09-narrow-run-bar');
-    for (const [tab, button, id] of [['synthesis', 'tab-synthesis', '#syn-run'], ['monte_carlo', 'tab-monte-carlo', '#mc-run']]) {
+    for (const [tab, button, id] of [['synthesis', 'tab-synthesis', '#syn-run'], ['identification', 'tab-identification', '#id-run'], ['monte_carlo', 'tab-monte-carlo', '#mc-run']]) {
       await phone.evaluate((t) => (location.hash = `#preset=helicopter-range&tab=${t}`), tab);
       await phone.waitForFunction((b) => document.getElementById(b).getAttribute('aria-selected') === 'true', button);
       await inWindow(id);

@@ -63,6 +63,22 @@ pub fn check(model_json: &str, set_json: &str) -> String {
     serde_json::to_string(&errors).expect("errors serialise")
 }
 
+/// [`check`] of a discrete model (`system.transition`, Φ per step: the form the
+/// identification reads, [`kea_core::model::compile_discrete`]): its problems as JSON
+/// (`[]` when valid), at the model's own paths. The editor checks a discrete model so,
+/// where [`check`] (the analysis's) would only say that it is not a continuous one.
+#[wasm_bindgen]
+pub fn check_discrete(model_json: &str, set_json: &str) -> String {
+    let result = kea_core::model_from_json(model_json).and_then(|model| {
+        kea_core::model::compile_discrete(&model, &overrides(set_json)?).map(|_| ())
+    });
+    let errors = match result {
+        Ok(()) => Vec::new(),
+        Err(e) => e.field_errors(),
+    };
+    serde_json::to_string(&errors).expect("errors serialise")
+}
+
 /// Check JSON text (its bytes, as read from a file or a link) as every way into kea
 /// reads it ([`kea_core::parse_json`]: a key given twice, a number beyond f64, text
 /// that is not UTF-8 are errors; a byte-order mark is skipped): nothing when it reads,
@@ -273,6 +289,30 @@ mod tests {
         assert_eq!(errors.len(), 1);
         let bad: Vec<serde_json::Value> = serde_json::from_str(&check(seed, "[1]")).unwrap();
         assert_eq!(bad[0]["path"], "set");
+    }
+
+    #[test]
+    fn check_discrete_reads_the_identifications_form() {
+        let mut model: serde_json::Value =
+            serde_json::from_str(kea_core::presets::get_json("cv-tracker").unwrap()).unwrap();
+        // A continuous model is not a discrete one, and a discrete one not a continuous one.
+        let errors: Vec<serde_json::Value> =
+            serde_json::from_str(&check_discrete(&model.to_string(), "")).unwrap();
+        assert!(errors.iter().any(|e| e["path"] == "system.transition"));
+        let a = model["system"]
+            .as_object_mut()
+            .unwrap()
+            .remove("a")
+            .unwrap();
+        model["system"]["transition"] = a;
+        assert_eq!(check_discrete(&model.to_string(), ""), "[]");
+        let errors: Vec<serde_json::Value> =
+            serde_json::from_str(&check(&model.to_string(), "")).unwrap();
+        assert_eq!(errors[0]["path"], "system.transition");
+        model["system"]["transition"][0][1] = serde_json::json!("1 +* q");
+        let errors: Vec<serde_json::Value> =
+            serde_json::from_str(&check_discrete(&model.to_string(), "")).unwrap();
+        assert_eq!(errors[0]["path"], "system.transition[0][1]");
     }
 
     #[test]

@@ -127,7 +127,7 @@ pub async fn submit(
     let pool = state.pool.clone();
     let stored = job.clone();
     let queue_limit = state.config.limits.queue;
-    let outcome = tokio::task::spawn_blocking(move || pool.submit(&stored, queue_limit))
+    let outcome = tokio::task::spawn_blocking(move || pool.submit(&stored, queue_limit, prepared))
         .await
         .map_err(Problem::internal)??;
     if let Enqueued::Full { queued } = outcome {

@@ -226,6 +226,12 @@ pub struct Pool {
     /// Live jobs by id. Claims, submissions and cancellations take this lock so a
     /// cancellation never slips between "claimed in the store" and "known here".
     live: Mutex<HashMap<String, Arc<LiveJob>>>,
+    /// Requests compiled at submission, by job id, so that a worker runs them without
+    /// compiling them again: at most one per worker (the next to run; a compiled
+    /// model may be far larger than its JSON), the rest compiled when claimed — as
+    /// are jobs after a restart, or queued by another instance.
+    prepared: Mutex<HashMap<String, super::jobs::PreparedJob>>,
+    workers: usize,
     wake: Mutex<u64>,
     cond: Condvar,
     state: AtomicU8,
@@ -282,6 +288,8 @@ impl Pool {
             state_every,
             build: this_build(),
             live: Mutex::new(HashMap::new()),
+            prepared: Mutex::new(HashMap::new()),
+            workers: workers.max(1),
             wake: Mutex::new(0),
             cond: Condvar::new(),
             state: AtomicU8::new(RUNNING),
@@ -303,11 +311,13 @@ impl Pool {
     }
 
     /// Store a new queued job, unless `queue_limit` jobs are queued already (checked
-    /// and inserted at once), and wake a worker.
+    /// and inserted at once), and wake a worker. `prepared` is its request as the
+    /// submission compiled it, kept for the worker while there is room ([`Pool::prepared`]).
     pub fn submit(
         &self,
         job: &JobRecord,
         queue_limit: u64,
+        prepared: super::jobs::PreparedJob,
     ) -> Result<Enqueued, super::store::StoreError> {
         {
             let mut live = self.live.lock().unwrap();
@@ -319,6 +329,10 @@ impl Pool {
                 job.id.clone(),
                 LiveJob::new(JobStatus::Queued, job.progress),
             );
+            let mut kept = self.prepared.lock().unwrap();
+            if kept.len() < self.workers {
+                kept.insert(job.id.clone(), prepared);
+            }
         }
         self.wake_one();
         Ok(Enqueued::Queued)
@@ -342,6 +356,7 @@ impl Pool {
     pub fn cancel(&self, id: &str) -> Result<CancelOutcome, super::store::StoreError> {
         let mut live = self.live.lock().unwrap();
         if self.store.cancel_queued(id, &now_rfc3339())? {
+            self.prepared.lock().unwrap().remove(id);
             if let Some(job) = live.remove(id) {
                 job.tx.send_replace(Snapshot {
                     status: JobStatus::Cancelled,
@@ -451,9 +466,15 @@ impl Pool {
         let started = Instant::now();
         let stop = Cell::new(None::<Stop>);
         let result = std::panic::catch_unwind(AssertUnwindSafe(|| {
-            let request: serde_json::Value = serde_json::from_str(&job.request_json)
-                .map_err(|e| Error::invalid("", format!("stored request unreadable: {e}")))?;
-            let prepared = super::jobs::prepare(&job.kind, request)?;
+            let kept = self.prepared.lock().unwrap().remove(&job.id);
+            let prepared = match kept {
+                Some(p) => p,
+                None => {
+                    let request: serde_json::Value = serde_json::from_str(&job.request_json)
+                        .map_err(|e| Error::invalid("", format!("stored request unreadable: {e}")))?;
+                    super::jobs::prepare(&job.kind, request)?
+                }
+            };
             let memo = StoreMemo::new(&*self.store, &job.id, self.state_every, &self.build);
             let mut last_persist = Instant::now();
             let mut progress = |fraction: f64| {
@@ -560,6 +581,7 @@ impl Pool {
 
     /// Publish the final state of a live job and drop it from the live set.
     fn forget(&self, id: &str, status: JobStatus) {
+        self.prepared.lock().unwrap().remove(id);
         if let Some(job) = self.live.lock().unwrap().remove(id) {
             let progress = if status == JobStatus::Succeeded {
                 1.0

@@ -421,7 +421,7 @@ export class IdentificationView extends RunView {
     }
     const path = iterationChart(this.chartParam, { title: `${name} against the iteration (estimate ${fmt(e.value)})`, yLabel: name, width, columns });
     const acf = this.fitCharts.map((c) =>
-      autocorrelationChart(c.box, { title: `${c.measurement}: autocorrelations of the standardized innovations at lags 1…${c.rho.length}, ±1.96/√n`, rho: c.rho, count: c.count, width }),
+      autocorrelationChart(c.box, { title: `${c.measurement}: the innovations’ autocorrelations ρ(lag), ±1.96/√n`, rho: c.rho, count: c.count, width }),
     );
     this.plots = [j, path, ...acf];
   }

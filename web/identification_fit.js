@@ -141,7 +141,7 @@ export function optimaTable(r) {
   if (optima.length < 2) return null;
   const best = optima[0].neg_log_likelihood;
   const table = el('table', { class: 'criteria id-optima', id: 'id-optima' });
-  table.append(el('caption', { text: `The ${optima.length} distinct optima the starts reached, lowest J first: the first is the estimate (start i: the i-th line of More starts)` }));
+  table.append(el('caption', { text: `The ${optima.length} distinct optima the starts reached, lowest J first: the first is the estimate (start i: the i-th start of More starts, blank lines and comments not counted)` }));
   table.append(el('thead', {}, el('tr', {}, ...['', 'J', 'J − J of the estimate', ...r.parameters, 'converged', 'reached from'].map((t) => el('th', { scope: 'col', text: t })))));
   const body = el('tbody');
   optima.forEach((o, i) => {

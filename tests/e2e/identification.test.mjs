@@ -389,7 +389,7 @@ test("a script's identification job, with inline rows, opens in the tab from the
   const csv = readFileSync(path.join(ROOT, 'examples', 'identification', 'oscillator.csv'), 'utf8').trim().split('\n').slice(1);
   const rows = csv.map((line) => line.split(',').map(Number));
   rows[2][1] = null; // a missing measurement
-  const request = { kind: 'identification', model: example.model, data: { rows }, estimate: { r: { initial: 0.9, min: 0, max: 1 }, sv: {} }, method: 'conjugate', max_iterations: 200 };
+  const request = { kind: 'identification', model: example.model, data: { rows }, estimate: { r: { initial: 0.9, min: 0, max: 1 }, sv: {} }, method: 'conjugate', max_iterations: 200, starts: [{ r: 0.5, sv: 0.7 }] };
   const call = client(app.server.url);
   const submitted = await call('POST', '/v1/jobs', request);
   assert.equal(submitted.status, 202, JSON.stringify(submitted.json));
@@ -416,6 +416,7 @@ test("a script's identification job, with inline rows, opens in the tab from the
   });
   assert.equal(await page.inputValue('#id-method'), 'conjugate');
   assert.equal(await page.inputValue('#id-max-iterations'), '200');
+  assert.equal(await page.inputValue('#id-starts'), 'r=0.5, sv=0.7');
   // Its result, as the server has it.
   const result = (await call('GET', `/v1/jobs/${id}/result`)).json;
   const [download] = await Promise.all([page.waitForEvent('download'), page.click('#id-download')]);
@@ -430,6 +431,7 @@ test("the tab's fields and data are kept over a reload, and the tab in the link"
   await page.selectOption('#id-method', 'conjugate');
   await page.fill('#id-max-iterations', '50');
   await page.fill('#id-max-2', '3'); // sv ≤ 3
+  await page.fill('#id-starts', 'r=0.9, w=0.2\nsv=0.7');
   await page.waitForFunction(() => /&tab=identification$/.test(location.hash));
   const data = await page.inputValue('#id-data');
   await page.reload();
@@ -438,6 +440,7 @@ test("the tab's fields and data are kept over a reload, and the tab in the link"
   assert.equal(await page.inputValue('#id-data'), data);
   assert.equal(await page.inputValue('#id-method'), 'conjugate');
   assert.equal(await page.inputValue('#id-max-iterations'), '50');
+  assert.equal(await page.inputValue('#id-starts'), 'r=0.9, w=0.2\nsv=0.7');
   const rows = await page.$$eval('#id-params tbody tr', (trs) =>
     trs.map((tr) => [tr.dataset.param, tr.querySelector('input[type=checkbox]').checked, ...[...tr.querySelectorAll('input:not([type=checkbox])')].map((i) => i.value)]),
   );

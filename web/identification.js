@@ -3,13 +3,15 @@
 // identification_data.js), in this browser (wasm, the core's Sequential executor: the
 // same bits as the server and `kea identify`) or as a server job of kind
 // `identification`; the estimates with their standard errors and 95 % intervals, J, the
-// identifiability verdict and the stop reason in words, and J and each param's path
-// over the iterations (identification_plots.js).
+// identifiability verdict and the stop reason in words, whether the model fits the data
+// (the innovations), the distinct optima of several starts (identification_fit.js), and J
+// and each param's path over the iterations (identification_plots.js).
 
 import { isDiscrete } from './editor.js';
 import { numberProblem, toNumber } from './numbers.js';
 import { DataBox, rowsToCsv } from './identification_data.js';
-import { CHART_HEIGHT, iterationChart } from './identification_plots.js';
+import { fitBlock, optimaTable, parseStarts, startsText } from './identification_fit.js';
+import { CHART_HEIGHT, autocorrelationChart, iterationChart } from './identification_plots.js';
 import { resumedText } from './results.js';
 import { KeptFields, RunBar, RunView, checkModel, duration, el, field, fmt, input, markControls, recheckControl, requestErrors, select } from './views.js';
 
@@ -70,6 +72,7 @@ export class IdentificationView extends RunView {
       // unreadable: the defaults
     }
     this.plots = [];
+    this.fitCharts = []; // the result's autocorrelation boxes (fitBlock)
     this.build();
   }
 
@@ -77,6 +80,14 @@ export class IdentificationView extends RunView {
     this.method = select('id-method', METHODS, 'scoring');
     this.method.dataset.requestPath = 'method';
     this.maxIterations = input('id-max-iterations', '', { inputmode: 'numeric', placeholder: '100', 'data-request-path': 'max_iterations' });
+    this.starts = el('textarea', {
+      id: 'id-starts',
+      rows: 3,
+      spellcheck: 'false',
+      autocomplete: 'off',
+      placeholder: 'w=-0.5\nr=0.9, w=0.2',
+      'data-request-path': 'starts',
+    });
     this.formNote = el('p', { id: 'id-form-note', class: 'help id-form-note', hidden: true });
     this.exampleButton = el('button', { type: 'button', id: 'id-example', text: 'Load the example', title: 'The damped oscillator of examples/identification: its model into the editor, its data here', onclick: () => this.loadExample() });
     this.data = new DataBox({ probe: () => this.probe(), onChange: () => keep(KEEP_DATA, this.data.value()) });
@@ -88,6 +99,12 @@ export class IdentificationView extends RunView {
       el('thead', {}, el('tr', {}, ...['param', 'estimate', 'initial', 'min', 'max'].map((t) => el('th', { scope: 'col', text: t })))),
       this.paramsBody,
     );
+    const startsField = field(
+      'More starts (optional)',
+      this.starts,
+      'Further starting points, one per line: NAME=x items of params estimated, split by commas (r=0.9, w=0.2); a param left out starts at its initial value; at most 100. The fit runs from each: the lowest J is the estimate, and every distinct optimum is listed with the starts that reached it.',
+    );
+    startsField.classList.add('wide', 'id-starts');
     this.form = el(
       'form',
       { class: 'view-form', novalidate: true, onsubmit: (e) => e.preventDefault(), oninput: (e) => recheckControl(e.target, () => requestErrors(() => this.request())) },
@@ -98,6 +115,7 @@ export class IdentificationView extends RunView {
         this.formNote,
         this.data.root(this.exampleButton),
         el('div', { class: 'scroll' }, this.paramsTable),
+        startsField,
         el('div', { class: 'row' }, field('Method', this.method), field('Max iterations', this.maxIterations)),
         el('p', { class: 'help', text: 'Maximum likelihood by the square-root information filter (METHOD §3): J(θ) = −log-likelihood of the data, minimised within the bounds — scoring with a line search, gradient descent halving its step, or conjugate directions restarted every p iterations. Cost ∝ iterations × D × (N + L)³ × (1 + params).' }),
       ),
@@ -110,7 +128,7 @@ export class IdentificationView extends RunView {
     this.chartParam = el('div', { id: 'id-chart-param', class: 'id-chart' });
     new ResizeObserver(() => this.plots.forEach((p) => p.setSize({ width: this.width(), height: CHART_HEIGHT }))).observe(this.out);
     this.root.append(this.form, this.bar.root, this.out);
-    this.kept = new KeptFields('kea-identification', [[this.method], [this.maxIterations]]);
+    this.kept = new KeptFields('kea-identification', [[this.method], [this.maxIterations], [this.starts]]);
     this.kept.restore();
     for (const type of ['input', 'change']) this.form.addEventListener(type, (e) => e.target !== this.data.text && this.saveFields());
     const data = readKept(KEEP_DATA);
@@ -178,6 +196,7 @@ export class IdentificationView extends RunView {
     this.refreshParams({ fromEntries: true });
     this.method.value = request.method ?? 'scoring';
     this.maxIterations.value = shown(request.max_iterations);
+    this.starts.value = startsText(request.starts);
     const data = request.data ?? {};
     if (typeof data.csv_text === 'string') this.data.set(data.csv_text, 'the request’s CSV');
     else if (Array.isArray(data.rows)) this.data.set(rowsToCsv(data.rows, this.ctx.model()?.measurement?.names ?? []), 'the request’s rows, as CSV');
@@ -237,6 +256,9 @@ export class IdentificationView extends RunView {
       if (problem) errors.push({ path: 'max_iterations', message: problem });
       else request.max_iterations = toNumber(iterations);
     }
+    const starts = parseStarts(this.starts.value, Object.keys(estimate));
+    errors.push(...starts.errors);
+    if (starts.starts.length) request.starts = starts.starts;
     if (errors.length) throw { kind: 'invalid', title: 'Invalid identification request', errors };
     return request;
   }
@@ -305,6 +327,8 @@ export class IdentificationView extends RunView {
         .join(' · '),
     });
     const id = r.identifiability;
+    const fit = fitBlock(r);
+    this.fitCharts = fit.charts;
     const previous = this.paramSelect.value;
     this.paramSelect.replaceChildren(...r.parameters.map((p) => el('option', { value: p, text: p })));
     if (r.parameters.includes(previous)) this.paramSelect.value = previous;
@@ -316,6 +340,8 @@ export class IdentificationView extends RunView {
       el('h3', { text: 'Estimates' }),
       this.estimatesTable(r),
       r.correlation ? this.correlationTable(r) : null,
+      optimaTable(r),
+      fit.root,
       el(
         'div',
         { class: 'downloads' },
@@ -394,6 +420,9 @@ export class IdentificationView extends RunView {
       for (const [k, end] of [[0, 'low'], [1, 'high']]) columns.push({ label: `95 % interval, ${end}`, values: flat(e.interval[k]), stroke: '#2ca02c', dash: [6, 4], width: 1 });
     }
     const path = iterationChart(this.chartParam, { title: `${name} against the iteration (estimate ${fmt(e.value)})`, yLabel: name, width, columns });
-    this.plots = [j, path];
+    const acf = this.fitCharts.map((c) =>
+      autocorrelationChart(c.box, { title: `${c.measurement}: the innovations’ autocorrelations ρ(lag), ±1.96/√n`, rho: c.rho, count: c.count, width }),
+    );
+    this.plots = [j, path, ...acf];
   }
 }

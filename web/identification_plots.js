@@ -46,3 +46,46 @@ export function iterationChart(box, { title, yLabel, columns, width }) {
 
 /** The chart's height, for the box that holds it. */
 export const CHART_HEIGHT = HEIGHT;
+
+/**
+ * The autocorrelations ρ_1…ρ_L of a measurement's standardized innovations as bars
+ * against the lag, with the band ±1.96/√n (`count` = n) a white sequence keeps 95 % of
+ * them within, into `box`. Returns the uPlot.
+ */
+export function autocorrelationChart(box, { title, rho, count, width }) {
+  const lags = rho.map((_, i) => i + 1);
+  const band = 1.96 / Math.sqrt(Math.max(1, count));
+  const x = valueAxis([lags]);
+  const y = valueAxis([rho, [band, -band]]);
+  // Symmetric about 0, the band inside: ρ's sign is read at a glance.
+  let top = band;
+  for (const v of rho) if (Number.isFinite(v)) top = Math.max(top, Math.abs(v));
+  const unit = y.value(1);
+  const range = (1.15 * top) / unit;
+  const pad = 0.6 / x.value(1); // half a lag and a little, in the axis's units
+  const flat = (v) => lags.map(() => v);
+  const shown = (_, v) => (v === null || v === undefined ? '—' : fmt(y.value(v)));
+  box.replaceChildren();
+  return new uPlot(
+    {
+      title,
+      width,
+      height: HEIGHT,
+      scales: { x: { time: false, range: (_, lo, hi) => [lo - pad, hi + pad] }, y: { range: () => [-range, range] } },
+      axes: [
+        { label: 'lag', ...x.axis },
+        { label: 'ρ', size: 70, ...y.axis },
+      ],
+      series: [
+        { label: 'lag', value: (_, v) => (v === null || v === undefined ? '—' : String(Math.round(x.value(v)))) },
+        { label: 'ρ', stroke: '#1f77b4', fill: 'rgba(31, 119, 180, 0.45)', width: 1, paths: uPlot.paths.bars({ size: [0.6, 40] }), points: { show: false }, value: shown },
+        { label: '+1.96/√n', stroke: '#d62728', dash: [6, 4], width: 1, points: { show: false }, value: shown },
+        { label: '−1.96/√n', stroke: '#d62728', dash: [6, 4], width: 1, points: { show: false }, value: shown },
+      ],
+      legend: { live: true },
+      hooks: { draw: [() => (box.dataset.yTicks = y.ticks().join(' | '))] },
+    },
+    [x.data(lags), y.data(rho), y.data(flat(band)), y.data(flat(-band))],
+    box,
+  );
+}

@@ -4,11 +4,13 @@
 // against the reference optimum computed outside kea, and the result's bits against
 // `kea identify --json`. A bad CSV cell is named by its line, row and column; Cancel
 // stops a run; a discrete model in the editor leaves the other tabs to say the core's
-// error.
+// error. The innovations say whether the model fits; more starts list the optima they
+// reach (the mirror w → −w); a malformed start is refused at its field.
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
-import { readFileSync } from 'node:fs';
+import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
+import os from 'node:os';
 import path from 'node:path';
 import { ROOT, client, exportedModel, importModel, kea, openApp, refusedRun, relDiff, screenshot } from './lib.mjs';
 
@@ -122,6 +124,28 @@ test('the example runs in the browser and on the server to the reference optimum
   assert.equal(await page.textContent('#id-identifiability'), inBrowser.identifiability.verdict);
   assert.match(await page.textContent('#id-identifiability'), /^identifiable: the information's condition number is 6\.5$/);
   assert.equal(await page.textContent('#id-stop'), `Converged: ${inBrowser.stop_reason}`);
+  // Does the model fit? The NIS within its band, the position's innovations white, Q as the result has it.
+  const inn = inBrowser.innovations;
+  assert.equal(inn.nis_consistent, true);
+  assert.equal(await page.getAttribute('#id-nis', 'data-consistent'), 'true');
+  assert.match(await page.textContent('#id-nis'), /^NIS mean 1\.0027 within its 95 % band \[0\.91426, 1\.0895\] \(1,000 degrees of freedom\): consistent$/);
+  assert.equal(await page.textContent('#id-fit-verdict'), 'Yes: the NIS is consistent and the innovations are white at 95 %.');
+  const whiteness = await page.$$eval('#id-whiteness tbody tr', (trs) =>
+    trs.map((tr) => [tr.dataset.measurement, Object.fromEntries([...tr.querySelectorAll('td')].map((td) => [td.dataset.key, [td.dataset.value, td.textContent]]))]),
+  );
+  assert.deepEqual(whiteness.map(([m]) => m), ['position_meas']);
+  const [, w0] = whiteness[0];
+  const expected = inn.whiteness[0];
+  assert.equal(expected.white, true);
+  assert.deepEqual(w0.white, ['true', `white: Q ≤ ${Number(expected.critical.toPrecision(5))}`]);
+  assert.equal(Number(w0.ljung_box[0]), expected.ljung_box, 'Q: the result JSON’s');
+  assert.equal(w0.ljung_box[1], '12.609');
+  assert.equal(Number(w0.critical[0]), expected.critical);
+  assert.equal(w0.lags[1], '20');
+  // The autocorrelations as bars with the band ±1.96/√n.
+  assert.ok(await page.$('#id-chart-acf-0 .uplot'), 'the chart of the autocorrelations');
+  assert.deepEqual(await page.$$eval('#id-chart-acf-0 .u-legend .u-series th', (ths) => ths.map((t) => t.textContent)), ['lag', 'ρ', '+1.96/√n', '−1.96/√n']);
+  assert.equal(await page.$('#id-optima'), null, 'one optimum: no table of optima');
   // J and a param's path over the iterations.
   assert.ok(await page.$('#id-chart-j .uplot'), 'the chart of J');
   assert.ok(await page.$('#id-chart-param .uplot'), "the chart of a param's path");
@@ -176,6 +200,78 @@ test('a bad CSV cell is named by its line, data row and column, at the data and 
   await page.click('#id-run');
   await page.waitForSelector('#id-initial-0 + .control-error', { timeout: 30000 });
   assert.match(await page.textContent('#id-initial-0 + .control-error'), /the initial value 2 is outside \[min, max\] = \[0, 1\]/);
+  assert.deepEqual(consoleErrors, []);
+});
+
+test('more starts: the mirror optimum of w listed beside the estimate, the same bits as the CLI', async () => {
+  await loadExample();
+  await page.fill('#id-min-1', ''); // w ≥ 0 no more: w → −w is a mirror optimum
+  await page.fill('#id-starts', 'w=-0.5\n\nr=0.9, w=0.2 # a second one');
+  const result = await runIdentification('browser');
+  assert.equal(result.optima.length, 2, JSON.stringify(result.optima));
+  const [a, b] = result.optima;
+  assert.ok(Math.abs(a.neg_log_likelihood - b.neg_log_likelihood) <= 1e-9, `J ${a.neg_log_likelihood} and ${b.neg_log_likelihood}`);
+  assert.ok(Math.abs(a.params.w + b.params.w) <= 1e-6 && Math.abs(a.params.w) > 0.3, `w ${a.params.w} and ${b.params.w}`);
+  assert.equal(a.neg_log_likelihood, result.neg_log_likelihood, 'the first is the estimate');
+  assert.deepEqual([...a.starts, ...b.starts].sort(), [0, 1, 2], 'each start reached one of them');
+  // The table: the estimate first, J, each param, the starts that reached each.
+  const rows = await page.$$eval('#id-optima tbody tr', (trs) =>
+    trs.map((tr) => ({
+      head: tr.querySelector('th').textContent,
+      estimate: tr.classList.contains('estimate'),
+      J: Number(tr.querySelector('[data-key=neg_log_likelihood]').dataset.value),
+      w: Number(tr.querySelector('[data-param=w]').dataset.value),
+      starts: JSON.parse(tr.querySelector('[data-key=starts]').dataset.value),
+      from: tr.querySelector('[data-key=starts]').textContent,
+    })),
+  );
+  assert.deepEqual(rows.map((r) => [r.head, r.estimate]), [['the estimate', true], ['optimum 2', false]]);
+  result.optima.forEach((o, i) => {
+    assert.equal(rows[i].J, o.neg_log_likelihood);
+    assert.equal(rows[i].w, o.params.w);
+    assert.deepEqual(rows[i].starts, o.starts);
+  });
+  const names = (starts) => starts.map((i) => (i === 0 ? 'the initial values' : `start ${i}`)).join(', ');
+  assert.deepEqual(rows.map((r) => r.from), result.optima.map((o) => names(o.starts)));
+  assert.match(await page.textContent('#id-optima caption'), /^The 2 distinct optima/);
+  await screenshot(page, '33-identification-optima');
+  // The same bits through the CLI, the request's starts in its file (the CSV beside it).
+  const dir = mkdtempSync(path.join(os.tmpdir(), 'kea-id-starts-'));
+  try {
+    const request = JSON.parse(readFileSync(path.join(ROOT, 'examples', 'identification', 'oscillator.json'), 'utf8'));
+    request.estimate.w = { initial: 0.5 };
+    request.starts = [{ w: -0.5 }, { r: 0.9, w: 0.2 }];
+    writeFileSync(path.join(dir, 'starts.json'), JSON.stringify(request));
+    writeFileSync(path.join(dir, 'oscillator.csv'), readFileSync(path.join(ROOT, 'examples', 'identification', 'oscillator.csv')));
+    const cli = JSON.parse(kea('identify', path.join(dir, 'starts.json'), '--json'));
+    assert.deepStrictEqual(bits(result), bits(cli), 'browser and CLI: the same bits');
+  } finally {
+    rmSync(dir, { recursive: true, force: true });
+  }
+  assert.deepEqual(consoleErrors, []);
+});
+
+test('a malformed start line is refused at its field before anything is sent', async () => {
+  await loadExample();
+  await page.evaluate(() => delete document.getElementById('id-result').dataset.where);
+  await page.fill('#id-starts', 'w=0.4\nw 0.3');
+  await page.check('input[name=id-where][value=browser]');
+  await page.click('#id-run');
+  await page.waitForFunction(() => document.getElementById('id-status').classList.contains('error'), null, { timeout: 30000 });
+  assert.match(await page.textContent('#id-status'), /see the marked fields/);
+  assert.equal(await page.getAttribute('#id-starts', 'aria-invalid'), 'true');
+  assert.deepEqual(await page.$$eval('#id-starts ~ .control-error', (es) => es.map((e) => e.textContent)), ['line 2: “w 0.3” is not NAME=value (one start per line: r=0.5, …)']);
+  assert.equal(await page.evaluate(() => document.getElementById('id-result').dataset.where), undefined, 'not run');
+  // Re-checked as typed: a param not estimated, a decimal comma, then a good line.
+  await page.fill('#id-starts', 'sw=0.3\nr=0,9');
+  assert.deepEqual(await page.$$eval('#id-starts ~ .control-error', (es) => es.map((e) => e.textContent)), [
+    'line 1: “sw” is not a param estimated here (estimated: r, w, sv)',
+    'line 2, r: “0,9” — use a decimal point: 0.9',
+  ]);
+  await page.fill('#id-starts', 'r=0.9');
+  assert.equal(await page.$('#id-starts ~ .control-error'), null);
+  assert.equal(await page.getAttribute('#id-starts', 'aria-invalid'), null);
+  await page.fill('#id-starts', '');
   assert.deepEqual(consoleErrors, []);
 });
 
@@ -293,7 +389,7 @@ test("a script's identification job, with inline rows, opens in the tab from the
   const csv = readFileSync(path.join(ROOT, 'examples', 'identification', 'oscillator.csv'), 'utf8').trim().split('\n').slice(1);
   const rows = csv.map((line) => line.split(',').map(Number));
   rows[2][1] = null; // a missing measurement
-  const request = { kind: 'identification', model: example.model, data: { rows }, estimate: { r: { initial: 0.9, min: 0, max: 1 }, sv: {} }, method: 'conjugate', max_iterations: 200 };
+  const request = { kind: 'identification', model: example.model, data: { rows }, estimate: { r: { initial: 0.9, min: 0, max: 1 }, sv: {} }, method: 'conjugate', max_iterations: 200, starts: [{ r: 0.5, sv: 0.7 }] };
   const call = client(app.server.url);
   const submitted = await call('POST', '/v1/jobs', request);
   assert.equal(submitted.status, 202, JSON.stringify(submitted.json));
@@ -320,6 +416,7 @@ test("a script's identification job, with inline rows, opens in the tab from the
   });
   assert.equal(await page.inputValue('#id-method'), 'conjugate');
   assert.equal(await page.inputValue('#id-max-iterations'), '200');
+  assert.equal(await page.inputValue('#id-starts'), 'r=0.5, sv=0.7');
   // Its result, as the server has it.
   const result = (await call('GET', `/v1/jobs/${id}/result`)).json;
   const [download] = await Promise.all([page.waitForEvent('download'), page.click('#id-download')]);
@@ -334,6 +431,7 @@ test("the tab's fields and data are kept over a reload, and the tab in the link"
   await page.selectOption('#id-method', 'conjugate');
   await page.fill('#id-max-iterations', '50');
   await page.fill('#id-max-2', '3'); // sv ≤ 3
+  await page.fill('#id-starts', 'r=0.9, w=0.2\nsv=0.7');
   await page.waitForFunction(() => /&tab=identification$/.test(location.hash));
   const data = await page.inputValue('#id-data');
   await page.reload();
@@ -342,6 +440,7 @@ test("the tab's fields and data are kept over a reload, and the tab in the link"
   assert.equal(await page.inputValue('#id-data'), data);
   assert.equal(await page.inputValue('#id-method'), 'conjugate');
   assert.equal(await page.inputValue('#id-max-iterations'), '50');
+  assert.equal(await page.inputValue('#id-starts'), 'r=0.9, w=0.2\nsv=0.7');
   const rows = await page.$$eval('#id-params tbody tr', (trs) =>
     trs.map((tr) => [tr.dataset.param, tr.querySelector('input[type=checkbox]').checked, ...[...tr.querySelectorAll('input:not([type=checkbox])')].map((i) => i.value)]),
   );

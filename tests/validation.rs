@@ -413,7 +413,7 @@ fn malformed_json_is_located() {
         |v| v["system"]["extra"] = json!(1),
         &[],
         "system.extra",
-        "unknown member; expected one of: states, a, u, b",
+        "unknown member; expected one of: states, a, transition, prior_at, u, b",
     );
     // serde's path of a member whose key is not an identifier, quoted the same way.
     expect(

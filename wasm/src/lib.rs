@@ -306,9 +306,8 @@ mod tests {
             .unwrap();
         model["system"]["transition"] = a;
         assert_eq!(check_discrete(&model.to_string(), ""), "[]");
-        let errors: Vec<serde_json::Value> =
-            serde_json::from_str(&check(&model.to_string(), "")).unwrap();
-        assert_eq!(errors[0]["path"], "system.transition");
+        // (`check` reads a model in its own form, as a stored model is checked.)
+        assert_eq!(check(&model.to_string(), ""), "[]");
         model["system"]["transition"][0][1] = serde_json::json!("1 +* q");
         let errors: Vec<serde_json::Value> =
             serde_json::from_str(&check_discrete(&model.to_string(), "")).unwrap();

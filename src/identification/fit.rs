@@ -223,18 +223,22 @@ pub fn identify(
     })
 }
 
-/// The distinct optima the starts reached, by J: two are one where every param agrees
-/// to 1e-6·max(|θ_i|, 1) (mirror optima, ±w, are two). Each with the starts (by index:
-/// 0 the initial values, i the i-th of `starts`) that reached it.
+/// The distinct optima the starts reached, by J: two are one where J agrees to 1e-9
+/// relatively and every param to 1e-4·max(|θ_i|, 1) — the minimisers stop within
+/// ≈ 1e-5 of an optimum, while mirror optima (±w) and a local optimum differ far more.
+/// Each with the starts (by index: 0 the initial values, i the i-th of `starts`) that
+/// reached it.
 fn distinct_optima(outcomes: &[minimise::Outcome], names: &[&str]) -> Vec<Optimum> {
     let mut out: Vec<(Vec<f64>, Optimum)> = Vec::new();
     for (k, o) in outcomes.iter().enumerate() {
-        let same = |t: &Vec<f64>| {
-            t.iter()
-                .zip(&o.theta)
-                .all(|(a, b)| (a - b).abs() <= 1e-6 * a.abs().max(1.0))
+        let j = o.evaluation.j;
+        let same = |(t, opt): &(Vec<f64>, Optimum)| {
+            (opt.neg_log_likelihood - j).abs() <= 1e-9 * j.abs().max(1.0)
+                && t.iter()
+                    .zip(&o.theta)
+                    .all(|(a, b)| (a - b).abs() <= 1e-4 * a.abs().max(1.0))
         };
-        match out.iter_mut().find(|(t, _)| same(t)) {
+        match out.iter_mut().find(|x| same(x)) {
             Some((_, opt)) => opt.starts.push(k),
             None => out.push((
                 o.theta.clone(),

@@ -71,10 +71,16 @@ pub fn text(r: &IdentificationResult) -> String {
         }
     }
     if r.optima.len() > 1 {
-        out += &format!("{} distinct optima from the starts (lowest J first):\n", r.optima.len());
+        out += &format!(
+            "{} distinct optima from the starts (lowest J first):\n",
+            r.optima.len()
+        );
         for o in &r.optima {
-            let params: Vec<String> =
-                o.params.iter().map(|(k, v)| format!("{k} {}", cell(Some(*v)).trim())).collect();
+            let params: Vec<String> = o
+                .params
+                .iter()
+                .map(|(k, v)| format!("{k} {}", cell(Some(*v)).trim()))
+                .collect();
             out += &format!(
                 "  J {}  {}  (starts {:?})\n",
                 short(o.neg_log_likelihood),

@@ -471,7 +471,9 @@ impl Pool {
                 Some(p) => p,
                 None => {
                     let request: serde_json::Value = serde_json::from_str(&job.request_json)
-                        .map_err(|e| Error::invalid("", format!("stored request unreadable: {e}")))?;
+                        .map_err(|e| {
+                            Error::invalid("", format!("stored request unreadable: {e}"))
+                        })?;
                     super::jobs::prepare(&job.kind, request)?
                 }
             };

@@ -350,6 +350,17 @@ fn bad_requests_name_their_fields() {
     let mut r = case.request("scoring", None);
     r["data"] = json!({"rows": [[1, 0.5], [2, "x"]]});
     assert_eq!(paths(r), ["data.rows[1][1]"]);
+    let mut r = case.request("scoring", None);
+    r["data"] = json!({"simulate": {"seed": -1, "x": 1, "set": {"nope": 1, "sv": "a"}}});
+    assert_eq!(
+        paths(r),
+        [
+            "data.simulate.x",
+            "data.simulate.seed",
+            "data.simulate.set.sv",
+            "data.simulate.set.nope"
+        ]
+    );
     // A discrete model is the identification's: an analysis refuses it at its path.
     let analysis = registry::prepare("analysis", json!({"model": model(&case.spec)}));
     let Err(Error::Invalid(v)) = analysis else {

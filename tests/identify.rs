@@ -428,6 +428,35 @@ fn innovations_at_the_optimum_match_a_covariance_filter_and_tell_a_wrong_model()
             }
         }
     }
+    // The CSV: every step, ν/√S as the covariance filter has it.
+    let prepared =
+        registry::prepare_checked("identification", case.request("scoring", None)).unwrap();
+    let csv = prepared
+        .run(&Sequential, &mut NoProgress, &Forgetful)
+        .unwrap()
+        .csv()
+        .unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some("t,nis,innovation:position_meas"));
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), z.len());
+    for (k, row) in rows.iter().enumerate() {
+        assert_eq!(row[0], (k + 1) as f64);
+        assert!(
+            (row[2] - std[k]).abs() < 1e-9,
+            "step {}: {} against {}",
+            k + 1,
+            row[2],
+            std[k]
+        );
+        assert!(
+            (row[1] - std[k] * std[k]).abs() < 1e-8 * (1.0 + row[1]),
+            "NIS at step {}",
+            k + 1
+        );
+    }
     let i = &r["innovations"];
     let got = i["nis_mean"].as_f64().unwrap();
     let want = nis / z.len() as f64;

@@ -7,7 +7,8 @@ use super::discrete;
 use super::minimise::{self, Bounds, Evaluation, Failure, Objective, Options};
 use super::request::IdentificationRequest;
 use super::result::{
-    Identifiability, IdentificationResult, IterationRecord, Optimum, ParamEstimate,
+    Identifiability, IdentificationResult, InnovationSeries, IterationRecord, Optimum,
+    ParamEstimate,
 };
 use super::srif::{Likelihood, Srif};
 use crate::error::Error;
@@ -220,6 +221,12 @@ pub fn identify(
         steps: request.data.rows(),
         measurements: at_hat.measurements,
         timing: Timing::default(),
+        series: Some(InnovationSeries {
+            measurements: compiled.measurements.clone(),
+            t: request.data.t.clone(),
+            nis: at_hat.nis.clone(),
+            innovations: at_hat.innovations.clone(),
+        }),
     })
 }
 

@@ -61,8 +61,8 @@ impl Kind for Identification {
         super::report::text(o)
     }
 
-    /// No traces: the iterations are in the result's JSON.
-    fn csv(_: &IdentificationResult) -> Option<String> {
-        None
+    /// The innovations at θ̂, every step: `t,nis,innovation:NAME…`.
+    fn csv(o: &IdentificationResult) -> Option<String> {
+        o.series.as_ref().map(super::report::innovations_csv)
     }
 }

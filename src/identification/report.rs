@@ -111,3 +111,21 @@ fn method_name(r: &IdentificationResult) -> &'static str {
         super::minimise::Method::Conjugate => "conjugate directions",
     }
 }
+
+/// The innovations at θ̂ as CSV, one row per step: `t`, `nis` (νᵀS⁻¹ν, empty where
+/// nothing was measured), then `innovation:NAME` (ν/√S per measurement, empty where
+/// missing); numbers as the other kinds' CSVs write them.
+pub fn innovations_csv(s: &super::result::InnovationSeries) -> String {
+    use crate::text::{csv_text, num};
+    let m = s.measurements.len();
+    let cell = |x: f64| if x.is_nan() { String::new() } else { num(x) };
+    let header = ["t".to_string(), "nis".to_string()]
+        .into_iter()
+        .chain(s.measurements.iter().map(|n| format!("innovation:{n}")));
+    let rows = s.t.iter().enumerate().map(move |(k, t)| {
+        [num(*t), cell(s.nis[k])]
+            .into_iter()
+            .chain((0..m).map(move |j| cell(s.innovations[k * m + j])))
+    });
+    csv_text(header, rows)
+}

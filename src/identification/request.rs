@@ -330,7 +330,11 @@ fn simulated(v: &Value, grid: &Grid, model: &Model, set: &Overrides) -> Result<D
             Overrides::new()
         }
     };
-    let named = obj.get("set").and_then(Value::as_object).into_iter().flat_map(|m| m.keys());
+    let named = obj
+        .get("set")
+        .and_then(Value::as_object)
+        .into_iter()
+        .flat_map(|m| m.keys());
     for name in named {
         if !model.params.contains_key(name) {
             errors.push(FieldError::new(

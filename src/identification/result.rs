@@ -45,6 +45,18 @@ pub struct IdentificationResult {
     pub steps: usize,
     pub measurements: usize,
     pub timing: Timing,
+    /// The innovations at θ̂ step by step, for the CSV (not in the JSON: D rows).
+    #[serde(skip)]
+    pub series: Option<InnovationSeries>,
+}
+
+/// Each step's t, NIS and standardized innovations (D × m; NaN where missing).
+#[derive(Clone, Debug, PartialEq)]
+pub struct InnovationSeries {
+    pub measurements: Vec<String>,
+    pub t: Vec<f64>,
+    pub nis: Vec<f64>,
+    pub innovations: Vec<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize)]

@@ -1,5 +1,5 @@
 //! `kea identify REQUEST.json [--model FILE|preset:NAME] [--method M] [--json]
-//! [--data-csv FILE] [--max-work UNITS]`: the maximum-likelihood params of a discrete
+//! [--csv FILE|-] [--data-csv FILE] [--max-work UNITS]`: the maximum-likelihood params of a discrete
 //! model from measured data (METHOD §3). The request's `data.csv` names a CSV file
 //! relative to the request file; it is read here and sent to the core as
 //! `data.csv_text`.
@@ -31,6 +31,10 @@ pub struct Args {
     /// Print the whole result as JSON instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Also write the innovations at the optimum, step by step (`t,nis,innovation:NAME…`),
+    /// as CSV to this file; `-` writes them to stdout in place of the table (not with --json).
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
     /// Also write the measurements the fit uses — read, or simulated by the request's
     /// `data.simulate` — as CSV to this file (the format `data.csv` reads), before the fit.
     #[arg(long, value_name = "FILE")]
@@ -91,7 +95,7 @@ impl Run for Args {
             kind: "identification",
             input: &self.request,
             json: self.json,
-            csv: None,
+            csv: self.csv.as_deref(),
             limit: &self.limit,
             model_file: false,
         };

@@ -361,6 +361,35 @@ fn bad_requests_name_their_fields() {
             "data.simulate.set.nope"
         ]
     );
+    // The data's size and a simulation's cost are bounded before anything is made: 40
+    // states over 10⁶ steps, with 20 measurements (2·10⁷ values), then with 2 simulated.
+    let n = 40;
+    let half: Vec<Vec<f64>> = (0..n)
+        .map(|i| (0..n).map(|j| if i == j { 0.5 } else { 0.0 }).collect())
+        .collect();
+    let states: Vec<String> = (0..n).map(|i| format!("x{i}")).collect();
+    let large = |m: usize, data: Value| {
+        let c: Vec<Vec<f64>> = (0..m)
+            .map(|i| (0..n).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
+            .collect();
+        let gamma: Vec<Vec<f64>> = (0..m)
+            .map(|i| (0..m).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
+            .collect();
+        let names: Vec<String> = (0..m).map(|i| format!("z{i}")).collect();
+        json!({
+            "model": {
+                "params": {"q": 0.3},
+                "time": {"t0": 0, "t_end": 1e6, "steps": 1e6},
+                "system": {"states": states, "transition": half, "b": half,
+                           "phi": vec!["q"; n], "eta0": vec![1; n]},
+                "measurement": {"names": names, "c": c, "gamma": gamma, "psi": vec![0.1; m]}
+            },
+            "data": data,
+            "estimate": {"q": {}}
+        })
+    };
+    assert_eq!(paths(large(20, json!({"rows": []}))), ["model.time.steps"]);
+    assert_eq!(paths(large(2, json!({"simulate": {}}))), ["data.simulate"]);
     // A discrete model is the identification's: an analysis refuses it at its path.
     let analysis = registry::prepare("analysis", json!({"model": model(&case.spec)}));
     let Err(Error::Invalid(v)) = analysis else {

@@ -12,6 +12,10 @@ use serde_json::{Map, Value};
 
 /// The most iterations a request may ask for.
 pub const MAX_ITERATIONS: u64 = 10_000;
+/// The most data values (steps × measurements) a request may hold (80 MB).
+pub const MAX_DATA_VALUES: u64 = 10_000_000;
+/// The most multiply-adds a simulation of the data may take (D · N · (N + L + m)).
+pub const MAX_SIMULATION_WORK: u64 = 1_000_000_000;
 /// The iterations when the request does not say.
 pub const DEFAULT_MAX_ITERATIONS: usize = 100;
 
@@ -118,6 +122,30 @@ pub fn read(obj: &Map<String, Value>) -> Result<IdentificationRequest, Error> {
             format!(
                 "{} steps: the identification's data hold at most {MAX_ROWS} steps",
                 compiled.max_steps()
+            ),
+        ));
+    }
+    // The data are held whole (D × m values) and a simulation is made here, before the
+    // work estimate is checked: both bounded up front.
+    let (d, nm) = (compiled.max_steps(), compiled.n_measurements() as u64);
+    if d * nm > MAX_DATA_VALUES {
+        return Err(Error::invalid(
+            "model.time.steps",
+            format!(
+                "{d} steps × {nm} measurements = {} values: the identification's data hold at most {MAX_DATA_VALUES}",
+                d * nm
+            ),
+        ));
+    }
+    let (n, l) = (compiled.n_states() as u64, compiled.b.cols as u64);
+    let simulation = d * n * (n + l + nm);
+    if obj.get("data").is_some_and(|v| v.get("simulate").is_some())
+        && simulation > MAX_SIMULATION_WORK
+    {
+        return Err(Error::invalid(
+            "data.simulate",
+            format!(
+                "simulating {d} steps of N = {n} states is {simulation} multiply-adds, more than the limit of {MAX_SIMULATION_WORK} (about a second): use fewer steps"
             ),
         ));
     }

@@ -4,6 +4,8 @@
 //! (`tests/data/identification/`, its README: scipy and statsmodels optimisers polished
 //! by scoring, J in 50-digit arithmetic).
 
+mod common;
+use common::matrix;
 use kea_core::exec::{Forgetful, Sequential};
 use kea_core::registry::{self, Outcome};
 use kea_core::{Error, NoProgress};
@@ -130,20 +132,6 @@ fn identify(request: Value) -> Result<Value, Error> {
         panic!("an identification outcome");
     };
     Ok(serde_json::from_str(&outcome.to_json()).unwrap())
-}
-
-fn matrix(v: &Value) -> Vec<Vec<f64>> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|r| {
-            r.as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x.as_f64().unwrap())
-                .collect()
-        })
-        .collect()
 }
 
 /// Every minimiser, from the case's initial values, reaches the reference optimum of

@@ -1,6 +1,8 @@
 //! The analysis against independent references: closed forms of the scalar case and
 //! scipy's DARE (the team's shared reference values, copied to tests/data/dare_reference.json).
 
+mod common;
+use common::matrix;
 use kea_core::{AnalysisResult, Model, NoProgress, analyze, model_from_value};
 use serde_json::{Value, json};
 
@@ -122,20 +124,6 @@ fn scalar_means_bounds_and_open_loop_match_geometric_sums() {
 
 fn reference() -> Value {
     serde_json::from_str(include_str!("data/dare_reference.json")).expect("reference JSON")
-}
-
-fn matrix(v: &Value) -> Vec<Vec<f64>> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|r| {
-            r.as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x.as_f64().unwrap())
-                .collect()
-        })
-        .collect()
 }
 
 /// A discrete model (A, Q, H, R) as a kea model with Δt = 1: a = A − I, b = I, W = Q,

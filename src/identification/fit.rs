@@ -139,16 +139,15 @@ pub fn identify(
         .expect("one start at least");
     let outcome = outcomes.swap_remove(best);
     let theta = outcome.theta.clone();
-    let at_hat = objective.at_recording(&theta, true, true, true)?;
-    let compiled = crate::model::compile_discrete(&request.model, &request.params_at(&theta))?;
-    let innovations = (at_hat.measurements > 0).then(|| {
-        super::innovations::check(&at_hat.innovations, &at_hat.nis, &compiled.measurements)
-    });
+    let mut at_hat = objective.at_recording(&theta, true, true, true)?;
+    let measurement_names = request.measurement_names();
+    let innovations = (at_hat.measurements > 0)
+        .then(|| super::innovations::check(&at_hat.innovations, &at_hat.nis, &measurement_names));
     let observed = observed_information(&objective, &theta);
     let evaluations = objective.evaluations;
     let _ = objective.progress.report(1.0);
 
-    let fisher = at_hat.fisher_sample.clone();
+    let fisher = std::mem::take(&mut at_hat.fisher_sample);
     let identifiability = identifiability(&fisher, &names, &theta);
     let inverse = identifiability
         .identifiable
@@ -222,10 +221,10 @@ pub fn identify(
         measurements: at_hat.measurements,
         timing: Timing::default(),
         series: Some(InnovationSeries {
-            measurements: compiled.measurements.clone(),
+            measurements: measurement_names,
             t: request.data.t.clone(),
-            nis: at_hat.nis.clone(),
-            innovations: at_hat.innovations.clone(),
+            nis: std::mem::take(&mut at_hat.nis),
+            innovations: std::mem::take(&mut at_hat.innovations),
         }),
     })
 }

@@ -248,7 +248,7 @@ pub fn minimise<O: Objective>(
         let outward = |i: usize, v: f64| {
             theta[i] <= bounds.min[i] && v < 0.0 || theta[i] >= bounds.max[i] && v > 0.0
         };
-        let free: Vec<bool> = (0..p).map(|i| !outward(i, -g[i])).collect();
+        let free = held_free(&at.theta, &at.e.gradient, bounds);
         let pg: Vec<f64> = (0..p).map(|i| if free[i] { g[i] } else { 0.0 }).collect();
         let newton = if info { newton(&at.e, &free) } else { None };
         let scale = at.e.j.abs().max(1.0);
@@ -353,7 +353,7 @@ fn polish<O: Objective>(
 ) -> Result<Point, O::Error> {
     let p = at.theta.len();
     for _ in 0..POLISH {
-        let free = held_free(&at, bounds);
+        let free = held_free(&at.theta, &at.e.gradient, bounds);
         let Some((d, decrement)) = newton(&at.e, &free) else {
             break;
         };
@@ -369,13 +369,7 @@ fn polish<O: Objective>(
             Ok(_) | Err(Failure::Domain(_)) => break,
             Err(Failure::Abort(x)) => return Err(x),
         };
-        let free = held_free(
-            &Point {
-                theta: theta.clone(),
-                e: e.clone(),
-            },
-            bounds,
-        );
+        let free = held_free(&theta, &e.gradient, bounds);
         let Some((_, next)) = newton(&e, &free) else {
             break;
         };
@@ -393,8 +387,7 @@ fn polish<O: Objective>(
 }
 
 /// The parameters not held at a bound by a gradient that pushes outward.
-fn held_free(at: &Point, bounds: &Bounds) -> Vec<bool> {
-    let (theta, g) = (&at.theta, &at.e.gradient);
+fn held_free(theta: &[f64], g: &[f64], bounds: &Bounds) -> Vec<bool> {
     (0..theta.len())
         .map(|i| {
             !(theta[i] <= bounds.min[i] && g[i] > 0.0 || theta[i] >= bounds.max[i] && g[i] < 0.0)

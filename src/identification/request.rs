@@ -6,6 +6,7 @@ use super::data::{Grid, MAX_ROWS, from_csv, from_rows};
 use super::minimise::Method;
 use super::model::Data;
 use crate::error::{Error, FieldError, got, member_path};
+use crate::model::params::unknown_param;
 use crate::model::{Model, Overrides};
 use crate::request;
 use serde_json::{Map, Value};
@@ -195,18 +196,7 @@ fn estimates(
     for (name, spec) in obj {
         let path = member_path("estimate", name);
         let Some(value) = model.params.get(name) else {
-            let known: Vec<&str> = model.params.keys().map(String::as_str).collect();
-            errors.push(FieldError::new(
-                &path,
-                format!(
-                    "no parameter \"{name}\" in the model (params: {})",
-                    if known.is_empty() {
-                        "none".into()
-                    } else {
-                        known.join(", ")
-                    }
-                ),
-            ));
+            errors.push(FieldError::new(&path, unknown_param(&model.params, name)));
             continue;
         };
         if set.contains_key(name) {
@@ -337,10 +327,8 @@ fn simulated(v: &Value, grid: &Grid, model: &Model, set: &Overrides) -> Result<D
             ),
         ));
     };
-    let mut errors = request::unknown_members(obj, &["seed", "set"])
-        .into_iter()
-        .map(|e| FieldError::new(member_path(path, &e.path), e.message))
-        .collect::<Vec<_>>();
+    // Every problem at its path inside `data.simulate`, prefixed once at the end.
+    let mut errors = request::unknown_members(obj, &["seed", "set"]);
     let seed = request::whole(
         obj,
         "seed",
@@ -348,41 +336,23 @@ fn simulated(v: &Value, grid: &Grid, model: &Model, set: &Overrides) -> Result<D
         &mut errors,
     )
     .unwrap_or(1);
-    let truth = match request::overrides(obj.get("set")) {
-        Ok(t) => t,
-        Err(e) => {
-            errors.extend(
-                e.into_iter()
-                    .map(|e| FieldError::new(format!("{path}.{}", e.path), e.message)),
-            );
-            Overrides::new()
-        }
-    };
+    let truth = request::overrides(obj.get("set")).unwrap_or_else(|e| {
+        errors.extend(e);
+        Overrides::new()
+    });
     let named = obj
         .get("set")
         .and_then(Value::as_object)
         .into_iter()
         .flat_map(|m| m.keys());
-    for name in named {
-        if !model.params.contains_key(name) {
-            errors.push(FieldError::new(
-                format!("{path}.{}", member_path("set", name)),
-                format!("no parameter \"{name}\" in the model"),
-            ));
-        }
+    for name in named.filter(|name| !model.params.contains_key(*name)) {
+        errors.push(FieldError::new(
+            member_path("set", name),
+            unknown_param(&model.params, name),
+        ));
     }
     if !errors.is_empty() {
-        return Err(Error::Invalid(
-            errors
-                .into_iter()
-                .map(|mut e| {
-                    if e.path == "seed" {
-                        e.path = format!("{path}.seed");
-                    }
-                    e
-                })
-                .collect(),
-        ));
+        return Err(Error::Invalid(errors).with_prefix(path));
     }
     let mut at = set.clone();
     at.extend(truth);

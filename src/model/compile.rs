@@ -203,17 +203,9 @@ fn compile_form(model: &Model, set: &Overrides, form: Form) -> Result<CompiledMo
     for (name, value) in set {
         let path = member_path("set", name);
         if !model.params.contains_key(name) {
-            let known: Vec<&str> = model.params.keys().map(|s| s.as_str()).collect();
             errs.at(
                 &path,
-                format!(
-                    "no parameter \"{name}\" in the model (params: {})",
-                    if known.is_empty() {
-                        "none".to_string()
-                    } else {
-                        known.join(", ")
-                    }
-                ),
+                crate::model::params::unknown_param(&model.params, name),
             );
         } else if !value.is_finite() {
             errs.at(&path, "expected a finite number");

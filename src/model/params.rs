@@ -7,6 +7,18 @@
 use super::{Model, Value};
 use std::collections::BTreeMap;
 
+/// The message for a name that is none of the model's params, listing them: one
+/// wording for `set`, a synthesis's params, an identification's `estimate` and truth.
+pub fn unknown_param(params: &BTreeMap<String, f64>, name: &str) -> String {
+    let known: Vec<&str> = params.keys().map(String::as_str).collect();
+    let known = if known.is_empty() {
+        "none".to_string()
+    } else {
+        known.join(", ")
+    };
+    format!("no parameter \"{name}\" in the model (params: {known})")
+}
+
 /// A member of a model whose entries may be expressions.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Member {

@@ -298,18 +298,8 @@ pub fn validated(req: &SynthesisRequest) -> Result<crate::model::CompiledModel, 
     }
     let param_check = |name: &str, path: String, errs: &mut Vec<FieldError>| {
         if !req.model.params.contains_key(name) {
-            let known: Vec<&str> = req.model.params.keys().map(|s| s.as_str()).collect();
-            errs.push(FieldError::new(
-                path,
-                format!(
-                    "no parameter \"{name}\" in the model (params: {})",
-                    if known.is_empty() {
-                        "none".into()
-                    } else {
-                        known.join(", ")
-                    }
-                ),
-            ));
+            let message = crate::model::params::unknown_param(&req.model.params, name);
+            errs.push(FieldError::new(path, message));
         }
     };
     match &req.mode {

@@ -41,3 +41,15 @@ pub fn preset_value(name: &str) -> serde_json::Value {
     serde_json::from_str(kea_core::presets::get_json(name).expect("a preset"))
         .expect("presets parse")
 }
+
+/// A JSON array of arrays of numbers (a reference's matrix).
+pub fn matrix(v: &serde_json::Value) -> Vec<Vec<f64>> {
+    let row = |r: &serde_json::Value| -> Vec<f64> {
+        r.as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    v.as_array().unwrap().iter().map(row).collect()
+}

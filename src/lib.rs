@@ -31,6 +31,7 @@ pub mod kind;
 pub mod analysis;
 pub mod identification;
 pub mod monte_carlo;
+pub mod nonlinear;
 pub mod synthesis;
 
 pub mod registry;

@@ -128,6 +128,7 @@ kinds! {
     MonteCarlo => crate::monte_carlo::kind::MonteCarlo,
     Synthesis => crate::synthesis::kind::Synthesis,
     Identification => crate::identification::kind::Identification,
+    Nonlinear => crate::nonlinear::kind::Nonlinear,
 }
 
 /// The error for a `kind` that names none (at the request's `kind`).

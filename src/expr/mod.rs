@@ -37,6 +37,7 @@ pub mod block;
 pub mod dual;
 mod lex;
 mod limits;
+mod state_fn;
 mod time_matrix;
 mod translate;
 mod trig;
@@ -45,6 +46,7 @@ use exmex::prelude::*;
 pub use limits::{
     ExprBudget, MAX_EXPRESSION_CHARS, MAX_TIME_EXPRESSION_CHARS, MAX_TIME_EXPRESSIONS,
 };
+pub use state_fn::StateFn;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 pub use time_matrix::{TimeMatrix, TimeMatrixBuilder};

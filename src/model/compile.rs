@@ -8,12 +8,13 @@ use crate::model::Overrides;
 use crate::model::limits::*;
 use crate::model::{MODEL_FORMAT_VERSION, Model, PriorAt, Steps};
 use crate::text::{is_identifier, num};
+use std::collections::BTreeMap;
 
 mod blind;
 mod criteria;
-mod matrices;
-mod names;
-mod noise;
+pub(crate) mod matrices;
+pub(crate) mod names;
+pub(crate) mod noise;
 use blind::blind_measurements;
 use criteria::weights;
 use matrices::{check_shape, const_matrix, const_vector, time_matrix, time_vector};
@@ -125,14 +126,14 @@ impl CompiledModel {
 }
 
 /// Collects errors; the first error per field is enough.
-struct Errors(Vec<FieldError>);
+pub(crate) struct Errors(pub(crate) Vec<FieldError>);
 
 impl Errors {
-    fn push(&mut self, e: FieldError) {
+    pub(crate) fn push(&mut self, e: FieldError) {
         self.0.push(e);
     }
     /// The errors as `Error::Invalid`, at most [`MAX_REPORTED_ERRORS`] of them.
-    fn into_error(mut self) -> Error {
+    pub(crate) fn into_error(mut self) -> Error {
         let more = self.0.len().saturating_sub(MAX_REPORTED_ERRORS);
         if more > 0 {
             self.0.truncate(MAX_REPORTED_ERRORS);
@@ -140,7 +141,7 @@ impl Errors {
         }
         Error::Invalid(self.0)
     }
-    fn at(&mut self, path: &str, msg: impl Into<String>) {
+    pub(crate) fn at(&mut self, path: &str, msg: impl Into<String>) {
         self.0.push(FieldError::new(path, msg));
     }
 }
@@ -166,22 +167,17 @@ pub fn compile_discrete(model: &Model, set: &Overrides) -> Result<CompiledModel,
     compile_form(model, set, Form::Discrete)
 }
 
-fn compile_form(model: &Model, set: &Overrides, form: Form) -> Result<CompiledModel, Error> {
-    let mut errs = Errors(Vec::new());
-
-    if model.kea_model != MODEL_FORMAT_VERSION {
-        errs.at(
-            "kea_model",
-            format!(
-                "unsupported model format version {}; this kea reads version {MODEL_FORMAT_VERSION}",
-                model.kea_model
-            ),
-        );
-    }
-
-    // --- params and overrides
-    let mut params = model.params.clone();
-    for (name, value) in &model.params {
+/// A model's `params` with the overrides `set` applied, every problem with either
+/// pushed to `errs`: a name that is not an identifier, `t` or a name of the expression
+/// language, a value that is not finite, an override of no declared param. (Shared with
+/// the nonlinear model, `crate::nonlinear::model`.)
+pub(crate) fn params_with(
+    declared: &BTreeMap<String, f64>,
+    set: &Overrides,
+    errs: &mut Errors,
+) -> BTreeMap<String, f64> {
+    let mut params = declared.clone();
+    for (name, value) in declared {
         let path = member_path("params", name);
         if !is_identifier(name) {
             errs.at(&path, "a parameter name must be an identifier (letters, digits, _; not starting with a digit)");
@@ -202,17 +198,32 @@ fn compile_form(model: &Model, set: &Overrides, form: Form) -> Result<CompiledMo
     }
     for (name, value) in set {
         let path = member_path("set", name);
-        if !model.params.contains_key(name) {
-            errs.at(
-                &path,
-                crate::model::params::unknown_param(&model.params, name),
-            );
+        if !declared.contains_key(name) {
+            errs.at(&path, crate::model::params::unknown_param(declared, name));
         } else if !value.is_finite() {
             errs.at(&path, "expected a finite number");
         } else {
             params.insert(name.clone(), *value);
         }
     }
+    params
+}
+
+fn compile_form(model: &Model, set: &Overrides, form: Form) -> Result<CompiledModel, Error> {
+    let mut errs = Errors(Vec::new());
+
+    if model.kea_model != MODEL_FORMAT_VERSION {
+        errs.at(
+            "kea_model",
+            format!(
+                "unsupported model format version {}; this kea reads version {MODEL_FORMAT_VERSION}",
+                model.kea_model
+            ),
+        );
+    }
+
+    // --- params and overrides
+    let params = params_with(&model.params, set, &mut errs);
     // Errors in the version or the params stop here (every expression depends on the
     // params); an unknown `set` name does not: the model's own errors are listed with it.
     if errs.0.iter().any(|e| {

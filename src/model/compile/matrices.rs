@@ -8,7 +8,7 @@ use crate::text::{entries, num};
 use std::collections::BTreeMap;
 
 /// Check rows × cols; `cols` None means "any, but all rows equal".
-pub(super) fn check_shape(
+pub(crate) fn check_shape(
     m: &[Vec<Value>],
     rows: usize,
     cols: Option<usize>,
@@ -107,7 +107,7 @@ pub(super) fn time_vector(
     out.finish()
 }
 
-pub(super) fn const_vector(
+pub(crate) fn const_vector(
     v: Option<&[Value]>,
     n: usize,
     path: &str,

@@ -11,7 +11,7 @@ fn is_invisible(c: char) -> bool {
         | '\u{FEFF}')
 }
 
-pub(super) fn check_names(names: &[String], path: &str, errs: &mut Errors) {
+pub(crate) fn check_names(names: &[String], path: &str, errs: &mut Errors) {
     for (i, name) in names.iter().enumerate() {
         if name.chars().all(|c| c.is_whitespace() || is_invisible(c)) {
             errs.at(&format!("{path}[{i}]"), "a name must not be empty");

@@ -9,7 +9,7 @@ use crate::text::num;
 use std::collections::BTreeMap;
 
 /// SKOs (diagonal covariance) or a full covariance matrix: returns (cov, skos).
-pub(super) fn noise_cov(
+pub(crate) fn noise_cov(
     sko: Option<&[Value]>,
     cov: Option<&[Vec<Value>]>,
     dim: usize,

@@ -1,0 +1,233 @@
+//! An expression in a nonlinear model's states, `t` and its params
+//! (`crate::nonlinear`): its value and its exact partial derivatives in the states,
+//! by the forward-mode dual numbers of [`super::dual`] — one evaluation per state the
+//! text names (a state it does not name has derivative 0, exactly).
+//!
+//! Why not a symbolic derivative: exmex's `partial` knows only exmex's default
+//! operators, not kea's table (`signum`, `round`, `atan2`, `min`, `max` with their
+//! meanings here), and a derivative text would be a second expression to keep in step
+//! with the first. The dual numbers carry the chain rule through the very operator
+//! table the value uses, so the value is `ScalarOps`'s bit for bit and the derivative
+//! is exact to rounding (a test compares both with central differences).
+
+use super::dual::{Dual, DualEx};
+use super::translate::{translate, unknown};
+use super::{MAX_EXPRESSION_CHARS, Value, cannot_parse, names};
+use crate::error::FieldError;
+use exmex::prelude::*;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// What one of the expression's variables is.
+#[derive(Clone, Copy, Debug)]
+enum Slot {
+    /// A number, constant or param: its value.
+    Fixed(f64),
+    /// The time.
+    T,
+    /// State `i`.
+    State(usize),
+}
+
+/// A compiled expression in the states, `t` and the params (the params' values are
+/// fixed at compile time).
+#[derive(Clone, Debug)]
+pub struct StateFn {
+    expr: Arc<DualEx>,
+    slots: Vec<Slot>,
+    /// The states the text names, each once, in state order.
+    used: Vec<usize>,
+    /// The variables' values for the next evaluation (kept: no allocation per call).
+    vars: Vec<Dual>,
+    text: String,
+}
+
+impl StateFn {
+    /// Compile `value` (a number or a text) at `path`; `states` are the state names
+    /// (distinct, none of them a param, `t` or a name of the language: the caller's
+    /// checks).
+    pub fn compile(
+        value: &Value,
+        states: &[String],
+        params: &BTreeMap<String, f64>,
+        path: &str,
+    ) -> Result<StateFn, FieldError> {
+        let text = match value {
+            Value::Number(x) if x.is_finite() => format!("{x:?}"),
+            Value::Number(_) => return Err(FieldError::new(path, "expected a finite number")),
+            Value::Expr(s) => s.clone(),
+        };
+        if text.trim().is_empty() {
+            return Err(FieldError::new(
+                path,
+                "empty expression: expected a number or an expression such as \"-b*abs(x2)*x2\"",
+            ));
+        }
+        let chars = text.chars().count();
+        if chars > MAX_EXPRESSION_CHARS {
+            return Err(FieldError::new(
+                path,
+                format!("expression of {chars} characters; the limit is {MAX_EXPRESSION_CHARS}"),
+            ));
+        }
+        // The translator knows a name by the map it is given: the params and the states.
+        let mut known = params.clone();
+        for s in states {
+            known.insert(s.clone(), 0.0);
+        }
+        let (plain, literals) = translate(&text, &known, path, true)?;
+        let expr = DualEx::parse(&plain).map_err(|e| cannot_parse(&text, path, &e))?;
+        let mut slots = Vec::with_capacity(expr.var_names().len());
+        for name in expr.var_names() {
+            let literal = name
+                .strip_prefix('#')
+                .and_then(|k| literals.get(k.parse::<usize>().ok()?));
+            let slot = if let Some(&v) = literal {
+                Slot::Fixed(v)
+            } else if name == "t" {
+                Slot::T
+            } else if let Some(i) = states.iter().position(|s| s == name) {
+                Slot::State(i)
+            } else if let Some(&v) = params.get(name.as_str()) {
+                Slot::Fixed(v)
+            } else {
+                return Err(unknown(&text, name, &known, path, true));
+            };
+            slots.push(slot);
+        }
+        let mut used: Vec<usize> = names(&text)
+            .iter()
+            .filter_map(|n| states.iter().position(|s| s == n))
+            .collect();
+        used.sort_unstable();
+        used.dedup();
+        let vars = vec![Dual::default(); slots.len()];
+        Ok(StateFn {
+            expr: Arc::new(expr),
+            slots,
+            used,
+            vars,
+            text,
+        })
+    }
+
+    /// The text as written (a number as Rust prints it).
+    pub fn text(&self) -> &str {
+        &self.text
+    }
+
+    /// The states the text names, in state order.
+    pub fn used(&self) -> &[usize] {
+        &self.used
+    }
+
+    /// The value at the state `x` and time `t`, with the derivative along state
+    /// `direction` (none: 0).
+    #[inline]
+    pub fn eval(&mut self, x: &[f64], t: f64, direction: Option<usize>) -> Dual {
+        for (v, slot) in self.vars.iter_mut().zip(&self.slots) {
+            *v = match *slot {
+                Slot::Fixed(v) => Dual { v, d: 0.0 },
+                Slot::T => Dual { v: t, d: 0.0 },
+                Slot::State(i) => Dual {
+                    v: x[i],
+                    d: if Some(i) == direction { 1.0 } else { 0.0 },
+                },
+            };
+        }
+        // Errors cannot happen after a successful parse with the right variable count;
+        // NaN makes the caller's finiteness check fire with the expression's path.
+        self.expr.eval(&self.vars).unwrap_or(Dual {
+            v: f64::NAN,
+            d: f64::NAN,
+        })
+    }
+
+    /// The value at (`x`, `t`), and the gradient in the states into `grad` (length N;
+    /// zero for the states the text does not name). One evaluation per named state,
+    /// one when it names none.
+    #[inline]
+    pub fn eval_with_gradient(&mut self, x: &[f64], t: f64, grad: &mut [f64]) -> f64 {
+        grad.fill(0.0);
+        if self.used.is_empty() {
+            return self.eval(x, t, None).v;
+        }
+        let mut value = f64::NAN;
+        for k in 0..self.used.len() {
+            let j = self.used[k];
+            let d = self.eval(x, t, Some(j));
+            value = d.v;
+            grad[j] = d.d;
+        }
+        value
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn states() -> Vec<String> {
+        vec!["x1".into(), "x2".into()]
+    }
+
+    fn params() -> BTreeMap<String, f64> {
+        BTreeMap::from([("b".to_string(), 1.5)])
+    }
+
+    /// The seed's drag law and its gradient in closed form.
+    #[test]
+    fn gradient_of_the_drag_law_is_the_closed_form() {
+        let mut f = StateFn::compile(
+            &Value::Expr("-b*abs(x2)*x2/abs(x1)".into()),
+            &states(),
+            &params(),
+            "system.f[1]",
+        )
+        .unwrap();
+        let (x1, x2, b) = (900.0, -40.0, 1.5);
+        let mut g = [0.0; 2];
+        let v = f.eval_with_gradient(&[x1, x2], 0.0, &mut g);
+        assert_eq!(v, -b * f64::abs(x2) * x2 / f64::abs(x1));
+        let d1 = b * x2.abs() * x2 / (x1 * x1.abs());
+        let d2 = -2.0 * b * x2.abs() / x1.abs();
+        assert!((g[0] - d1).abs() <= 1e-15 * d1.abs(), "{} {d1}", g[0]);
+        assert!((g[1] - d2).abs() <= 1e-15 * d2.abs(), "{} {d2}", g[1]);
+        assert_eq!(f.used(), &[0, 1]);
+    }
+
+    #[test]
+    fn time_numbers_and_unnamed_states() {
+        let mut f = StateFn::compile(
+            &Value::Expr("x2 + sin(t)".into()),
+            &states(),
+            &params(),
+            "f",
+        )
+        .unwrap();
+        let mut g = [9.0; 2];
+        let v = f.eval_with_gradient(&[1.0, 2.0], 0.5, &mut g);
+        assert_eq!(v, 2.0 + libm::sin(0.5));
+        assert_eq!(g, [0.0, 1.0]);
+        let mut c = StateFn::compile(&Value::Number(3.0), &states(), &params(), "f").unwrap();
+        assert_eq!(c.eval_with_gradient(&[1.0, 2.0], 0.0, &mut g), 3.0);
+        assert_eq!(g, [0.0, 0.0]);
+    }
+
+    #[test]
+    fn unknown_names_are_errors_at_the_path() {
+        let e = StateFn::compile(
+            &Value::Expr("x3 + b".into()),
+            &states(),
+            &params(),
+            "system.f[0]",
+        )
+        .unwrap_err();
+        assert_eq!(e.path, "system.f[0]");
+        assert!(
+            e.message.contains("unknown parameter \"x3\""),
+            "{}",
+            e.message
+        );
+    }
+}

@@ -1,0 +1,26 @@
+//! Nonlinear estimation (METHOD §4, seed 002): the extended Kalman filter and the
+//! iterative regularised procedure — K filters over the same data, filter k an EKF
+//! with R_k = V/γ_k^k driven also by the earlier filters' residuals — with the
+//! iterate chosen by δ on the one-step predictions, beside two baselines: the plain
+//! EKF and EKFs whose Q scale is chosen by the same δ.
+//!
+//! `model` (format, compile), `gamma` (the weights), `bank` (the filters stepped
+//! together), `data` (CSV and inline rows, with the truth where given), `truth`
+//! (data simulated from a truth model), `request`, `run`, `result`, `report`,
+//! `work`, `kind`.
+
+pub mod bank;
+pub mod data;
+pub mod gamma;
+pub mod kind;
+pub mod model;
+pub mod report;
+pub mod request;
+pub mod result;
+pub mod run;
+pub mod truth;
+pub mod work;
+
+pub use model::{Compiled, NonlinearModel};
+pub use request::NonlinearRequest;
+pub use result::NonlinearResult;

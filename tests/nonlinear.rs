@@ -252,3 +252,224 @@ fn scenario_a_model_right_equals_the_reference() {
 fn scenario_b_wrong_model_manoeuvre_equals_the_reference() {
     scenario("b_wrong_model_manoeuvre");
 }
+
+/// The seed-002 preset as a model object, to edit.
+fn preset() -> Value {
+    let text = kea_core::nonlinear::request::preset("seed-002").unwrap();
+    serde_json::from_str(text).unwrap()
+}
+
+/// F = ∂f/∂x and H = ∂h/∂x from the expressions equal central differences on random
+/// points (the dual numbers against a second way).
+#[test]
+fn jacobians_equal_central_differences() {
+    use kea_core::expr::{StateFn, Value as Entry};
+    let states = vec!["x1".to_string(), "x2".to_string(), "x3".to_string()];
+    let params = std::collections::BTreeMap::from([("b".to_string(), 0.7)]);
+    let texts = [
+        "-b*abs(x2)*x2/abs(x1)",
+        "sin(x1)*exp(-x2/10) + x1^3 - x3",
+        "atan2(x2, x1) + cos(t*x3)",
+        "sqrt(x1^2 + x2^2 + x3^2)",
+        "log(x1)*x2 + tanh(x1*x3)",
+        "x1/(1 + x2^2) - b*x3^2",
+        "min(x1, x2) + max(x2, x3)^2",
+    ];
+    // A fixed linear congruential stream: points in [0.5, 3] (log and the drag law's
+    // domain), the same on every run.
+    let mut seed: u64 = 20261203;
+    let mut uniform = || {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        0.5 + 2.5 * ((seed >> 11) as f64 / (1u64 << 53) as f64)
+    };
+    for text in texts {
+        let mut f = StateFn::compile(&Entry::Expr(text.into()), &states, &params, "f").unwrap();
+        for _ in 0..50 {
+            let x = [uniform(), uniform(), uniform()];
+            let t = uniform();
+            let mut grad = [0.0; 3];
+            let v = f.eval_with_gradient(&x, t, &mut grad);
+            assert_eq!(v.to_bits(), f.eval(&x, t, None).v.to_bits(), "{text}");
+            for j in 0..3 {
+                let h = 1e-6 * x[j].abs().max(1.0);
+                let (mut up, mut down) = (x, x);
+                up[j] += h;
+                down[j] -= h;
+                let numeric = (f.eval(&up, t, None).v - f.eval(&down, t, None).v) / (2.0 * h);
+                let scale = grad[j].abs().max(1.0);
+                assert!(
+                    (grad[j] - numeric).abs() <= 1e-6 * scale,
+                    "∂({text})/∂x{} at {x:?}: {} against {numeric}",
+                    j + 1,
+                    grad[j]
+                );
+            }
+        }
+    }
+}
+
+/// A state leaving f's domain stops the run with the step, the time, the filter, the
+/// expression and the state — never a NaN in a result.
+#[test]
+fn a_state_leaving_the_domain_is_a_clear_error() {
+    let mut model = preset();
+    model["system"]["y0"] = json!([0, 45]);
+    let rows: Vec<Value> = (1..=2000).map(|n| json!([n as f64 * 0.01, 1.0])).collect();
+    let e = run(json!({"model": model, "data": {"rows": rows}})).unwrap_err();
+    let Error::Numerical { step, t, path, message } = &e else {
+        panic!("{e:?}")
+    };
+    assert_eq!((*step, *t), (0, 0.0));
+    assert_eq!(path, "model.system.f[1]");
+    assert!(
+        message.contains("iterate 1")
+            && message.contains("\"-b*abs(x2)*x2/abs(x1)\"")
+            && message.contains("x1 = 0, x2 = 45")
+            && message.contains("left the expression's domain"),
+        "{message}"
+    );
+}
+
+/// The truth, simulated: the same seed gives the same bits; without noise a constant
+/// velocity is integrated exactly and an input is an acceleration; with noise the
+/// increments and the measurement errors have the variances asked for.
+#[test]
+fn the_truth_is_simulated_as_specified() {
+    let prepare = |truth: Value, steps: u64| {
+        let mut model = preset();
+        model["time"] = json!({"t0": 0, "t_end": steps as f64 * 0.01, "steps": steps});
+        let request = json!({"model": model, "data": {"truth": truth}});
+        match registry::prepare_checked("nonlinear", request).unwrap() {
+            registry::Prepared::Nonlinear(r) => r,
+            _ => unreachable!(),
+        }
+    };
+    let data = |truth: Value, steps: u64| {
+        let r = prepare(truth, steps);
+        let csv = kea_core::nonlinear::data_csv(&r).unwrap();
+        let mut rows = csv.lines();
+        assert_eq!(rows.next(), Some("t,y,x1_true,x2_true"));
+        rows.map(|l| {
+            l.split(',')
+                .map(|c| c.parse::<f64>().unwrap_or(f64::NAN))
+                .collect::<Vec<f64>>()
+        })
+        .collect::<Vec<_>>()
+    };
+    // Reproducible.
+    let noisy = json!({"seed": 7, "y0": [1000, 50], "phi": [0, 1]});
+    let a = data(noisy.clone(), 300);
+    let b = data(noisy, 300);
+    assert_eq!(format!("{a:?}"), format!("{b:?}"));
+    let c = data(json!({"seed": 8, "y0": [1000, 50], "phi": [0, 1]}), 300);
+    assert_ne!(format!("{a:?}"), format!("{c:?}"));
+
+    // No process noise, constant velocity; then a constant input of 2 m/s².
+    let still = data(json!({"seed": 1, "y0": [1000, 50], "phi": [0, 0], "f": ["x2", "0"]}), 500);
+    for row in &still {
+        let t = row[0];
+        assert!((row[2] - (1000.0 + 50.0 * t)).abs() < 1e-9, "{row:?}");
+        assert_eq!(row[3], 50.0);
+    }
+    let pushed = data(
+        json!({"seed": 1, "y0": [1000, 50], "phi": [0, 0], "f": ["x2", "0"], "input": ["0", "2"]}),
+        500,
+    );
+    for row in &pushed {
+        assert!((row[3] - (50.0 + 2.0 * row[0])).abs() < 1e-9, "{row:?}");
+    }
+
+    // Random walk of intensity q = 4 in x1 (f = 0): increments N(0, q Δt); the
+    // measurement errors N(0, σ² = 4). 4σ bands of the sample variances, D = 20000.
+    let d = 20000;
+    let walk = data(
+        json!({"seed": 3, "y0": [1000, 0], "phi": [2, 0], "f": ["0", "0"]}),
+        d,
+    );
+    let increments: Vec<f64> = walk.windows(2).map(|w| w[1][2] - w[0][2]).collect();
+    let errors: Vec<f64> = walk[1..].iter().map(|r| r[1] - r[2]).collect();
+    let var = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64;
+    let band = 4.0 * (2.0 / d as f64).sqrt();
+    let q_dt = 4.0 * 0.01;
+    assert!((var(&increments) / q_dt - 1.0).abs() < band, "{}", var(&increments) / q_dt);
+    assert!((var(&errors) / 4.0 - 1.0).abs() < band, "{}", var(&errors) / 4.0);
+}
+
+/// Bad requests: every problem at its path, saying what was expected.
+#[test]
+fn bad_requests_name_the_field() {
+    let rows = json!([[0.01, 1000.0]]);
+    let cases = [
+        (json!({"model": "preset:seed-003", "data": {"rows": rows}}), "model", "no nonlinear preset"),
+        (json!({"model": "preset:seed-002", "data": {"rows": rows}, "procedure": {"alpha": [1, 1.2]}}), "procedure.alpha[1]", "0 < α_j < 1"),
+        (json!({"model": "preset:seed-002", "data": {"rows": rows}, "checkpoints": [0]}), "checkpoints[0]", "from 1 to D = 2000"),
+        (json!({"model": "preset:seed-002", "data": {"csv": "d.csv"}}), "data.csv", "read by the command line"),
+        (json!({"model": "preset:seed-002", "data": {}}), "data", "exactly one of"),
+        (json!({"model": "preset:seed-002", "data": {"truth": {"sed": 1}}}), "data.truth.sed", "unknown member"),
+        (json!({"model": "preset:seed-002", "data": {"truth": {"seed": 1, "f": ["x2", "x3"]}}}), "data.truth.f[1]", "unknown parameter \"x3\""),
+        (json!({"model": "preset:seed-002", "data": {"rows": [[0.015, 1.0]]}}), "data.rows[0][0]", "not on the model's grid"),
+        (json!({"model": "preset:seed-002", "data": {"rows": rows}, "q_scale": [0]}), "q_scale[0]", "scale > 0"),
+        (json!({"model": "preset:seed-002", "data": {"rows": rows}, "set": {"c": 1}}), "set.c", "c"),
+        (json!({"model": "preset:seed-002", "data": {"rows": rows}, "runs": 3}), "runs", "unknown member"),
+    ];
+    for (request, path, words) in cases {
+        let e = run(request.clone()).unwrap_err().field_errors();
+        assert!(
+            e.iter().any(|e| e.path == path && e.message.contains(words)),
+            "{request}: {e:?}"
+        );
+    }
+    let mut model = preset();
+    model["system"]["states"] = json!(["x1", "b"]);
+    model["measurement"]["h"] = json!(["x1", "b"]);
+    model["measurement"]["psi"] = json!([0]);
+    let e = run(json!({"model": model, "data": {"rows": rows}})).unwrap_err().field_errors();
+    let paths: Vec<&str> = e.iter().map(|e| e.path.as_str()).collect();
+    assert!(paths.contains(&"model.system.states[1]"), "{e:?}");
+    let e = {
+        let mut model = preset();
+        model["measurement"]["h"] = json!(["x1", "x2"]);
+        model["measurement"]["psi"] = json!([0]);
+        run(json!({"model": model, "data": {"rows": rows}})).unwrap_err().field_errors()
+    };
+    assert!(e.iter().any(|e| e.path == "model.measurement.h"), "{e:?}");
+}
+
+/// Missing measurements are left out of their step's update: a record with every other
+/// measurement missing gives the filter of the thinned data, and δ counts only what
+/// was measured.
+#[test]
+fn missing_measurements_are_skipped() {
+    let csv = std::fs::read_to_string(data_dir().join("a_model_right.data.csv")).unwrap();
+    let thinned: String = csv
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            if i >= 2 && i % 2 == 0 {
+                // (Row n = i − 1 odd kept; even steps lose y, the last column.)
+                let cut = l.rfind(',').unwrap();
+                format!("{},\n", &l[..cut])
+            } else {
+                format!("{l}\n")
+            }
+        })
+        .collect();
+    let r = run(json!({"model": "preset:seed-002", "data": {"csv_text": thinned}, "q_scale": []}))
+        .unwrap();
+    assert_eq!(r.measured, vec![1000]);
+    assert!(r.iterates.iter().all(|s| s.delta.is_finite() && s.rms.is_some()));
+    // The same data with the missing rows left out entirely: the same filters, bit for
+    // bit (the RMS differ: the truth is then known at half the steps).
+    let dropped: String = thinned
+        .lines()
+        .filter(|l| !l.ends_with(','))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let s = run(json!({"model": "preset:seed-002", "data": {"csv_text": dropped}, "q_scale": []}))
+        .unwrap();
+    for (a, b) in r.iterates.iter().zip(&s.iterates) {
+        assert_eq!(a.delta.to_bits(), b.delta.to_bits());
+        assert_eq!(a.delta_posterior.to_bits(), b.delta_posterior.to_bits());
+    }
+    assert_eq!(r.traces.iterates.len(), s.traces.iterates.len());
+}

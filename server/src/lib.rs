@@ -53,6 +53,8 @@ commands! {
     Synthesize(cli::synthesize::Args),
     /// Identification: the maximum-likelihood params of a model from measured data.
     Identify(cli::identify::Args),
+    /// Nonlinear: the EKF and the iterative regularised procedure over measured data.
+    Nonlinear(cli::nonlinear::Args),
     /// Run the HTTP service (API, jobs, web UI).
     Serve(serve::Args),
 }

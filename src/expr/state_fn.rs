@@ -40,6 +40,9 @@ pub struct StateFn {
     /// The variables' values for the next evaluation (kept: no allocation per call).
     vars: Vec<Dual>,
     text: String,
+    /// A text that is one state's name (`x2`, `f` = ẋ1 = x2; `h` = x1): its value and
+    /// its gradient without an evaluation — the most common entries of f and h.
+    only: Option<usize>,
 }
 
 impl StateFn {
@@ -102,12 +105,14 @@ impl StateFn {
         used.sort_unstable();
         used.dedup();
         let vars = vec![Dual::default(); slots.len()];
+        let only = states.iter().position(|s| s == text.trim());
         Ok(StateFn {
             expr: Arc::new(expr),
             slots,
             used,
             vars,
             text,
+            only,
         })
     }
 
@@ -125,6 +130,12 @@ impl StateFn {
     /// `direction` (none: 0).
     #[inline]
     pub fn eval(&mut self, x: &[f64], t: f64, direction: Option<usize>) -> Dual {
+        if let Some(i) = self.only {
+            return Dual {
+                v: x[i],
+                d: if direction == Some(i) { 1.0 } else { 0.0 },
+            };
+        }
         for (v, slot) in self.vars.iter_mut().zip(&self.slots) {
             *v = match *slot {
                 Slot::Fixed(v) => Dual { v, d: 0.0 },
@@ -149,6 +160,10 @@ impl StateFn {
     #[inline]
     pub fn eval_with_gradient(&mut self, x: &[f64], t: f64, grad: &mut [f64]) -> f64 {
         grad.fill(0.0);
+        if let Some(i) = self.only {
+            grad[i] = 1.0;
+            return x[i];
+        }
         if self.used.is_empty() {
             return self.eval(x, t, None).v;
         }

@@ -142,8 +142,21 @@ impl Bank {
     /// Step every filter from t_{n−1} to t_n = `t` with the measurements `y` (m
     /// values, NaN: not measured). `step` is n, for errors.
     pub fn step(&mut self, step: u64, t_prev: f64, t: f64, y: &[f64]) -> Result<(), Error> {
+        // N known at compile time for the small models (the loops unrolled: ≈ 3× at
+        // N = 2, BENCHMARKS.md); 0 is any N.
+        match self.n {
+            1 => self.step_n::<1>(step, t_prev, t, y),
+            2 => self.step_n::<2>(step, t_prev, t, y),
+            3 => self.step_n::<3>(step, t_prev, t, y),
+            4 => self.step_n::<4>(step, t_prev, t, y),
+            6 => self.step_n::<6>(step, t_prev, t, y),
+            _ => self.step_n::<0>(step, t_prev, t, y),
+        }
+    }
+
+    fn step_n<const N: usize>(&mut self, step: u64, t_prev: f64, t: f64, y: &[f64]) -> Result<(), Error> {
         for k in 0..self.filters.len() {
-            self.predict(k, step, t_prev)?;
+            self.predict::<N>(k, step, t_prev)?;
         }
         self.a.clear();
         self.a.extend((0..self.m).filter(|&j| y[j].is_finite()));
@@ -151,13 +164,14 @@ impl Bank {
             self.measured[j] += 1;
         }
         for k in 0..self.filters.len() {
-            self.update(k, step, t, y)?;
+            self.update::<N>(k, step, t, y)?;
         }
         Ok(())
     }
 
-    fn predict(&mut self, k: usize, step: u64, t_prev: f64) -> Result<(), Error> {
-        let (n, dt) = (self.n, self.dt);
+    #[inline(always)]
+    fn predict<const N: usize>(&mut self, k: usize, step: u64, t_prev: f64) -> Result<(), Error> {
+        let (n, dt) = (if N == 0 { self.n } else { N }, self.dt);
         let filter = &mut self.filters[k];
         self.phi.fill(0.0);
         for i in 0..n {
@@ -193,8 +207,9 @@ impl Bank {
         Ok(())
     }
 
-    fn update(&mut self, k: usize, step: u64, t: f64, y: &[f64]) -> Result<(), Error> {
-        let (n, m) = (self.n, self.m);
+    #[inline(always)]
+    fn update<const N: usize>(&mut self, k: usize, step: u64, t: f64, y: &[f64]) -> Result<(), Error> {
+        let (n, m) = (if N == 0 { self.n } else { N }, self.m);
         let (earlier, rest) = self.filters.split_at_mut(k);
         let filter = &mut rest[0];
         for j in 0..m {

@@ -23,7 +23,11 @@ use crate::error::{Error, FieldError, MAX_REPORTED_ERRORS, got, omitted_entry};
 use crate::text::short;
 use serde_json::Value;
 
-pub use crate::identification::data::{MAX_ROWS, TOLERANCE};
+pub use crate::identification::data::TOLERANCE;
+
+/// The most rows read: one per grid point of the longest grid (D ≤ 10⁷ here: 10⁷
+/// rows of CSV are hundreds of MB).
+pub const MAX_ROWS: usize = 10_000_001;
 
 /// The data on the model's grid.
 #[derive(Clone, Debug, Default)]
@@ -45,7 +49,8 @@ pub struct Grid {
 }
 
 impl Grid {
-    fn t(&self, n: usize) -> f64 {
+    /// t_n = t0 + n·Δt.
+    pub fn t(&self, n: usize) -> f64 {
         self.t0 + n as f64 * self.dt
     }
 
@@ -279,12 +284,13 @@ pub fn from_csv(
             }
         };
         let line = record.position().map_or(rows as u64 + 1, |p| p.line());
-        let at = format!("line {line} (data row {rows})");
+        let at = || format!("line {line} (data row {rows})");
         if record.len() != header.len() {
             errs.push(FieldError::new(
                 path,
                 format!(
-                    "{at}: {} fields, expected {} as in the header",
+                    "{}: {} fields, expected {} as in the header",
+                    at(),
                     record.len(),
                     header.len()
                 ),
@@ -297,18 +303,18 @@ pub fn from_csv(
         let mut ok = true;
         for (c, column) in columns.iter().enumerate() {
             let cell = &record[c];
-            let (name, slot) = match *column {
+            let slot = match *column {
                 Column::Ignored => continue,
-                Column::T => ("t".to_string(), None),
-                Column::Measurement(j) => (names[j].clone(), Some(&mut y[j])),
-                Column::Truth(i) => (format!("{}_true", states[i]), Some(&mut truth[i])),
+                Column::T => None,
+                Column::Measurement(j) => Some(&mut y[j]),
+                Column::Truth(i) => Some(&mut truth[i]),
             };
             match (number(cell), slot) {
                 (Ok(Some(v)), None) => t = Some(v),
                 (Ok(None), None) => {
                     errs.push(FieldError::new(
                         path,
-                        format!("{at}, column \"t\": empty; every row needs its time"),
+                        format!("{}, column \"t\": empty; every row needs its time", at()),
                     ));
                     ok = false;
                 }
@@ -317,7 +323,9 @@ pub fn from_csv(
                     errs.push(FieldError::new(
                         path,
                         format!(
-                            "{at}, column \"{name}\": \"{}\" {what} (an empty cell is a missing value)",
+                            "{}, column \"{}\": \"{}\" {what} (an empty cell is a missing value)",
+                            at(),
+                            shown(&header[c]),
                             shown(cell)
                         ),
                     ));
@@ -332,7 +340,7 @@ pub fn from_csv(
                 .unwrap_or(0)]
             .to_string();
             if let Err(m) = fill.row(t, &written, &y, &truth) {
-                errs.push(FieldError::new(path, format!("{at}, column \"t\": {m}")));
+                errs.push(FieldError::new(path, format!("{}, column \"t\": {m}", at())));
             }
         }
     }
@@ -424,6 +432,32 @@ pub fn from_rows(
     })
 }
 
+/// `data` as CSV text that [`from_csv`] reads back to the same bits: `t`, the
+/// measurements, then `STATE_true` per state where there is a truth; one row per grid
+/// point n = 0…D (the row at t0 holds only the truth), an empty cell for a missing
+/// value, numbers in Rust's shortest round-trip form.
+pub fn to_csv(data: &Measured, names: &[String], states: &[String], grid: Grid) -> String {
+    let (m, n) = (names.len(), states.len());
+    let mut header = vec!["t".to_string()];
+    header.extend(names.iter().cloned());
+    if data.truth.is_some() {
+        header.extend(states.iter().map(|s| format!("{s}_true")));
+    }
+    let cell = |v: f64| if v.is_nan() { String::new() } else { crate::text::num(v) };
+    let first = if data.truth.is_some() { 0 } else { 1 };
+    let rows = (first..=grid.steps).map(|k| {
+        let mut row = vec![crate::text::num(grid.t(k))];
+        for j in 0..m {
+            row.push(if k == 0 { String::new() } else { cell(data.y[(k - 1) * m + j]) });
+        }
+        if let Some(tr) = &data.truth {
+            row.extend(tr[k * n..(k + 1) * n].iter().map(|&v| cell(v)));
+        }
+        row
+    });
+    crate::text::csv_text(header, rows)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -478,6 +512,17 @@ mod tests {
                 .message
                 .contains("no column for measurement \"y\"")
         );
+    }
+
+    #[test]
+    fn written_and_read_back_to_the_same_bits() {
+        let text = "t,y,x1_true,x2_true\n0,,5,1\n0.1,6.123456789012345,6,\n0.3,7,,2\n";
+        let d = from_csv(text, &s(&["y"]), &s(&["x1", "x2"]), grid(), "data.csv").unwrap();
+        let back = to_csv(&d, &s(&["y"]), &s(&["x1", "x2"]), grid());
+        let again = from_csv(&back, &s(&["y"]), &s(&["x1", "x2"]), grid(), "data.csv").unwrap();
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&d.y), bits(&again.y));
+        assert_eq!(bits(d.truth.as_ref().unwrap()), bits(again.truth.as_ref().unwrap()));
     }
 
     #[test]

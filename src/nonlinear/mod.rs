@@ -24,3 +24,23 @@ pub mod work;
 pub use model::{Compiled, NonlinearModel};
 pub use request::NonlinearRequest;
 pub use result::NonlinearResult;
+
+/// The data a request runs on as CSV ([`data::to_csv`]): read, or simulated from its
+/// truth (as the run will: the same bits).
+pub fn data_csv(r: &NonlinearRequest) -> Result<String, crate::Error> {
+    let m = &r.model;
+    let grid = data::Grid {
+        t0: m.t0,
+        dt: m.dt,
+        steps: m.steps,
+    };
+    let simulated;
+    let d = match &r.source {
+        request::Source::Truth(t) => {
+            simulated = truth::simulate(t, "data.truth")?;
+            &simulated
+        }
+        _ => &r.data,
+    };
+    Ok(data::to_csv(d, &m.names, &m.states, grid))
+}

@@ -31,22 +31,29 @@ pub fn run(r: &NonlinearRequest, progress: &mut dyn Progress) -> Result<Nonlinea
             couplings: (0..i).map(|c| (c, w[i][c])).collect(),
         })
         .collect();
-    let ekf = designs.len();
-    designs.push(Design {
-        label: "the EKF".into(),
-        q: 1.0,
-        r: 1.0,
-        couplings: Vec::new(),
-    });
-    let grid0 = designs.len();
-    for &s in &r.q_scales {
-        designs.push(Design {
-            label: format!("the EKF with W × {}", crate::text::short(s)),
-            q: s,
-            r: 1.0,
-            couplings: Vec::new(),
-        });
-    }
+    // The uncoupled EKFs (the plain one, each Q scale): one filter of the bank per
+    // distinct design — with α_0 = 1 iterate 1 *is* the plain EKF, and a scale of 1 too.
+    let mut uncoupled = |q: f64, label: String| {
+        let same = |d: &Design| d.q == q && d.r == 1.0 && d.couplings.is_empty();
+        match designs.iter().position(same) {
+            Some(i) => i,
+            None => {
+                designs.push(Design {
+                    label,
+                    q,
+                    r: 1.0,
+                    couplings: Vec::new(),
+                });
+                designs.len() - 1
+            }
+        }
+    };
+    let ekf = uncoupled(1.0, "the EKF".into());
+    let scaled: Vec<usize> = r
+        .q_scales
+        .iter()
+        .map(|&s| uncoupled(s, format!("the EKF with W × {}", crate::text::short(s))))
+        .collect();
     let filters = designs.len();
     let mut bank = Bank::new(model, designs, r.residuals);
 
@@ -178,13 +185,13 @@ pub fn run(r: &NonlinearRequest, progress: &mut dyn Progress) -> Result<Nonlinea
         .enumerate()
         .map(|(j, &scale)| ScalePoint {
             scale,
-            summary: summary(grid0 + j, None),
+            summary: summary(scaled[j], None),
         })
         .collect();
     let chosen = argmin(grid.iter().map(|p| p.summary.delta));
     let grid_summaries: Vec<Summary> = grid.iter().map(|p| p.summary.clone()).collect();
     let q_best = least_rms(&grid_summaries, n, truth.is_some() && !grid.is_empty());
-    let traces = trace.finish(chosen.map(|c| grid0 + c), k);
+    let traces = trace.finish(chosen.map(|c| scaled[c]), k);
     let r_diag: Vec<Vec<f64>> = (0..k)
         .map(|i| (0..m).map(|j| model.v[j * m + j] / g[i][i]).collect())
         .collect();
@@ -314,8 +321,9 @@ impl Recorder {
     }
 
     fn finish(mut self, chosen: Option<usize>, k: usize) -> Traces {
-        self.traces.q_scaled = chosen.map(|c| std::mem::take(&mut self.estimates[c]));
-        self.traces.ekf = std::mem::take(&mut self.estimates[self.ekf]);
+        // (Cloned: the EKF and a Q-scaled one may be an iterate's filter.)
+        self.traces.q_scaled = chosen.map(|c| self.estimates[c].clone());
+        self.traces.ekf = self.estimates[self.ekf].clone();
         self.estimates.truncate(k);
         self.traces.iterates = self.estimates;
         self.traces

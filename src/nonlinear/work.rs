@@ -29,7 +29,8 @@ fn filter_step(r: &NonlinearRequest) -> f64 {
     f + h + 4.0 * n * n * n + 4.0 * n * n * m + 2.0 * m * m * m + 60.0
 }
 
-/// The filters of the bank: K iterates, the EKF and one per Q scale.
+/// The filters of the bank: K iterates, the EKF and one per Q scale (at most: the
+/// run shares a filter between equal designs).
 fn filters(r: &NonlinearRequest) -> usize {
     r.alpha.len() + 1 + r.q_scales.len()
 }

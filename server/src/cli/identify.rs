@@ -7,7 +7,7 @@
 use crate::Run;
 use crate::parallel::Rayon;
 use serde_json::Value;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
@@ -81,7 +81,7 @@ impl Run for Args {
             };
             obj.insert("method".into(), name.into());
         }
-        if let Err(code) = read_csv(obj, &self.request) {
+        if let Err(code) = super::read_data_csv(obj, &self.request) {
             return code;
         }
         let exec = match Rayon::new(Some(1)) {
@@ -115,34 +115,4 @@ impl Run for Args {
             Err(code) => code,
         }
     }
-}
-
-/// `data.csv`, a path relative to the request file (or to the working directory for a
-/// request on stdin), read into `data.csv_text`.
-fn read_csv(obj: &mut serde_json::Map<String, Value>, request: &str) -> Result<(), ExitCode> {
-    let Some(Value::Object(data)) = obj.get_mut("data") else {
-        return Ok(());
-    };
-    let Some(Value::String(file)) = data.get("csv") else {
-        return Ok(());
-    };
-    let base = match Path::new(request).parent() {
-        Some(dir) if request != "-" && !request.starts_with("preset:") => dir.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let path = base.join(file);
-    let text = std::fs::read(&path)
-        .map_err(|e| {
-            eprintln!("data.csv: cannot read {}: {e}", path.display());
-            ExitCode::from(super::EXIT_INVALID)
-        })
-        .and_then(|bytes| {
-            String::from_utf8(bytes).map_err(|_| {
-                eprintln!("data.csv: {} is not UTF-8 text", path.display());
-                ExitCode::from(super::EXIT_INVALID)
-            })
-        })?;
-    data.remove("csv");
-    data.insert("csv_text".into(), text.into());
-    Ok(())
 }

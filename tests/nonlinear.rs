@@ -279,7 +279,9 @@ fn jacobians_equal_central_differences() {
     // domain), the same on every run.
     let mut seed: u64 = 20261203;
     let mut uniform = || {
-        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         0.5 + 2.5 * ((seed >> 11) as f64 / (1u64 << 53) as f64)
     };
     for text in texts {
@@ -316,7 +318,13 @@ fn a_state_leaving_the_domain_is_a_clear_error() {
     model["system"]["y0"] = json!([0, 45]);
     let rows: Vec<Value> = (1..=2000).map(|n| json!([n as f64 * 0.01, 1.0])).collect();
     let e = run(json!({"model": model, "data": {"rows": rows}})).unwrap_err();
-    let Error::Numerical { step, t, path, message } = &e else {
+    let Error::Numerical {
+        step,
+        t,
+        path,
+        message,
+    } = &e
+    else {
         panic!("{e:?}")
     };
     assert_eq!((*step, *t), (0, 0.0));
@@ -365,7 +373,10 @@ fn the_truth_is_simulated_as_specified() {
     assert_ne!(format!("{a:?}"), format!("{c:?}"));
 
     // No process noise, constant velocity; then a constant input of 2 m/s².
-    let still = data(json!({"seed": 1, "y0": [1000, 50], "phi": [0, 0], "f": ["x2", "0"]}), 500);
+    let still = data(
+        json!({"seed": 1, "y0": [1000, 50], "phi": [0, 0], "f": ["x2", "0"]}),
+        500,
+    );
     for row in &still {
         let t = row[0];
         assert!((row[2] - (1000.0 + 50.0 * t)).abs() < 1e-9, "{row:?}");
@@ -391,8 +402,16 @@ fn the_truth_is_simulated_as_specified() {
     let var = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64;
     let band = 4.0 * (2.0 / d as f64).sqrt();
     let q_dt = 4.0 * 0.01;
-    assert!((var(&increments) / q_dt - 1.0).abs() < band, "{}", var(&increments) / q_dt);
-    assert!((var(&errors) / 4.0 - 1.0).abs() < band, "{}", var(&errors) / 4.0);
+    assert!(
+        (var(&increments) / q_dt - 1.0).abs() < band,
+        "{}",
+        var(&increments) / q_dt
+    );
+    assert!(
+        (var(&errors) / 4.0 - 1.0).abs() < band,
+        "{}",
+        var(&errors) / 4.0
+    );
 }
 
 /// Bad requests: every problem at its path, saying what was expected.
@@ -400,22 +419,67 @@ fn the_truth_is_simulated_as_specified() {
 fn bad_requests_name_the_field() {
     let rows = json!([[0.01, 1000.0]]);
     let cases = [
-        (json!({"model": "preset:seed-003", "data": {"rows": rows}}), "model", "no nonlinear preset"),
-        (json!({"model": "preset:seed-002", "data": {"rows": rows}, "procedure": {"alpha": [1, 1.2]}}), "procedure.alpha[1]", "0 < α_j < 1"),
-        (json!({"model": "preset:seed-002", "data": {"rows": rows}, "checkpoints": [0]}), "checkpoints[0]", "from 1 to D = 2000"),
-        (json!({"model": "preset:seed-002", "data": {"csv": "d.csv"}}), "data.csv", "read by the command line"),
-        (json!({"model": "preset:seed-002", "data": {}}), "data", "exactly one of"),
-        (json!({"model": "preset:seed-002", "data": {"truth": {"sed": 1}}}), "data.truth.sed", "unknown member"),
-        (json!({"model": "preset:seed-002", "data": {"truth": {"seed": 1, "f": ["x2", "x3"]}}}), "data.truth.f[1]", "unknown parameter \"x3\""),
-        (json!({"model": "preset:seed-002", "data": {"rows": [[0.015, 1.0]]}}), "data.rows[0][0]", "not on the model's grid"),
-        (json!({"model": "preset:seed-002", "data": {"rows": rows}, "q_scale": [0]}), "q_scale[0]", "scale > 0"),
-        (json!({"model": "preset:seed-002", "data": {"rows": rows}, "set": {"c": 1}}), "set.c", "c"),
-        (json!({"model": "preset:seed-002", "data": {"rows": rows}, "runs": 3}), "runs", "unknown member"),
+        (
+            json!({"model": "preset:seed-003", "data": {"rows": rows}}),
+            "model",
+            "no nonlinear preset",
+        ),
+        (
+            json!({"model": "preset:seed-002", "data": {"rows": rows}, "procedure": {"alpha": [1, 1.2]}}),
+            "procedure.alpha[1]",
+            "0 < α_j < 1",
+        ),
+        (
+            json!({"model": "preset:seed-002", "data": {"rows": rows}, "checkpoints": [0]}),
+            "checkpoints[0]",
+            "from 1 to D = 2000",
+        ),
+        (
+            json!({"model": "preset:seed-002", "data": {"csv": "d.csv"}}),
+            "data.csv",
+            "read by the command line",
+        ),
+        (
+            json!({"model": "preset:seed-002", "data": {}}),
+            "data",
+            "exactly one of",
+        ),
+        (
+            json!({"model": "preset:seed-002", "data": {"truth": {"sed": 1}}}),
+            "data.truth.sed",
+            "unknown member",
+        ),
+        (
+            json!({"model": "preset:seed-002", "data": {"truth": {"seed": 1, "f": ["x2", "x3"]}}}),
+            "data.truth.f[1]",
+            "unknown parameter \"x3\"",
+        ),
+        (
+            json!({"model": "preset:seed-002", "data": {"rows": [[0.015, 1.0]]}}),
+            "data.rows[0][0]",
+            "not on the model's grid",
+        ),
+        (
+            json!({"model": "preset:seed-002", "data": {"rows": rows}, "q_scale": [0]}),
+            "q_scale[0]",
+            "scale > 0",
+        ),
+        (
+            json!({"model": "preset:seed-002", "data": {"rows": rows}, "set": {"c": 1}}),
+            "set.c",
+            "c",
+        ),
+        (
+            json!({"model": "preset:seed-002", "data": {"rows": rows}, "runs": 3}),
+            "runs",
+            "unknown member",
+        ),
     ];
     for (request, path, words) in cases {
         let e = run(request.clone()).unwrap_err().field_errors();
         assert!(
-            e.iter().any(|e| e.path == path && e.message.contains(words)),
+            e.iter()
+                .any(|e| e.path == path && e.message.contains(words)),
             "{request}: {e:?}"
         );
     }
@@ -423,14 +487,18 @@ fn bad_requests_name_the_field() {
     model["system"]["states"] = json!(["x1", "b"]);
     model["measurement"]["h"] = json!(["x1", "b"]);
     model["measurement"]["psi"] = json!([0]);
-    let e = run(json!({"model": model, "data": {"rows": rows}})).unwrap_err().field_errors();
+    let e = run(json!({"model": model, "data": {"rows": rows}}))
+        .unwrap_err()
+        .field_errors();
     let paths: Vec<&str> = e.iter().map(|e| e.path.as_str()).collect();
     assert!(paths.contains(&"model.system.states[1]"), "{e:?}");
     let e = {
         let mut model = preset();
         model["measurement"]["h"] = json!(["x1", "x2"]);
         model["measurement"]["psi"] = json!([0]);
-        run(json!({"model": model, "data": {"rows": rows}})).unwrap_err().field_errors()
+        run(json!({"model": model, "data": {"rows": rows}}))
+            .unwrap_err()
+            .field_errors()
     };
     assert!(e.iter().any(|e| e.path == "model.measurement.h"), "{e:?}");
 }
@@ -457,7 +525,11 @@ fn missing_measurements_are_skipped() {
     let r = run(json!({"model": "preset:seed-002", "data": {"csv_text": thinned}, "q_scale": []}))
         .unwrap();
     assert_eq!(r.measured, vec![1000]);
-    assert!(r.iterates.iter().all(|s| s.delta.is_finite() && s.rms.is_some()));
+    assert!(
+        r.iterates
+            .iter()
+            .all(|s| s.delta.is_finite() && s.rms.is_some())
+    );
     // The same data with the missing rows left out entirely: the same filters, bit for
     // bit (the RMS differ: the truth is then known at half the steps).
     let dropped: String = thinned

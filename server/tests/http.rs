@@ -2106,3 +2106,47 @@ fn a_synchronous_analysis_stops_at_its_time_limit_and_when_its_client_goes() {
     );
     assert_eq!(s.get("/healthz").status, 200);
 }
+
+/// One nonlinear request — the reference scenario b's data as a CSV file for the
+/// command line, as its text for the server — gives the same result, bit for bit,
+/// from `kea nonlinear --json` and from a job; a bad request is 422 with the path.
+#[test]
+fn nonlinear_gives_the_same_bits_from_the_command_line_and_a_job() {
+    let csv_path = common::repo().join("tests/data/nonlinear/b_wrong_model_manoeuvre.data.csv");
+    let csv = std::fs::read_to_string(&csv_path).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("data.csv"), &csv).unwrap();
+    let request = json!({"model": "preset:seed-002", "data": {"csv": "data.csv"},
+                         "q_scale": [0.1, 1, 10], "checkpoints": [1000], "trace_points": 50});
+    let file = dir.path().join("request.json");
+    std::fs::write(&file, request.to_string()).unwrap();
+    let out = Command::new(common::KEA)
+        .args(["nonlinear", file.to_str().unwrap(), "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let cli: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(cli["i_star"], 3); // (the reference's)
+
+    let data = tempfile::tempdir().unwrap();
+    let s = Server::start(data.path(), &[]);
+    let mut job = request.clone();
+    job["kind"] = json!("nonlinear");
+    job["data"] = json!({"csv_text": csv});
+    let reply = s.post("/v1/jobs", &job);
+    assert_eq!(reply.status, 202, "{}", reply.text);
+    let id = reply.json()["id"].as_str().unwrap().to_string();
+    let done = s.wait_finished(&id, LONG);
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let result = s.get(&format!("/v1/jobs/{id}/result")).json();
+    assert_eq!(without_timing(result), without_timing(cli));
+
+    job["procedure"] = json!({"alpha": [1, 1.5]});
+    let bad = s.post("/v1/jobs", &job);
+    assert_eq!(bad.status, 422, "{}", bad.text);
+    assert!(bad.text.contains("procedure.alpha[1]"), "{}", bad.text);
+}

@@ -600,6 +600,12 @@ fn responses_validate_against_the_spec() {
                "target": {"criterion": "yx", "criteria": "covariance", "threshold": 1.5},
                "mode": {"bisect": {"param": "r", "low": 0.01, "high": 100}}}),
         common::identification_job(),
+        json!({"kind": "nonlinear",
+               "model": serde_json::from_str::<Value>(
+                   kea_core::nonlinear::request::preset("seed-002").unwrap()).unwrap(),
+               "procedure": {"alpha": [1, 0.6, 0.5], "earlier_residuals": "posterior"},
+               "data": {"truth": {"seed": 1, "y0": [1000, 50], "phi": [0, 1]}},
+               "q_scale": [0.1, 1, 10], "checkpoints": [1, 2000], "trace_points": 20}),
     ];
     let schemas = &spec["components"]["schemas"];
     let mut kinds_run = BTreeSet::new();
@@ -717,6 +723,14 @@ fn check_csv_header(spec: &Value, kind: &str, header: &str) {
             }
             "monte_carlo" | "identification" if c == "nees" || c == "nis" => Some(c),
             "identification" => c.split_once(':').map(|(series, _)| series),
+            "nonlinear" if c == "n" => Some(c),
+            "nonlinear" => c.split_once(':').map(|(series, _)| {
+                // (`iterate1` … `iterateK`: documented as `iterateK`.)
+                match series.strip_prefix("iterate") {
+                    Some(k) if k.parse::<u32>().is_ok() => "iterateK",
+                    _ => series,
+                }
+            }),
             "monte_carlo" => {
                 assert!(description.contains("`series:state`"));
                 c.split_once(':').map(|(series, _)| series)

@@ -154,7 +154,13 @@ impl Bank {
         }
     }
 
-    fn step_n<const N: usize>(&mut self, step: u64, t_prev: f64, t: f64, y: &[f64]) -> Result<(), Error> {
+    fn step_n<const N: usize>(
+        &mut self,
+        step: u64,
+        t_prev: f64,
+        t: f64,
+        y: &[f64],
+    ) -> Result<(), Error> {
         for k in 0..self.filters.len() {
             self.predict::<N>(k, step, t_prev)?;
         }
@@ -208,7 +214,13 @@ impl Bank {
     }
 
     #[inline(always)]
-    fn update<const N: usize>(&mut self, k: usize, step: u64, t: f64, y: &[f64]) -> Result<(), Error> {
+    fn update<const N: usize>(
+        &mut self,
+        k: usize,
+        step: u64,
+        t: f64,
+        y: &[f64],
+    ) -> Result<(), Error> {
         let (n, m) = (if N == 0 { self.n } else { N }, self.m);
         let (earlier, rest) = self.filters.split_at_mut(k);
         let filter = &mut rest[0];

@@ -340,7 +340,10 @@ pub fn from_csv(
                 .unwrap_or(0)]
             .to_string();
             if let Err(m) = fill.row(t, &written, &y, &truth) {
-                errs.push(FieldError::new(path, format!("{}, column \"t\": {m}", at())));
+                errs.push(FieldError::new(
+                    path,
+                    format!("{}, column \"t\": {m}", at()),
+                ));
             }
         }
     }
@@ -443,12 +446,22 @@ pub fn to_csv(data: &Measured, names: &[String], states: &[String], grid: Grid) 
     if data.truth.is_some() {
         header.extend(states.iter().map(|s| format!("{s}_true")));
     }
-    let cell = |v: f64| if v.is_nan() { String::new() } else { crate::text::num(v) };
+    let cell = |v: f64| {
+        if v.is_nan() {
+            String::new()
+        } else {
+            crate::text::num(v)
+        }
+    };
     let first = if data.truth.is_some() { 0 } else { 1 };
     let rows = (first..=grid.steps).map(|k| {
         let mut row = vec![crate::text::num(grid.t(k))];
         for j in 0..m {
-            row.push(if k == 0 { String::new() } else { cell(data.y[(k - 1) * m + j]) });
+            row.push(if k == 0 {
+                String::new()
+            } else {
+                cell(data.y[(k - 1) * m + j])
+            });
         }
         if let Some(tr) = &data.truth {
             row.extend(tr[k * n..(k + 1) * n].iter().map(|&v| cell(v)));
@@ -522,7 +535,10 @@ mod tests {
         let again = from_csv(&back, &s(&["y"]), &s(&["x1", "x2"]), grid(), "data.csv").unwrap();
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&d.y), bits(&again.y));
-        assert_eq!(bits(d.truth.as_ref().unwrap()), bits(again.truth.as_ref().unwrap()));
+        assert_eq!(
+            bits(d.truth.as_ref().unwrap()),
+            bits(again.truth.as_ref().unwrap())
+        );
     }
 
     #[test]

@@ -64,21 +64,22 @@ pub fn text(r: &NonlinearResult) -> String {
     out
 }
 
-/// The traces as CSV: `n,t`, each measurement, `STATE_true`, `ekf:STATE`,
-/// `ekf_sko:STATE`, `iterate1:STATE`…, `iterate1_sko:STATE`, `q_scaled:STATE`; an
-/// empty cell for a value that is not there.
+/// The traces as CSV: `t`, `n` (the step), then `series:name` columns —
+/// `measurement:NAME`, `truth:STATE` (with a truth), `ekf:STATE`, `ekf_sko:STATE`,
+/// `iterate1:STATE` … `iterateK:STATE`, `iterate1_sko:STATE`, `q_scaled:STATE` (with
+/// a Q-scale grid); an empty cell for a value that is not there.
 pub fn traces_csv(r: &NonlinearResult) -> String {
     let tr = &r.traces;
-    let mut header: Vec<String> = vec!["n".into(), "t".into()];
+    let mut header: Vec<String> = vec!["t".into(), "n".into()];
     let mut columns: Vec<Vec<Option<f64>>> = Vec::new();
     for (j, name) in r.measurements.iter().enumerate() {
-        header.push(name.clone());
+        header.push(format!("measurement:{name}"));
         columns.push(tr.measurements[j].clone());
     }
     let some = |v: &Vec<f64>| v.iter().map(|x| Some(*x)).collect::<Vec<_>>();
     if let Some(truth) = &tr.truth {
         for (i, s) in r.states.iter().enumerate() {
-            header.push(format!("{s}_true"));
+            header.push(format!("truth:{s}"));
             columns.push(truth[i].clone());
         }
     }
@@ -105,7 +106,7 @@ pub fn traces_csv(r: &NonlinearResult) -> String {
         }
     }
     let rows = (0..tr.n.len()).map(|p| {
-        let mut row = vec![tr.n[p].to_string(), num(tr.t[p])];
+        let mut row = vec![num(tr.t[p]), tr.n[p].to_string()];
         row.extend(columns.iter().map(|c| c[p].map(num).unwrap_or_default()));
         row
     });

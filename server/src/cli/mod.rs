@@ -3,8 +3,8 @@
 
 pub mod analyze;
 pub mod identify;
-pub mod nonlinear;
 pub mod monte_carlo;
+pub mod nonlinear;
 pub mod presets;
 pub mod synthesize;
 
@@ -549,7 +549,10 @@ mod tests {
 
 /// `data.csv`, a path relative to the request file (or to the working directory for a
 /// request on stdin), read into `data.csv_text`.
-pub fn read_data_csv(obj: &mut serde_json::Map<String, serde_json::Value>, request: &str) -> Result<(), ExitCode> {
+pub fn read_data_csv(
+    obj: &mut serde_json::Map<String, serde_json::Value>,
+    request: &str,
+) -> Result<(), ExitCode> {
     let Some(serde_json::Value::Object(data)) = obj.get_mut("data") else {
         return Ok(());
     };

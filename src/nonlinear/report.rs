@@ -6,7 +6,7 @@ use crate::text::{CELL, cell, csv_text, num, short};
 /// One table row: δ, δ on the posteriors and, with a truth, the RMS per state.
 fn row(label: &str, s: &Summary, truth: bool, mark: &str) -> String {
     let mut out = format!(
-        "{label:<16}  {:>CELL$}  {:>CELL$}",
+        "{label:<18}  {:>CELL$}  {:>CELL$}",
         cell(Some(s.delta)),
         cell(Some(s.delta_posterior))
     );
@@ -22,7 +22,7 @@ fn row(label: &str, s: &Summary, truth: bool, mark: &str) -> String {
 pub fn text(r: &NonlinearResult) -> String {
     let truth = r.ekf.rms.is_some();
     let mut out = format!(
-        "{:<16}  {:>CELL$}  {:>CELL$}",
+        "{:<18}  {:>CELL$}  {:>CELL$}",
         "filter", "delta", "delta post"
     );
     if truth {
@@ -39,8 +39,10 @@ pub fn text(r: &NonlinearResult) -> String {
     out += &row("EKF", &r.ekf, truth, "");
     if let Some(c) = r.q_scale.chosen {
         let p = &r.q_scale.grid[c];
+        let scale = format!("{:.3}", p.scale);
+        let scale = scale.trim_end_matches('0').trim_end_matches('.');
         out += &row(
-            &format!("EKF W×{}", short(p.scale)),
+            &format!("EKF, W × {scale}"),
             &p.summary,
             truth,
             "  (Q scale by delta)",

@@ -11,26 +11,88 @@ use exmex::{BinOp, MakeOperators, Operator};
 use std::collections::BTreeMap;
 use std::str::FromStr;
 
-/// A value `v` and its derivative `d` in one direction.
+/// How many directions a [`Dual`] carries at once: a nonlinear model's Jacobian row of
+/// two states is one evaluation (`expr::StateFn`); more states take one per pair.
+pub const DIRECTIONS: usize = 2;
+
+/// Derivatives in [`DIRECTIONS`] directions.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Grad(pub [f64; DIRECTIONS]);
+
+impl Grad {
+    pub const ZERO: Grad = Grad([0.0; DIRECTIONS]);
+
+    /// 1 in direction `k`, 0 in the others.
+    pub fn unit(k: usize) -> Grad {
+        let mut g = Grad::ZERO;
+        g.0[k] = 1.0;
+        g
+    }
+
+    fn map2(self, other: Grad, f: impl Fn(f64, f64) -> f64) -> Grad {
+        let mut out = Grad::ZERO;
+        for k in 0..DIRECTIONS {
+            out.0[k] = f(self.0[k], other.0[k]);
+        }
+        out
+    }
+}
+
+impl std::ops::Index<usize> for Grad {
+    type Output = f64;
+    fn index(&self, k: usize) -> &f64 {
+        &self.0[k]
+    }
+}
+
+impl std::ops::Add for Grad {
+    type Output = Grad;
+    fn add(self, o: Grad) -> Grad {
+        self.map2(o, |a, b| a + b)
+    }
+}
+
+impl std::ops::Sub for Grad {
+    type Output = Grad;
+    fn sub(self, o: Grad) -> Grad {
+        self.map2(o, |a, b| a - b)
+    }
+}
+
+impl std::ops::Neg for Grad {
+    type Output = Grad;
+    fn neg(self) -> Grad {
+        self.map2(Grad::ZERO, |a, _| -a)
+    }
+}
+
+impl std::ops::Mul<Grad> for f64 {
+    type Output = Grad;
+    fn mul(self, g: Grad) -> Grad {
+        g.map2(Grad::ZERO, |a, _| self * a)
+    }
+}
+
+/// A value `v` and its derivatives `d` in [`DIRECTIONS`] directions.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Dual {
     pub v: f64,
-    pub d: f64,
+    pub d: Grad,
 }
 
 impl FromStr for Dual {
     type Err = std::num::ParseFloatError;
     /// A literal: exmex's `f64` parse, derivative 0.
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        f64::from_str(s).map(|v| Dual { v, d: 0.0 })
+        f64::from_str(s).map(|v| Dual { v, d: Grad::ZERO })
     }
 }
 
 /// `slope · dx`, and 0 when `dx` is 0 even where `slope` is infinite or NaN: a function
 /// of a constant sub-expression is constant (`sqrt(r - r)`, `0^0.5`), so only moving
 /// an argument where no derivative exists is an error.
-fn term(slope: f64, dx: f64) -> f64 {
-    if dx == 0.0 { 0.0 } else { slope * dx }
+fn term(slope: f64, dx: Grad) -> Grad {
+    dx.map2(Grad::ZERO, |dx, _| if dx == 0.0 { 0.0 } else { slope * dx })
 }
 
 /// `f(a)` of value `v` and derivative `slope` at `a.v`, by the chain rule.
@@ -44,7 +106,7 @@ fn chain(a: Dual, v: f64, slope: f64) -> Dual {
 /// A function whose derivative is 0 wherever it exists (signum, floor, round…; their
 /// jumps are ignored).
 fn flat(v: f64) -> Dual {
-    Dual { v, d: 0.0 }
+    Dual { v, d: Grad::ZERO }
 }
 
 /// `a^b`: b·a^(b−1)·a′ + a^b·ln a·b′, with a^0's a-part 0 (a^0 is 1 for every a) and
@@ -108,7 +170,7 @@ pub struct DualOps;
 impl MakeOperators<Dual> for DualOps {
     fn make<'a>() -> Vec<Operator<'a, Dual>> {
         use std::f64::consts::{E, LN_2, LN_10, PI, TAU};
-        let k = |v: f64| Dual { v, d: 0.0 };
+        let k = |v: f64| Dual { v, d: Grad::ZERO };
         vec![
             Operator::make_bin(
                 "^",
@@ -283,7 +345,11 @@ pub(super) fn along(
             .iter()
             .map(|&(name, v)| Dual {
                 v,
-                d: if name == direction { 1.0 } else { 0.0 },
+                d: if name == direction {
+                    Grad::unit(0)
+                } else {
+                    Grad::ZERO
+                },
             })
             .collect();
         let x = expr
@@ -319,7 +385,7 @@ mod tests {
             match (d.constant(), s.constant()) {
                 (Some(dc), Some(sc)) => {
                     assert_eq!(dc.v.to_bits(), sc.to_bits(), "{name}");
-                    assert_eq!(dc.d, 0.0, "{name}");
+                    assert_eq!(dc.d, Grad::ZERO, "{name}");
                 }
                 (None, None) => {}
                 _ => panic!("{name}: a constant in one table only"),
@@ -363,7 +429,7 @@ mod tests {
         assert_eq!(value.to_bits(), want.to_bits(), "{text} at {p:?}");
         for ((name, dual), &d) in names.iter().zip(&duals).zip(&derivatives) {
             assert_eq!(dual.v.to_bits(), want.to_bits(), "{text} at {p:?}");
-            assert_eq!(dual.d.to_bits(), d.to_bits(), "{text} at {p:?}");
+            assert_eq!(dual.d[0].to_bits(), d.to_bits(), "{text} at {p:?}");
             let r = reference(text, p, name);
             assert!(
                 (d - r).abs() <= tol * r.abs(),

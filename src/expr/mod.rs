@@ -296,7 +296,7 @@ pub fn compile_const_with_derivatives(
     let duals = dual::along(text, params, &directions, path)?;
     for ((slot, name), d) in slots.into_iter().zip(directions).zip(duals) {
         debug_assert_eq!(d.v.to_bits(), x.to_bits(), "{text}");
-        if !d.d.is_finite() {
+        if !d.d[0].is_finite() {
             return Err(FieldError::new(
                 path,
                 format!(
@@ -305,7 +305,7 @@ pub fn compile_const_with_derivatives(
                 ),
             ));
         }
-        derivatives[slot] = d.d;
+        derivatives[slot] = d.d[0];
     }
     Ok((x, derivatives))
 }

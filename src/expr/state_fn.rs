@@ -10,7 +10,7 @@
 //! table the value uses, so the value is `ScalarOps`'s bit for bit and the derivative
 //! is exact to rounding (a test compares both with central differences).
 
-use super::dual::{Dual, DualEx};
+use super::dual::{DIRECTIONS, Dual, DualEx, Grad};
 use super::translate::{translate, unknown};
 use super::{MAX_EXPRESSION_CHARS, Value, cannot_parse, names};
 use crate::error::FieldError;
@@ -126,37 +126,47 @@ impl StateFn {
         &self.used
     }
 
-    /// The value at the state `x` and time `t`, with the derivative along state
-    /// `direction` (none: 0).
+    /// Set the variables at (`x`, `t`), the derivative directions on the states
+    /// `directions` (at most [`DIRECTIONS`]), and evaluate.
     #[inline]
-    pub fn eval(&mut self, x: &[f64], t: f64, direction: Option<usize>) -> Dual {
-        if let Some(i) = self.only {
-            return Dual {
-                v: x[i],
-                d: if direction == Some(i) { 1.0 } else { 0.0 },
-            };
-        }
+    fn eval(&mut self, x: &[f64], t: f64, directions: &[usize]) -> Dual {
         for (v, slot) in self.vars.iter_mut().zip(&self.slots) {
             *v = match *slot {
-                Slot::Fixed(v) => Dual { v, d: 0.0 },
-                Slot::T => Dual { v: t, d: 0.0 },
-                Slot::State(i) => Dual {
-                    v: x[i],
-                    d: if Some(i) == direction { 1.0 } else { 0.0 },
+                Slot::Fixed(v) => Dual { v, d: Grad::ZERO },
+                Slot::T => Dual {
+                    v: t,
+                    d: Grad::ZERO,
                 },
+                Slot::State(i) => {
+                    let mut d = Grad::ZERO;
+                    if let Some(k) = directions.iter().position(|&j| j == i) {
+                        d.0[k] = 1.0;
+                    }
+                    Dual { v: x[i], d }
+                }
             };
         }
         // Errors cannot happen after a successful parse with the right variable count;
         // NaN makes the caller's finiteness check fire with the expression's path.
         self.expr.eval(&self.vars).unwrap_or(Dual {
             v: f64::NAN,
-            d: f64::NAN,
+            d: Grad([f64::NAN; DIRECTIONS]),
         })
     }
 
+    /// The value at the state `x` and time `t`.
+    #[inline]
+    pub fn value(&mut self, x: &[f64], t: f64) -> f64 {
+        match self.only {
+            Some(i) => x[i],
+            None => self.eval(x, t, &[]).v,
+        }
+    }
+
     /// The value at (`x`, `t`), and the gradient in the states into `grad` (length N;
-    /// zero for the states the text does not name). One evaluation per named state,
-    /// one when it names none.
+    /// zero for the states the text does not name). One evaluation per [`DIRECTIONS`]
+    /// states the text names (one when it names none); none for a text that is one
+    /// state's name.
     #[inline]
     pub fn eval_with_gradient(&mut self, x: &[f64], t: f64, grad: &mut [f64]) -> f64 {
         grad.fill(0.0);
@@ -165,15 +175,18 @@ impl StateFn {
             return x[i];
         }
         if self.used.is_empty() {
-            return self.eval(x, t, None).v;
+            return self.eval(x, t, &[]).v;
         }
         let mut value = f64::NAN;
-        for k in 0..self.used.len() {
-            let j = self.used[k];
-            let d = self.eval(x, t, Some(j));
+        let used = std::mem::take(&mut self.used);
+        for chunk in used.chunks(DIRECTIONS) {
+            let d = self.eval(x, t, chunk);
             value = d.v;
-            grad[j] = d.d;
+            for (k, &j) in chunk.iter().enumerate() {
+                grad[j] = d.d[k];
+            }
         }
+        self.used = used;
         value
     }
 }
@@ -226,6 +239,7 @@ mod tests {
         assert_eq!(g, [0.0, 1.0]);
         let mut c = StateFn::compile(&Value::Number(3.0), &states(), &params(), "f").unwrap();
         assert_eq!(c.eval_with_gradient(&[1.0, 2.0], 0.0, &mut g), 3.0);
+        assert_eq!(c.value(&[1.0, 2.0], 0.0), 3.0);
         assert_eq!(g, [0.0, 0.0]);
     }
 

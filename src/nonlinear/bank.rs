@@ -262,68 +262,110 @@ impl Bank {
             self.rho[r] = rho;
             self.ha[r * n..r * n + n].copy_from_slice(&self.hj[j * n..j * n + n]);
         }
-        let (ha, s, hp) = (
-            &self.ha[..ma * n],
-            &mut self.s[..ma * ma],
-            &mut self.hp[..ma * n],
-        );
-        // HP = H_a P⁻ (ma×N); S = HP H_aᵀ + r V_aa.
-        mul(hp, ha, &filter.p_prior, ma, n, n);
-        mul_abt_sym(s, hp, ha, None, ma, n);
-        let r_scale = filter.design.r;
-        for (r1, &j1) in self.a.iter().enumerate() {
-            for (r2, &j2) in self.a.iter().enumerate() {
-                s[r1 * ma + r2] += r_scale * self.v[j1 * m + j2];
-            }
-        }
-        if !cholesky(s, ma) {
-            return Err(Error::Numerical {
-                step,
-                t,
-                path: "measurement".into(),
-                message: format!(
-                    "{}: the innovation covariance H P Hᵀ + R is not positive definite (the covariance P diverged)",
-                    filter.design.label
-                ),
-            });
-        }
-        // Gᵀ = S⁻¹ H_a P⁻ (P⁻ symmetric): solve in place in hp.
-        cholesky_solve(s, hp, ma, n);
-        let gain = &mut self.gain[..n * ma];
-        for r in 0..ma {
-            for i in 0..n {
-                gain[i * ma + r] = hp[r * n + i];
-            }
-        }
-        for i in 0..n {
-            let mut dx = 0.0;
-            for r in 0..ma {
-                dx += gain[i * ma + r] * self.rho[r];
-            }
-            filter.x[i] = filter.x_prior[i] + dx;
-        }
-        // P⁺ = (I − G H_a) P⁻ (I − G H_a)ᵀ + G R Gᵀ.
-        mul(&mut self.imkh, gain, ha, n, ma, n);
-        for v in self.imkh.iter_mut() {
-            *v = -*v;
-        }
-        for i in 0..n {
-            self.imkh[i * n + i] += 1.0;
-        }
-        mul(&mut self.tmp, &self.imkh, &filter.p_prior, n, n, n);
-        mul_abt_sym(&mut filter.p, &self.tmp, &self.imkh, None, n, n);
-        for i in 0..n {
-            for j in i..n {
-                let mut grg = 0.0;
-                for (r1, &j1) in self.a.iter().enumerate() {
-                    let gi = gain[i * ma + r1];
-                    for (r2, &j2) in self.a.iter().enumerate() {
-                        grg += gi * r_scale * self.v[j1 * m + j2] * gain[j * ma + r2];
-                    }
+        if ma == 1 {
+            // One measured value, the common case: S is a number (no factorisation).
+            let j = self.a[0];
+            let h = &self.ha[..n];
+            let p = &filter.p_prior;
+            let r_value = filter.design.r * self.v[j * m + j];
+            let mut s = r_value;
+            for c in 0..n {
+                let mut hp = 0.0;
+                for i in 0..n {
+                    hp += h[i] * p[i * n + c];
                 }
-                filter.p[i * n + j] += grg;
-                if i != j {
-                    filter.p[j * n + i] = filter.p[i * n + j];
+                self.hp[c] = hp;
+                s += hp * h[c];
+            }
+            if !(s > 0.0 && s.is_finite()) {
+                return Err(not_positive(&filter.design.label, step, t));
+            }
+            let rho = self.rho[0];
+            for i in 0..n {
+                let g = self.hp[i] / s;
+                self.gain[i] = g;
+                filter.x[i] = filter.x_prior[i] + g * rho;
+            }
+            // P⁺ = (I − G h) P⁻ (I − G h)ᵀ + G r Gᵀ.
+            for i in 0..n {
+                for c in 0..n {
+                    let delta = if i == c { 1.0 } else { 0.0 };
+                    self.imkh[i * n + c] = delta - self.gain[i] * h[c];
+                }
+            }
+            mul(&mut self.tmp, &self.imkh, p, n, n, n);
+            mul_abt_sym(&mut filter.p, &self.tmp, &self.imkh, None, n, n);
+            for i in 0..n {
+                for c in i..n {
+                    let v = filter.p[i * n + c] + self.gain[i] * r_value * self.gain[c];
+                    filter.p[i * n + c] = v;
+                    filter.p[c * n + i] = v;
+                }
+            }
+        } else {
+            let (ha, s, hp) = (
+                &self.ha[..ma * n],
+                &mut self.s[..ma * ma],
+                &mut self.hp[..ma * n],
+            );
+            // HP = H_a P⁻ (ma×N); S = HP H_aᵀ + r V_aa.
+            mul(hp, ha, &filter.p_prior, ma, n, n);
+            mul_abt_sym(s, hp, ha, None, ma, n);
+            let r_scale = filter.design.r;
+            for (r1, &j1) in self.a.iter().enumerate() {
+                for (r2, &j2) in self.a.iter().enumerate() {
+                    s[r1 * ma + r2] += r_scale * self.v[j1 * m + j2];
+                }
+            }
+            if !cholesky(s, ma) {
+                return Err(Error::Numerical {
+                    step,
+                    t,
+                    path: "measurement".into(),
+                    message: format!(
+                        "{}: the innovation covariance H P Hᵀ + R is not positive definite (the covariance P diverged)",
+                        filter.design.label
+                    ),
+                });
+            }
+            // Gᵀ = S⁻¹ H_a P⁻ (P⁻ symmetric): solve in place in hp.
+            cholesky_solve(s, hp, ma, n);
+            let gain = &mut self.gain[..n * ma];
+            for r in 0..ma {
+                for i in 0..n {
+                    gain[i * ma + r] = hp[r * n + i];
+                }
+            }
+            for i in 0..n {
+                let mut dx = 0.0;
+                for r in 0..ma {
+                    dx += gain[i * ma + r] * self.rho[r];
+                }
+                filter.x[i] = filter.x_prior[i] + dx;
+            }
+            // P⁺ = (I − G H_a) P⁻ (I − G H_a)ᵀ + G R Gᵀ.
+            mul(&mut self.imkh, gain, ha, n, ma, n);
+            for v in self.imkh.iter_mut() {
+                *v = -*v;
+            }
+            for i in 0..n {
+                self.imkh[i * n + i] += 1.0;
+            }
+            mul(&mut self.tmp, &self.imkh, &filter.p_prior, n, n, n);
+            mul_abt_sym(&mut filter.p, &self.tmp, &self.imkh, None, n, n);
+            for i in 0..n {
+                for j in i..n {
+                    let mut grg = 0.0;
+                    for (r1, &j1) in self.a.iter().enumerate() {
+                        let gi = gain[i * ma + r1];
+                        for (r2, &j2) in self.a.iter().enumerate() {
+                            grg += gi * r_scale * self.v[j1 * m + j2] * gain[j * ma + r2];
+                        }
+                    }
+                    filter.p[i * n + j] += grg;
+                    if i != j {
+                        filter.p[j * n + i] = filter.p[i * n + j];
+                    }
                 }
             }
         }
@@ -341,7 +383,7 @@ impl Bank {
         // The posterior residuals and the sums.
         filter.residual_posterior.fill(f64::NAN);
         for &j in &self.a {
-            let rp = y[j] - self.h[j].eval(&filter.x, t, None).v;
+            let rp = y[j] - self.h[j].value(&filter.x, t);
             if !rp.is_finite() {
                 return Err(domain(
                     &self.h[j],
@@ -360,6 +402,18 @@ impl Bank {
             filter.sum_posterior[j] += rp * rp;
         }
         Ok(())
+    }
+}
+
+/// The error for an innovation covariance that is not positive definite.
+fn not_positive(filter: &str, step: u64, t: f64) -> Error {
+    Error::Numerical {
+        step,
+        t,
+        path: "measurement".into(),
+        message: format!(
+            "{filter}: the innovation covariance H P Hᵀ + R is not positive definite (the covariance P diverged)"
+        ),
     }
 }
 

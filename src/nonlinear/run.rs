@@ -75,7 +75,7 @@ pub fn run(r: &NonlinearRequest, progress: &mut dyn Progress) -> Result<Nonlinea
     let mut checkpoints = Vec::with_capacity(r.checkpoints.len());
     let mut next_checkpoint = 0;
 
-    let between = steps_between_reports(super::work::per_step(r) as f64);
+    let between = steps_between_reports(super::work::per_step(r));
     for step in 1..=d {
         let (t_prev, t) = (model.t(step - 1), model.t(step));
         let y = &data.y[(step - 1) * m..step * m];
@@ -124,7 +124,7 @@ pub fn run(r: &NonlinearRequest, progress: &mut dyn Progress) -> Result<Nonlinea
                 k,
             );
         }
-        if step as u64 % between == 0
+        if (step as u64).is_multiple_of(between)
             && let ControlFlow::Break(()) = progress.report(step as f64 / d as f64)
         {
             return Err(Error::Cancelled);

@@ -224,14 +224,14 @@ pub fn simulate(truth: &Truth, path: &str) -> Result<Measured, Error> {
         for s in 0..truth.substeps {
             let t = t_start + s as f64 * h;
             for i in 0..n {
-                let mut v = model.f[i].eval(&x, t, None).v;
+                let mut v = model.f[i].value(&x, t);
                 let mut what = (
                     "f",
                     format!("{}[{i}]", truth.f_path),
                     model.f[i].text().to_string(),
                 );
                 if let Some(u) = &mut input {
-                    let ui = u[i].eval(&x, t, None).v;
+                    let ui = u[i].value(&x, t);
                     if !ui.is_finite() {
                         what = (
                             "input",
@@ -260,7 +260,7 @@ pub fn simulate(truth: &Truth, path: &str) -> Result<Measured, Error> {
             *v = normal();
         }
         for j in 0..m {
-            let hv = model.h[j].eval(&x, t, None).v;
+            let hv = model.h[j].value(&x, t);
             if !hv.is_finite() {
                 let what = (
                     "h",

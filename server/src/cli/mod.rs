@@ -503,6 +503,39 @@ impl kea_core::Progress for Bar {
     }
 }
 
+/// `data.csv`, a path relative to the request file (or to the working directory for a
+/// request on stdin), read into `data.csv_text`.
+pub fn read_data_csv(
+    obj: &mut serde_json::Map<String, serde_json::Value>,
+    request: &str,
+) -> Result<(), ExitCode> {
+    let Some(serde_json::Value::Object(data)) = obj.get_mut("data") else {
+        return Ok(());
+    };
+    let Some(serde_json::Value::String(file)) = data.get("csv") else {
+        return Ok(());
+    };
+    let base = match Path::new(request).parent() {
+        Some(dir) if request != "-" && !request.starts_with("preset:") => dir.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let path = base.join(file);
+    let text = std::fs::read(&path)
+        .map_err(|e| {
+            eprintln!("data.csv: cannot read {}: {e}", path.display());
+            ExitCode::from(EXIT_INVALID)
+        })
+        .and_then(|bytes| {
+            String::from_utf8(bytes).map_err(|_| {
+                eprintln!("data.csv: {} is not UTF-8 text", path.display());
+                ExitCode::from(EXIT_INVALID)
+            })
+        })?;
+    data.remove("csv");
+    data.insert("csv_text".into(), text.into());
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::{parse_limit, parse_override};
@@ -545,37 +578,4 @@ mod tests {
         );
         assert!(parse_override("q=inf").unwrap_err().contains("finite"));
     }
-}
-
-/// `data.csv`, a path relative to the request file (or to the working directory for a
-/// request on stdin), read into `data.csv_text`.
-pub fn read_data_csv(
-    obj: &mut serde_json::Map<String, serde_json::Value>,
-    request: &str,
-) -> Result<(), ExitCode> {
-    let Some(serde_json::Value::Object(data)) = obj.get_mut("data") else {
-        return Ok(());
-    };
-    let Some(serde_json::Value::String(file)) = data.get("csv") else {
-        return Ok(());
-    };
-    let base = match Path::new(request).parent() {
-        Some(dir) if request != "-" && !request.starts_with("preset:") => dir.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let path = base.join(file);
-    let text = std::fs::read(&path)
-        .map_err(|e| {
-            eprintln!("data.csv: cannot read {}: {e}", path.display());
-            ExitCode::from(EXIT_INVALID)
-        })
-        .and_then(|bytes| {
-            String::from_utf8(bytes).map_err(|_| {
-                eprintln!("data.csv: {} is not UTF-8 text", path.display());
-                ExitCode::from(EXIT_INVALID)
-            })
-        })?;
-    data.remove("csv");
-    data.insert("csv_text".into(), text.into());
-    Ok(())
 }

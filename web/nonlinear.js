@@ -17,6 +17,7 @@ import { resumedText } from './results.js';
 import { RunBar, RunView, duration, el, fmt, markControls, recheckControl, requestErrors, runError, wasmCall } from './views.js';
 
 const KEEP = 'kea-nonlinear';
+const KEEP_CSV = 'kea-nonlinear-data'; // apart: written when the data change, not at every key
 const CHECK_MS = 400;
 
 /** The control a request path is shown at: the deepest one named by the path or a parent of it. */
@@ -58,6 +59,14 @@ function readKept() {
   }
 }
 
+function keep(key, value) {
+  try {
+    sessionStorage.setItem(key, value);
+  } catch {
+    // storage off or full: not kept
+  }
+}
+
 export class NonlinearView extends RunView {
   /** `ctx`: {download(name, type, text)}. */
   constructor(root, ctx) {
@@ -74,7 +83,13 @@ export class NonlinearView extends RunView {
 
   build() {
     this.modelBox = new ModelBox({ onChange: () => this.modelChanged() });
-    this.data = new NonlinearData({ probe: () => this.probe(), onChange: () => this.changed() });
+    this.data = new NonlinearData({
+      probe: () => this.probe(),
+      onChange: () => {
+        if (!this.restoring) keep(KEEP_CSV, this.data.csv.value());
+        this.changed();
+      },
+    });
     this.procedure = new Procedure({ onChange: () => this.changed() });
     this.form = el(
       'form',
@@ -117,7 +132,13 @@ export class NonlinearView extends RunView {
     const kept = readKept();
     this.restoring = true;
     if (kept && typeof kept === 'object') {
-      this.data.restore(kept.data);
+      let csv = null;
+      try {
+        csv = sessionStorage.getItem(KEEP_CSV);
+      } catch {
+        // storage off: none
+      }
+      this.data.restore({ ...kept.data, csv });
       this.procedure.restore(kept.procedure);
     }
     if (typeof kept?.model === 'string' && kept.model.trim() !== '') {
@@ -138,11 +159,7 @@ export class NonlinearView extends RunView {
   /** Keep the fields for this browser tab (over a reload). */
   save() {
     if (this.restoring) return;
-    try {
-      sessionStorage.setItem(KEEP, JSON.stringify({ model: this.modelBox.value(), data: this.data.kept(), procedure: this.procedure.kept() }));
-    } catch {
-      // storage off or full: not kept
-    }
+    keep(KEEP, JSON.stringify({ model: this.modelBox.value(), data: this.data.kept(), procedure: this.procedure.kept() }));
   }
 
   changed() {
@@ -259,6 +276,7 @@ export class NonlinearView extends RunView {
     }
     this.procedure.fill({ ...request, model });
     this.data.fill(request.data);
+    keep(KEEP_CSV, this.data.csv.value());
     this.save();
   }
 

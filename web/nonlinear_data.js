@@ -148,10 +148,10 @@ export class NonlinearData {
     this.read();
   }
 
-  /** What is kept over a reload. */
+  /** What is kept over a reload (the CSV's text apart: NonlinearView keeps it as it changes). */
   kept() {
     this.read();
-    return { mode: this.mode(), seed: this.seed.value, substeps: this.substeps.value, rows: this.texts, csv: this.csv.value() };
+    return { mode: this.mode(), seed: this.seed.value, substeps: this.substeps.value, rows: this.texts };
   }
 
   restore(k) {

@@ -333,6 +333,10 @@ test("the tab's fields are kept over a reload", async () => {
   await page.click('#nl-alpha-add');
   await page.fill('#nl-alpha-6', '0.2');
   await page.fill('#nl-truth-seed', '11');
+  const csv = 't,y\n0.0666,1001\n0.1333,1002\n';
+  await page.check('input[name=nl-data-mode][value=csv]');
+  await page.setInputFiles('#nl-data-file', { name: 'short.csv', mimeType: 'text/csv', buffer: Buffer.from(csv) });
+  await page.waitForFunction(() => /^short\.csv: 2 data rows/.test(document.getElementById('nl-data-summary').textContent));
   const text = await page.inputValue('#nl-model');
   await page.reload();
   await page.waitForSelector('body[data-ready=true]', { timeout: 30000 });
@@ -342,5 +346,7 @@ test("the tab's fields are kept over a reload", async () => {
   assert.equal(await page.inputValue('#nl-time-steps'), '300');
   assert.deepEqual(await page.$$eval('#nl-alpha input', (is) => is.map((i) => i.value)), [...ALPHA.map(String), '0.2']);
   assert.equal(await page.inputValue('#nl-truth-seed'), '11');
+  assert.equal(await page.isChecked('input[name=nl-data-mode][value=csv]'), true);
+  assert.equal(await page.inputValue('#nl-data'), csv);
   assert.deepEqual(consoleErrors, []);
 });

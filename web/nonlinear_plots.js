@@ -12,8 +12,8 @@ export const CHART_HEIGHT = 300;
 const BAND_FILL = 'rgba(31, 119, 180, 0.13)';
 
 /**
- * `lines` ([{label, values, stroke, dash, width, points}], nulls for gaps; `points`: drawn
- * as dots only) against `x` into `box`, with `band` ({label, lo, hi}) shaded between its
+ * `lines` ([{label, values, stroke, dash, width, points}], nulls for gaps; `points`:
+ * 'only' drawn as dots only, false never with dots) against `x` into `box`, with `band` ({label, lo, hi}) shaded between its
  * two edges. Returns the uPlot (destroy() before drawing anew).
  */
 function chart(box, { title, xLabel, yLabel, x: xs, lines, band, width, markers = false, whole = false }) {
@@ -30,7 +30,7 @@ function chart(box, { title, xLabel, yLabel, x: xs, lines, band, width, markers 
       width: l.width ?? 1.5,
       dash: l.dash ?? [],
       value: shown,
-      ...(dots ? { paths: () => null, points: { show: true, size: l.size ?? 3, space: 0, fill: l.stroke, stroke: l.stroke } } : { points: { show: markers } }),
+      ...(dots ? { paths: () => null, points: { show: true, size: l.size ?? 3, space: 0, fill: l.stroke, stroke: l.stroke } } : { points: { show: markers && l.points !== false } }),
     });
   }
   const bands = [];
@@ -111,7 +111,7 @@ export function iterateChart(box, r, { title, yLabel, values, flat = [], width }
   const lines = [
     { label: yLabel, values, stroke: '#1f77b4', width: 2 },
     { label: `i* = ${r.i_star}`, values: star, stroke: '#d62728', points: 'only', size: 11 },
-    ...flat.map((f) => ({ label: f.label, values: is.map(() => f.value), stroke: f.stroke, dash: [6, 4], width: 1 })),
+    ...flat.map((f) => ({ label: f.label, values: is.map(() => f.value), stroke: f.stroke, dash: [6, 4], width: 1, points: false })),
   ];
   return chart(box, { title, xLabel: 'iterate i', yLabel, x: is, lines, width, markers: true, whole: true });
 }

@@ -466,6 +466,12 @@ async function openJob(job, tabs) {
   const r = await api(`v1/jobs/${job.id}/request`);
   if (!r.ok) throw new Error(r.status === 404 ? 'the server no longer has it' : (await problemOf(r)).title);
   const request = await r.json();
+  // A nonlinear job's model is the Nonlinear tab's own (not the editor's): its request goes there.
+  if (job.kind === 'nonlinear') {
+    tabs.show(job.kind);
+    tabs.open(job.kind, job.id, request, request.model, JSON.stringify({ kind: job.kind, model: request.model }));
+    return;
+  }
   const model = request.model;
   if (!model || typeof model !== 'object' || Array.isArray(model)) throw new Error('its request has no model');
   if (request.set && typeof request.set === 'object') model.params = { ...(model.params ?? {}), ...request.set };

@@ -1,12 +1,14 @@
 // The tabs of the run pane: Analysis (app.js), Synthesis (synthesis.js), Monte Carlo
 // (monte_carlo.js) and Identification (identification.js), all on the model in the
-// editor, and Server: the models (models.js) and jobs (jobs.js) the kea server keeps.
+// editor; Nonlinear (nonlinear.js), on a nonlinear model of its own; and Server: the
+// models (models.js) and jobs (jobs.js) the kea server keeps.
 // Arrow keys move between the tabs; Ctrl+Enter runs and Esc cancels in the tab shown.
 
 import { IdentificationView } from './identification.js';
 import { JobsView, KINDS } from './jobs.js';
 import { ModelsView } from './models.js';
 import { MonteCarloView } from './monte_carlo.js';
+import { NonlinearView } from './nonlinear.js';
 import { SynthesisView } from './synthesis.js';
 
 /**
@@ -28,6 +30,7 @@ export function mountTabs(ctx) {
     synthesis: new SynthesisView(document.getElementById('synthesis-panel'), ctx),
     monte_carlo: new MonteCarloView(document.getElementById('monte-carlo-panel'), ctx),
     identification: new IdentificationView(document.getElementById('identification-panel'), ctx),
+    nonlinear: new NonlinearView(document.getElementById('nonlinear-panel'), ctx),
   };
   if (!ctx.server) {
     for (const v of Object.values(views)) v.bar.disableServer('No kea server answers here (open the page through `kea serve`).');

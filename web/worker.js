@@ -2,7 +2,8 @@
 //
 // Messages in:  {id, op: 'presets' | 'preset' | 'presetSynthesis' | 'check' | 'analyze' | 'analysis_work' | 'traces_csv', ...args}
 //               ('check' with `discrete: true`: a discrete model, as the identification reads it)
-//               or {id, op: 'synthesize' | 'simulate' | 'identify' | 'synthesis_work' | 'monte_carlo_work' | 'identification_work', request}
+//               or {id, op: 'synthesize' | 'simulate' | 'identify' | 'nonlinear' | 'synthesis_work' | 'monte_carlo_work' | 'identification_work' | 'nonlinear_work', request}
+//               or {id, op: 'nonlinear_preset', name} (a nonlinear preset's model JSON text, exactly as shipped)
 //               or {id, op: 'monte_carlo_csv', result} | {id, op: 'parse', bytes}
 // Messages out: {id, progress} while analysing (at most every 50 ms), then
 //               {id, ok: <value>} or {id, error: {kind, title, errors:[{path, message}]}}.
@@ -38,6 +39,8 @@ const KINDS = {
   monte_carlo_work: 'monte_carlo',
   identify: 'identification',
   identification_work: 'identification',
+  nonlinear: 'nonlinear',
+  nonlinear_work: 'nonlinear',
 };
 
 self.onmessage = async (event) => {
@@ -55,6 +58,9 @@ self.onmessage = async (event) => {
       case 'preset':
         value = JSON.parse(kea.preset(event.data.name) ?? 'null');
         break;
+      case 'nonlinear_preset': // the text itself, not parsed: the tab shows it as shipped
+        value = kea.nonlinear_preset(event.data.name) ?? null;
+        break;
       case 'presetSynthesis': // the preset's synthesis example: {target, mode}, or null
         value = JSON.parse(kea.preset_synthesis(event.data.name) ?? 'null');
         break;
@@ -67,7 +73,8 @@ self.onmessage = async (event) => {
         break;
       case 'synthesis_work':
       case 'monte_carlo_work':
-      case 'identification_work': // the core's work(kind, request), as for a server job of that kind
+      case 'identification_work':
+      case 'nonlinear_work': // the core's work(kind, request), as for a server job of that kind
         value = JSON.parse(kea.work(KINDS[op], event.data.request));
         break;
       case 'check': // a discrete model (system.transition) is checked in the identification's form
@@ -88,10 +95,11 @@ self.onmessage = async (event) => {
       }
       case 'synthesize':
       case 'simulate':
-      case 'identify': {
-        // Synthesis, Monte Carlo and identification (web/synthesis.js, web/monte_carlo.js,
-        // web/identification.js): one request JSON, run by the core's run(kind, request)
-        // as a server job of that kind is.
+      case 'identify':
+      case 'nonlinear': {
+        // Synthesis, Monte Carlo, identification and nonlinear (web/synthesis.js,
+        // web/monte_carlo.js, web/identification.js, web/nonlinear.js): one request JSON,
+        // run by the core's run(kind, request) as a server job of that kind is.
         let last = 0;
         const text = kea.run(KINDS[op], event.data.request, (fraction) => {
           const now = performance.now();

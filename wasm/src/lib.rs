@@ -257,6 +257,13 @@ pub fn preset_synthesis(name: &str) -> Option<String> {
     kea_core::presets::synthesis_json(name).map(str::to_string)
 }
 
+/// One nonlinear preset's model JSON (`presets/nonlinear/NAME.json`, what a request's
+/// `"model": "preset:NAME"` reads), exactly as shipped; `undefined` for an unknown name.
+#[wasm_bindgen]
+pub fn nonlinear_preset(name: &str) -> Option<String> {
+    kea_core::nonlinear::request::preset(name).map(str::to_string)
+}
+
 /// The version of kea this build comes from.
 #[wasm_bindgen]
 pub fn version() -> String {
@@ -356,5 +363,14 @@ mod tests {
                 .contains("\"target\"")
         );
         assert!(preset_synthesis("no-such").is_none());
+    }
+
+    #[test]
+    fn nonlinear_preset_is_the_file_shipped() {
+        assert_eq!(
+            nonlinear_preset("seed-002").as_deref(),
+            Some(include_str!("../../presets/nonlinear/seed-002.json"))
+        );
+        assert!(nonlinear_preset("seed-example").is_none());
     }
 }

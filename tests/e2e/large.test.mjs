@@ -29,8 +29,10 @@ async function importFile(model) {
 }
 
 /** Wait for the core's check of the model shown (150 ms after an edit) to have answered. */
+/** Wait until the core's check of the latest edit is shown (app.js's `data-checking`
+ * on the body goes when it is), then a frame. */
 async function checked() {
-  await page.waitForTimeout(400);
+  await page.waitForFunction(() => document.body.dataset.checking === undefined, null, { timeout: 20000 });
   await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => setTimeout(r))));
 }
 

@@ -4,13 +4,17 @@
 //!
 //! Each step n, first every filter predicts from its posterior at t_{n−1} (Euler map):
 //!
+//! ```text
 //!     x⁻ = x⁺ + f(x⁺, t_{n−1}) Δt,   Φ = I + F(x⁺, t_{n−1}) Δt,   P⁻ = Φ P⁺ Φᵀ + q W Δt
+//! ```
 //!
 //! then, in the bank's order, each updates with the measured components a of y_n:
 //!
+//! ```text
 //!     R = r V_aa,   S = H_a P⁻ H_aᵀ + R,   G = P⁻ H_aᵀ S⁻¹      (H = ∂h/∂x at x⁻, t_n)
 //!     x⁺ = x⁻ + G [ (y − h(x⁻)) + Σ_c w_c ρ_c ]
 //!     P⁺ = (I − G H_a) P⁻ (I − G H_a)ᵀ + G R Gᵀ                  (Joseph form)
+//! ```
 //!
 //! where ρ_c is the residual y − h(·) of an earlier filter c of the bank at step n, at
 //! its posterior ([`Residuals::Posterior`], METHOD's default) or its prediction. A

@@ -1,7 +1,9 @@
 //! The procedure's weights (METHOD §4, seed (16)): from the regularisation steps
 //! α_0 … α_{K−1},
 //!
+//! ```text
 //!     γ_i^k = α_{i−1} (1 − α_i²)(1 − α_{i+1}²) ··· (1 − α_{k−1}²),   i = 1…k
+//! ```
 //!
 //! (the empty product is 1: γ_k^k = α_{k−1}); filter k's measurement noise is
 //! R_k = V/γ_k^k and its earlier filters' residuals enter with w_i^k = γ_i^k/γ_k^k.

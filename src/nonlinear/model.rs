@@ -1,7 +1,9 @@
 //! The nonlinear model (METHOD §4): what a user writes ([`NonlinearModel`], serde)
 //! and what the filters run on ([`Compiled`]).
 //!
+//! ```text
 //!     dx/dt = f(x, t) + noise of intensity W,   y_n = h(x(t_n)) + v_n,  v_n ~ N(0, V)
+//! ```
 //!
 //! `system.f` (N texts) and `measurement.h` (n texts) are expressions in the state
 //! names, `t` and the params; F = ∂f/∂x and H = ∂h/∂x come from them

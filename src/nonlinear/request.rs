@@ -1,9 +1,11 @@
 //! A nonlinear run's request, read strictly once:
 //!
+//! ```text
 //!     {"model": MODEL | "preset:NAME", "set": {…},
 //!      "data": {"csv_text": "…"} | {"rows": [[t, y1, …], …]} | {"truth": {…}},
 //!      "procedure": {"alpha": [α_0, …], "earlier_residuals": "posterior" | "prior"},
 //!      "q_scale": [s, …], "checkpoints": [n, …], "trace_points": P}
+//! ```
 //!
 //! (`data.csv`, a file's path, is the command line's: it reads the file and sends
 //! `csv_text`.) `procedure` overrides the model's own `procedure` member by member;

@@ -3,7 +3,9 @@
 //! inputs u(x, t) added to f, other noises — so that the procedure can be tried where
 //! the filter's model is wrong, with the true errors known.
 //!
+//! ```text
 //!     dx = (f_true(x, t) + u(x, t)) dt + dβ,  dβ of intensity W_true;  y_n = h_true(x(t_n)) + v_n
+//! ```
 //!
 //! integrated by Euler–Maruyama at Δt/`substeps` (default 10). The draws, from one
 //! ChaCha8 stream of `seed`: the initial state (only when `y0` is not given: then

@@ -425,7 +425,7 @@ fn expected_columns(names: &[String]) -> String {
 }
 
 /// A cell as a message shows it: at most 40 characters, then "…".
-fn shown(cell: &str) -> String {
+pub(crate) fn shown(cell: &str) -> String {
     match cell.char_indices().nth(40) {
         Some((end, _)) => format!("{}…", &cell[..end]),
         None => cell.to_string(),
@@ -433,7 +433,7 @@ fn shown(cell: &str) -> String {
 }
 
 /// A cell: empty (missing), a finite number, or what it is not.
-fn number(cell: &str) -> Result<Option<f64>, &'static str> {
+pub(crate) fn number(cell: &str) -> Result<Option<f64>, &'static str> {
     if cell.is_empty() {
         return Ok(None);
     }
@@ -457,18 +457,28 @@ fn too_many(path: &str, what: &str, grid: &Grid) -> Error {
 
 /// The field errors found, the first [`MAX_REPORTED_ERRORS`] kept and the rest
 /// counted (so that a file of bad cells does not build millions of them).
+/// (Shared with the nonlinear data's reader, `crate::nonlinear::data`.)
 #[derive(Default)]
-struct Errors {
+pub(crate) struct Errors {
     kept: Vec<FieldError>,
     more: usize,
 }
 
 impl Errors {
-    fn push(&mut self, e: FieldError) {
+    pub(crate) fn push(&mut self, e: FieldError) {
         if self.kept.len() < MAX_REPORTED_ERRORS {
             self.kept.push(e);
         } else {
             self.more += 1;
+        }
+    }
+
+    /// Nothing found, or the errors as `Error::Invalid` ([`Errors::finish`]).
+    pub(crate) fn result(self) -> Result<(), Error> {
+        if self.kept.is_empty() {
+            Ok(())
+        } else {
+            Err(self.finish(None))
         }
     }
 

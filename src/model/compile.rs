@@ -209,6 +209,25 @@ pub(crate) fn params_with(
     params
 }
 
+/// `time.t0` and `time.t_end` finite, t_end > t0 (the linear and the nonlinear model's).
+pub(crate) fn check_interval(t0: f64, t_end: f64, errs: &mut Errors) {
+    if !t0.is_finite() {
+        errs.at("time.t0", "expected a finite number");
+    }
+    if !t_end.is_finite() {
+        errs.at("time.t_end", "expected a finite number");
+    } else if t0.is_finite() && t_end <= t0 {
+        errs.at(
+            "time.t_end",
+            format!(
+                "t_end ({}) must be greater than t0 ({})",
+                num(t_end),
+                num(t0)
+            ),
+        );
+    }
+}
+
 fn compile_form(model: &Model, set: &Overrides, form: Form) -> Result<CompiledModel, Error> {
     let mut errs = Errors(Vec::new());
 
@@ -234,21 +253,7 @@ fn compile_form(model: &Model, set: &Overrides, form: Form) -> Result<CompiledMo
 
     // --- time
     let t = &model.time;
-    if !t.t0.is_finite() {
-        errs.at("time.t0", "expected a finite number");
-    }
-    if !t.t_end.is_finite() {
-        errs.at("time.t_end", "expected a finite number");
-    } else if t.t0.is_finite() && t.t_end <= t.t0 {
-        errs.at(
-            "time.t_end",
-            format!(
-                "t_end ({}) must be greater than t0 ({})",
-                num(t.t_end),
-                num(t.t0)
-            ),
-        );
-    }
+    check_interval(t.t0, t.t_end, &mut errs);
     let mut notes = Vec::new();
     if let (Steps::Fixed(d), Some(_)) = (&t.steps, &t.auto) {
         notes.push(format!(

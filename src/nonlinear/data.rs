@@ -17,13 +17,14 @@
 //!
 //! **Errors** name the line, the data row (from 1 after the header), the column and
 //! the cell (`line 4 (data row 3), column "y": "abc" is not a number`), or the inline
-//! entry's path (`data.rows[2][1]`); at most [`MAX_REPORTED_ERRORS`] are listed.
+//! entry's path (`data.rows[2][1]`); at most [`crate::error::MAX_REPORTED_ERRORS`] are listed.
 
-use crate::error::{Error, FieldError, MAX_REPORTED_ERRORS, got, omitted_entry};
+use crate::error::{Error, FieldError, got};
+use crate::identification::data::{Errors, number, shown};
 use crate::text::short;
 use serde_json::Value;
 
-pub use crate::identification::data::TOLERANCE;
+pub use crate::identification::data::{Grid, TOLERANCE};
 
 /// The most rows read: one per grid point of the longest grid (D ≤ 10⁷ here: 10⁷
 /// rows of CSV are hundreds of MB).
@@ -40,65 +41,25 @@ pub struct Measured {
     pub ignored: Vec<String>,
 }
 
-/// The grid the data must sit on.
-#[derive(Clone, Copy, Debug)]
-pub struct Grid {
-    pub t0: f64,
-    pub dt: f64,
-    pub steps: usize,
-}
-
-impl Grid {
-    /// t_n = t0 + n·Δt.
-    pub fn t(&self, n: usize) -> f64 {
-        self.t0 + n as f64 * self.dt
-    }
-
-    /// The grid index n (0…D) of `t`, or why there is none.
-    fn index(&self, t: f64, written: &str) -> Result<usize, String> {
-        let d = self.steps;
-        let tol =
-            |n: usize| TOLERANCE * self.dt + 4.0 * f64::EPSILON * (self.t0.abs() + self.t(n).abs());
-        let nearest = ((t - self.t0) / self.dt).round();
-        if nearest >= 0.0 && nearest <= d as f64 {
-            let n = nearest as usize;
-            if (t - self.t(n)).abs() <= tol(n) {
-                return Ok(n);
-            }
-        }
-        Err(format!(
-            "t = {written} is not on the model's grid t_n = t0 + n·Δt, n = 0…{d} (t0 = {}, Δt = {}, t_D = {}, within {TOLERANCE:e}·Δt)",
-            short(self.t0),
-            short(self.dt),
-            short(self.t(d))
-        ))
-    }
-}
-
-/// The errors found, the first [`MAX_REPORTED_ERRORS`] kept and the rest counted.
-#[derive(Default)]
-struct Errors {
-    kept: Vec<FieldError>,
-    more: usize,
-}
-
-impl Errors {
-    fn push(&mut self, e: FieldError) {
-        if self.kept.len() < MAX_REPORTED_ERRORS {
-            self.kept.push(e);
-        } else {
-            self.more += 1;
+/// The grid index n (0…D) of `t` (written `written`), or why there is none: the
+/// nonlinear grid starts at t0 (n = 0), the identification's at t_1.
+fn index(grid: &Grid, t: f64, written: &str) -> Result<usize, String> {
+    let d = grid.steps;
+    let tol =
+        |n: usize| TOLERANCE * grid.dt + 4.0 * f64::EPSILON * (grid.t0.abs() + grid.t(n).abs());
+    let nearest = ((t - grid.t0) / grid.dt).round();
+    if nearest >= 0.0 && nearest <= d as f64 {
+        let n = nearest as usize;
+        if (t - grid.t(n)).abs() <= tol(n) {
+            return Ok(n);
         }
     }
-    fn finish(mut self) -> Result<(), Error> {
-        if self.kept.is_empty() {
-            return Ok(());
-        }
-        if self.more > 0 {
-            self.kept.push(omitted_entry(self.more));
-        }
-        Err(Error::Invalid(self.kept))
-    }
+    Err(format!(
+        "t = {written} is not on the model's grid t_n = t0 + n·Δt, n = 0…{d} (t0 = {}, Δt = {}, t_D = {}, within {TOLERANCE:e}·Δt)",
+        short(grid.t0),
+        short(grid.dt),
+        short(grid.t(d))
+    ))
 }
 
 /// The rows placed on the grid, in order.
@@ -125,7 +86,7 @@ impl Fill {
 
     /// Place one row at `t`; `Err(message)` when it cannot be.
     fn row(&mut self, t: f64, written: &str, y: &[f64], truth: &[f64]) -> Result<(), String> {
-        let n = self.grid.index(t, written)?;
+        let n = index(&self.grid, t, written)?;
         if let Some(last) = self.last
             && n <= last
         {
@@ -148,26 +109,6 @@ impl Fill {
             tr[n * self.n_states..(n + 1) * self.n_states].copy_from_slice(truth);
         }
         Ok(())
-    }
-}
-
-/// A cell: empty (missing), a finite number, or what it is not.
-fn number(cell: &str) -> Result<Option<f64>, &'static str> {
-    if cell.is_empty() {
-        return Ok(None);
-    }
-    match cell.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(Some(v)),
-        Ok(_) => Err("is not a finite number"),
-        Err(_) => Err("is not a number"),
-    }
-}
-
-/// A cell as a message shows it: at most 40 characters.
-fn shown(cell: &str) -> String {
-    match cell.char_indices().nth(40) {
-        Some((end, _)) => format!("{}…", &cell[..end]),
-        None => cell.to_string(),
     }
 }
 
@@ -261,7 +202,7 @@ pub fn from_csv(
             ));
         }
     }
-    errs.finish()?;
+    errs.result()?;
     let with_truth = columns.iter().any(|c| matches!(c, Column::Truth(_)));
     let mut fill = Fill::new(grid, names.len(), states.len(), with_truth);
     let mut errs = Errors::default();
@@ -347,7 +288,7 @@ pub fn from_csv(
             }
         }
     }
-    errs.finish()?;
+    errs.result()?;
     Ok(Measured {
         y: fill.y,
         truth: fill.truth,
@@ -427,7 +368,7 @@ pub fn from_rows(
             errs.push(FieldError::new(format!("{at}[0]"), message));
         }
     }
-    errs.finish()?;
+    errs.result()?;
     Ok(Measured {
         y: fill.y,
         truth: None,

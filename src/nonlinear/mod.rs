@@ -29,11 +29,7 @@ pub use result::NonlinearResult;
 /// truth (as the run will: the same bits).
 pub fn data_csv(r: &NonlinearRequest) -> Result<String, crate::Error> {
     let m = &r.model;
-    let grid = data::Grid {
-        t0: m.t0,
-        dt: m.dt,
-        steps: m.steps,
-    };
+    let grid = m.grid();
     let simulated;
     let d = match &r.source {
         request::Source::Truth(t) => {

@@ -22,7 +22,7 @@ use crate::model::compile::matrices::const_vector;
 use crate::model::compile::names::check_names;
 use crate::model::compile::noise::noise_cov;
 use crate::model::limits::MAX_STEPS;
-use crate::text::{is_identifier, num};
+use crate::text::is_identifier;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -153,6 +153,14 @@ impl Compiled {
     pub fn t(&self, k: usize) -> f64 {
         self.t0 + k as f64 * self.dt
     }
+    /// The grid the data sit on.
+    pub fn grid(&self) -> super::data::Grid {
+        super::data::Grid {
+            t0: self.t0,
+            dt: self.dt,
+            steps: self.steps,
+        }
+    }
 }
 
 /// A model from JSON, every serde error at its path.
@@ -190,21 +198,7 @@ pub fn compile(model: &NonlinearModel, set: &Overrides) -> Result<Compiled, Erro
 
     // --- time
     let t = &model.time;
-    if !t.t0.is_finite() {
-        errs.at("time.t0", "expected a finite number");
-    }
-    if !t.t_end.is_finite() {
-        errs.at("time.t_end", "expected a finite number");
-    } else if t.t0.is_finite() && t.t_end <= t.t0 {
-        errs.at(
-            "time.t_end",
-            format!(
-                "t_end ({}) must be greater than t0 ({})",
-                num(t.t_end),
-                num(t.t0)
-            ),
-        );
-    }
+    crate::model::compile::check_interval(t.t0, t.t_end, &mut errs);
     if !(1..=MAX_STEPS).contains(&t.steps) {
         errs.at(
             "time.steps",

@@ -12,7 +12,7 @@
 //! without either, α = (1, 0.8, 0.6, 0.5, 0.4, 0.3), the seed's reference schedule.
 
 use super::bank::Residuals;
-use super::data::{self, Grid, Measured};
+use super::data::{self, Measured};
 use super::model::{Compiled, NonlinearModel, compile, from_value};
 use super::truth::{self, Truth};
 use crate::error::{Error, FieldError, got};
@@ -269,11 +269,7 @@ fn read_data(
             },
         ));
     };
-    let grid = Grid {
-        t0: model.t0,
-        dt: model.dt,
-        steps: model.steps,
-    };
+    let grid = model.grid();
     let given: Vec<&String> = d.keys().collect();
     match given.as_slice() {
         [k] if *k == "csv_text" => {

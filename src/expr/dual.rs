@@ -91,12 +91,12 @@ impl FromStr for Dual {
 /// `slope · dx`, and 0 when `dx` is 0 even where `slope` is infinite or NaN: a function
 /// of a constant sub-expression is constant (`sqrt(r - r)`, `0^0.5`), so only moving
 /// an argument where no derivative exists is an error.
-fn term(slope: f64, dx: Grad) -> Grad {
+pub(super) fn term(slope: f64, dx: Grad) -> Grad {
     dx.map2(Grad::ZERO, |dx, _| if dx == 0.0 { 0.0 } else { slope * dx })
 }
 
 /// `f(a)` of value `v` and derivative `slope` at `a.v`, by the chain rule.
-fn chain(a: Dual, v: f64, slope: f64) -> Dual {
+pub(super) fn chain(a: Dual, v: f64, slope: f64) -> Dual {
     Dual {
         v,
         d: term(slope, a.d),
@@ -105,13 +105,13 @@ fn chain(a: Dual, v: f64, slope: f64) -> Dual {
 
 /// A function whose derivative is 0 wherever it exists (signum, floor, round…; their
 /// jumps are ignored).
-fn flat(v: f64) -> Dual {
+pub(super) fn flat(v: f64) -> Dual {
     Dual { v, d: Grad::ZERO }
 }
 
 /// `a^b`: b·a^(b−1)·a′ + a^b·ln a·b′, with a^0's a-part 0 (a^0 is 1 for every a) and
 /// 0^b's b-part 0 for b > 0 (0^b is 0 near every b > 0).
-fn pow(a: Dual, b: Dual) -> Dual {
+pub(super) fn pow(a: Dual, b: Dual) -> Dual {
     let v = libm::pow(a.v, b.v);
     let a_part = if b.v == 0.0 {
         0.0
@@ -130,7 +130,7 @@ fn pow(a: Dual, b: Dual) -> Dual {
 }
 
 /// `atan2(y, x)`: (x·y′ − y·x′) / (x² + y²).
-fn atan2(y: Dual, x: Dual) -> Dual {
+pub(super) fn atan2(y: Dual, x: Dual) -> Dual {
     let r2 = x.v * x.v + y.v * y.v;
     Dual {
         v: libm::atan2(y.v, x.v),
@@ -140,7 +140,7 @@ fn atan2(y: Dual, x: Dual) -> Dual {
 
 /// The derivative of whichever of `a` and `b` gave `v` (min or max); at a tie the mean
 /// of the two one-sided derivatives, as `abs` at 0 (so max(x, −x) is abs(x) there too).
-fn chosen(a: Dual, b: Dual, v: f64) -> Dual {
+pub(super) fn chosen(a: Dual, b: Dual, v: f64) -> Dual {
     let d = if a.v == b.v {
         0.5 * (a.d + b.d)
     } else if v == a.v {
@@ -152,30 +152,28 @@ fn chosen(a: Dual, b: Dual, v: f64) -> Dual {
 }
 
 /// 1/√(1 − x²), asin's slope, without the cancellation of 1 − x² near ±1.
-fn inv_sqrt(x: f64) -> f64 {
+pub(super) fn inv_sqrt(x: f64) -> f64 {
     1.0 / (libm::sqrt(1.0 - x) * libm::sqrt(1.0 + x))
 }
 
 /// The language's sign function: −1, 0 or 1.
-fn sign(x: f64) -> f64 {
+pub(super) fn sign(x: f64) -> f64 {
     if x == 0.0 { x } else { x.signum() }
 }
 
-/// The operators on dual numbers: `block::operators!`'s names, priorities,
-/// commutativity and constants (`the_table_is_scalar_ops_table`), each value by
-/// `ScalarOps`'s function.
-#[derive(Clone, Debug)]
-pub struct DualOps;
-
-impl MakeOperators<Dual> for DualOps {
-    fn make<'a>() -> Vec<Operator<'a, Dual>> {
+/// The language's operators on dual numbers — `block::operators!`'s names,
+/// priorities, commutativity and constants (`the_table_is_scalar_ops_table`), each
+/// value by `ScalarOps`'s function — for a value type that `$un!` and `$bin!` lift a
+/// [`Dual`] function to, and `$k!` a constant: one table for [`DualOps`] and
+/// `lanes::DualLaneOps`.
+macro_rules! dual_operators {
+    ($un:ident, $bin:ident, $k:ident) => {{
         use std::f64::consts::{E, LN_2, LN_10, PI, TAU};
-        let k = |v: f64| Dual { v, d: Grad::ZERO };
         vec![
             Operator::make_bin(
                 "^",
                 BinOp {
-                    apply: pow,
+                    apply: $bin!(pow),
                     prio: 4,
                     is_commutative: false,
                 },
@@ -183,10 +181,10 @@ impl MakeOperators<Dual> for DualOps {
             Operator::make_bin(
                 "*",
                 BinOp {
-                    apply: |a, b| Dual {
+                    apply: $bin!(|a: Dual, b: Dual| Dual {
                         v: a.v * b.v,
                         d: term(b.v, a.d) + term(a.v, b.d),
-                    },
+                    }),
                     prio: 2,
                     is_commutative: true,
                 },
@@ -194,13 +192,13 @@ impl MakeOperators<Dual> for DualOps {
             Operator::make_bin(
                 "/",
                 BinOp {
-                    apply: |a, b| {
+                    apply: $bin!(|a: Dual, b: Dual| {
                         let v = a.v / b.v;
                         Dual {
                             v,
                             d: term(1.0 / b.v, a.d) - term(v / b.v, b.d),
                         }
-                    },
+                    }),
                     prio: 3,
                     is_commutative: false,
                 },
@@ -208,31 +206,31 @@ impl MakeOperators<Dual> for DualOps {
             Operator::make_bin_unary(
                 "+",
                 BinOp {
-                    apply: |a, b| Dual {
+                    apply: $bin!(|a: Dual, b: Dual| Dual {
                         v: a.v + b.v,
                         d: a.d + b.d,
-                    },
+                    }),
                     prio: 0,
                     is_commutative: true,
                 },
-                |a| a,
+                $un!(|a: Dual| a),
             ),
             Operator::make_bin_unary(
                 "-",
                 BinOp {
-                    apply: |a, b| Dual {
+                    apply: $bin!(|a: Dual, b: Dual| Dual {
                         v: a.v - b.v,
                         d: a.d - b.d,
-                    },
+                    }),
                     prio: 1,
                     is_commutative: false,
                 },
-                |a| Dual { v: -a.v, d: -a.d },
+                $un!(|a: Dual| Dual { v: -a.v, d: -a.d }),
             ),
             Operator::make_bin(
                 "atan2",
                 BinOp {
-                    apply: atan2,
+                    apply: $bin!(atan2),
                     prio: 0,
                     is_commutative: false,
                 },
@@ -240,7 +238,7 @@ impl MakeOperators<Dual> for DualOps {
             Operator::make_bin(
                 "min",
                 BinOp {
-                    apply: |a, b| chosen(a, b, libm::fmin(a.v, b.v)),
+                    apply: $bin!(|a: Dual, b: Dual| chosen(a, b, libm::fmin(a.v, b.v))),
                     prio: 0,
                     is_commutative: false,
                 },
@@ -248,71 +246,145 @@ impl MakeOperators<Dual> for DualOps {
             Operator::make_bin(
                 "max",
                 BinOp {
-                    apply: |a, b| chosen(a, b, libm::fmax(a.v, b.v)),
+                    apply: $bin!(|a: Dual, b: Dual| chosen(a, b, libm::fmax(a.v, b.v))),
                     prio: 0,
                     is_commutative: false,
                 },
             ),
-            Operator::make_unary("abs", |a| chain(a, a.v.abs(), sign(a.v))),
-            Operator::make_unary("signum", |a| flat(sign(a.v))),
-            Operator::make_unary("sin", |a| chain(a, libm::sin(a.v), libm::cos(a.v))),
-            Operator::make_unary("cos", |a| chain(a, libm::cos(a.v), -libm::sin(a.v))),
-            Operator::make_unary("tan", |a| {
-                let v = libm::tan(a.v);
-                chain(a, v, 1.0 + v * v)
-            }),
-            Operator::make_unary("asin", |a| chain(a, libm::asin(a.v), inv_sqrt(a.v))),
-            Operator::make_unary("acos", |a| chain(a, libm::acos(a.v), -inv_sqrt(a.v))),
-            Operator::make_unary("atan", |a| {
-                chain(a, libm::atan(a.v), 1.0 / (1.0 + a.v * a.v))
-            }),
-            Operator::make_unary("sinh", |a| chain(a, libm::sinh(a.v), libm::cosh(a.v))),
-            Operator::make_unary("cosh", |a| chain(a, libm::cosh(a.v), libm::sinh(a.v))),
-            Operator::make_unary("tanh", |a| {
-                let c = libm::cosh(a.v);
-                chain(a, libm::tanh(a.v), 1.0 / (c * c))
-            }),
-            Operator::make_unary("asinh", |a| {
-                chain(a, libm::asinh(a.v), 1.0 / libm::hypot(a.v, 1.0))
-            }),
-            Operator::make_unary("acosh", |a| {
-                let slope = 1.0 / (libm::sqrt(a.v - 1.0) * libm::sqrt(a.v + 1.0));
-                chain(a, libm::acosh(a.v), slope)
-            }),
-            Operator::make_unary("atanh", |a| {
-                chain(a, libm::atanh(a.v), 1.0 / ((1.0 - a.v) * (1.0 + a.v)))
-            }),
-            Operator::make_unary("floor", |a| flat(a.v.floor())),
-            Operator::make_unary("round", |a| flat(a.v.round())),
-            Operator::make_unary("ceil", |a| flat(a.v.ceil())),
-            Operator::make_unary("trunc", |a| flat(a.v.trunc())),
-            Operator::make_unary("fract", |a| Dual {
-                v: a.v.fract(),
-                d: a.d,
-            }),
-            Operator::make_unary("exp", |a| {
-                let v = libm::exp(a.v);
-                chain(a, v, v)
-            }),
-            Operator::make_unary("sqrt", |a| {
-                let v = a.v.sqrt();
-                chain(a, v, 0.5 / v)
-            }),
-            Operator::make_unary("cbrt", |a| {
-                let v = libm::cbrt(a.v);
-                chain(a, v, 1.0 / (3.0 * v * v))
-            }),
-            Operator::make_unary("ln", |a| chain(a, libm::log(a.v), 1.0 / a.v)),
-            Operator::make_unary("log2", |a| chain(a, libm::log2(a.v), 1.0 / (a.v * LN_2))),
-            Operator::make_unary("log10", |a| chain(a, libm::log10(a.v), 1.0 / (a.v * LN_10))),
-            Operator::make_unary("log", |a| chain(a, libm::log(a.v), 1.0 / a.v)),
-            Operator::make_constant("PI", k(PI)),
-            Operator::make_constant("π", k(PI)),
-            Operator::make_constant("E", k(E)),
-            Operator::make_constant("e", k(E)),
-            Operator::make_constant("TAU", k(TAU)),
-            Operator::make_constant("τ", k(TAU)),
+            Operator::make_unary("abs", $un!(|a: Dual| chain(a, a.v.abs(), sign(a.v)))),
+            Operator::make_unary("signum", $un!(|a: Dual| flat(sign(a.v)))),
+            Operator::make_unary(
+                "sin",
+                $un!(|a: Dual| chain(a, libm::sin(a.v), libm::cos(a.v))),
+            ),
+            Operator::make_unary(
+                "cos",
+                $un!(|a: Dual| chain(a, libm::cos(a.v), -libm::sin(a.v))),
+            ),
+            Operator::make_unary(
+                "tan",
+                $un!(|a: Dual| {
+                    let v = libm::tan(a.v);
+                    chain(a, v, 1.0 + v * v)
+                }),
+            ),
+            Operator::make_unary(
+                "asin",
+                $un!(|a: Dual| chain(a, libm::asin(a.v), inv_sqrt(a.v))),
+            ),
+            Operator::make_unary(
+                "acos",
+                $un!(|a: Dual| chain(a, libm::acos(a.v), -inv_sqrt(a.v))),
+            ),
+            Operator::make_unary(
+                "atan",
+                $un!(|a: Dual| { chain(a, libm::atan(a.v), 1.0 / (1.0 + a.v * a.v)) }),
+            ),
+            Operator::make_unary(
+                "sinh",
+                $un!(|a: Dual| chain(a, libm::sinh(a.v), libm::cosh(a.v))),
+            ),
+            Operator::make_unary(
+                "cosh",
+                $un!(|a: Dual| chain(a, libm::cosh(a.v), libm::sinh(a.v))),
+            ),
+            Operator::make_unary(
+                "tanh",
+                $un!(|a: Dual| {
+                    let c = libm::cosh(a.v);
+                    chain(a, libm::tanh(a.v), 1.0 / (c * c))
+                }),
+            ),
+            Operator::make_unary(
+                "asinh",
+                $un!(|a: Dual| { chain(a, libm::asinh(a.v), 1.0 / libm::hypot(a.v, 1.0)) }),
+            ),
+            Operator::make_unary(
+                "acosh",
+                $un!(|a: Dual| {
+                    let slope = 1.0 / (libm::sqrt(a.v - 1.0) * libm::sqrt(a.v + 1.0));
+                    chain(a, libm::acosh(a.v), slope)
+                }),
+            ),
+            Operator::make_unary(
+                "atanh",
+                $un!(|a: Dual| { chain(a, libm::atanh(a.v), 1.0 / ((1.0 - a.v) * (1.0 + a.v))) }),
+            ),
+            Operator::make_unary("floor", $un!(|a: Dual| flat(a.v.floor()))),
+            Operator::make_unary("round", $un!(|a: Dual| flat(a.v.round()))),
+            Operator::make_unary("ceil", $un!(|a: Dual| flat(a.v.ceil()))),
+            Operator::make_unary("trunc", $un!(|a: Dual| flat(a.v.trunc()))),
+            Operator::make_unary(
+                "fract",
+                $un!(|a: Dual| Dual {
+                    v: a.v.fract(),
+                    d: a.d,
+                }),
+            ),
+            Operator::make_unary(
+                "exp",
+                $un!(|a: Dual| {
+                    let v = libm::exp(a.v);
+                    chain(a, v, v)
+                }),
+            ),
+            Operator::make_unary(
+                "sqrt",
+                $un!(|a: Dual| {
+                    let v = a.v.sqrt();
+                    chain(a, v, 0.5 / v)
+                }),
+            ),
+            Operator::make_unary(
+                "cbrt",
+                $un!(|a: Dual| {
+                    let v = libm::cbrt(a.v);
+                    chain(a, v, 1.0 / (3.0 * v * v))
+                }),
+            ),
+            Operator::make_unary("ln", $un!(|a: Dual| chain(a, libm::log(a.v), 1.0 / a.v))),
+            Operator::make_unary(
+                "log2",
+                $un!(|a: Dual| chain(a, libm::log2(a.v), 1.0 / (a.v * LN_2))),
+            ),
+            Operator::make_unary(
+                "log10",
+                $un!(|a: Dual| chain(a, libm::log10(a.v), 1.0 / (a.v * LN_10))),
+            ),
+            Operator::make_unary("log", $un!(|a: Dual| chain(a, libm::log(a.v), 1.0 / a.v))),
+            Operator::make_constant("PI", $k!(PI)),
+            Operator::make_constant("π", $k!(PI)),
+            Operator::make_constant("E", $k!(E)),
+            Operator::make_constant("e", $k!(E)),
+            Operator::make_constant("TAU", $k!(TAU)),
+            Operator::make_constant("τ", $k!(TAU)),
         ]
+    }};
+}
+pub(super) use dual_operators;
+
+macro_rules! same {
+    ($f:expr) => {
+        $f
+    };
+}
+
+macro_rules! dual_k {
+    ($x:expr) => {
+        Dual {
+            v: $x,
+            d: Grad::ZERO,
+        }
+    };
+}
+
+/// The operators on dual numbers.
+#[derive(Clone, Debug)]
+pub struct DualOps;
+
+impl MakeOperators<Dual> for DualOps {
+    fn make<'a>() -> Vec<Operator<'a, Dual>> {
+        dual_operators!(same, same, dual_k)
     }
 }
 

@@ -35,6 +35,7 @@ pub const LANES: usize = 16;
 
 pub mod block;
 pub mod dual;
+mod dual_lanes;
 mod lex;
 mod limits;
 mod state_fn;

@@ -11,6 +11,7 @@
 //! is exact to rounding (a test compares both with central differences).
 
 use super::dual::{DIRECTIONS, Dual, DualEx, Grad};
+use super::dual_lanes::{DUAL_LANES, DualBlock, DualBlockEx};
 use super::translate::{translate, unknown};
 use super::{MAX_EXPRESSION_CHARS, Value, cannot_parse, names};
 use crate::error::FieldError;
@@ -34,6 +35,10 @@ enum Slot {
 #[derive(Clone, Debug)]
 pub struct StateFn {
     expr: Arc<DualEx>,
+    /// The same text over blocks of dual numbers, for many states at once
+    /// ([`StateFn::eval_many_with_gradient`]), and its variables' values.
+    block: Arc<DualBlockEx>,
+    block_vars: Vec<DualBlock>,
     slots: Vec<Slot>,
     /// The states the text names, each once, in state order.
     used: Vec<usize>,
@@ -80,6 +85,8 @@ impl StateFn {
         }
         let (plain, literals) = translate(&text, &known, path, true)?;
         let expr = DualEx::parse(&plain).map_err(|e| cannot_parse(&text, path, &e))?;
+        let block = DualBlockEx::parse(&plain).map_err(|e| cannot_parse(&text, path, &e))?;
+        debug_assert_eq!(expr.var_names(), block.var_names());
         let mut slots = Vec::with_capacity(expr.var_names().len());
         for name in expr.var_names() {
             let literal = name
@@ -105,9 +112,12 @@ impl StateFn {
         used.sort_unstable();
         used.dedup();
         let vars = vec![Dual::default(); slots.len()];
+        let block_vars = vec![DualBlock::default(); slots.len()];
         let only = states.iter().position(|s| s == text.trim());
         Ok(StateFn {
             expr: Arc::new(expr),
+            block: Arc::new(block),
+            block_vars,
             slots,
             used,
             vars,
@@ -189,6 +199,90 @@ impl StateFn {
         self.used = used;
         value
     }
+    /// The values and gradients at several states at once: `xs` holds `values.len()`
+    /// states of `n` components each (row by row), `grads` receives their gradients
+    /// (the same shape). Each row's value and gradient equal
+    /// [`StateFn::eval_with_gradient`]'s at that state bit for bit; the expression is
+    /// evaluated once per [`DUAL_LANES`] rows (and [`DIRECTIONS`] named states), not
+    /// once per row — the bank's filters share exmex's bookkeeping.
+    pub fn eval_many_with_gradient(
+        &mut self,
+        xs: &[f64],
+        n: usize,
+        t: f64,
+        values: &mut [f64],
+        grads: &mut [f64],
+    ) {
+        let rows = values.len();
+        if rows == 1 || self.only.is_some() || self.used.is_empty() {
+            for r in 0..rows {
+                let x = &xs[r * n..r * n + n];
+                values[r] = self.eval_with_gradient(x, t, &mut grads[r * n..r * n + n]);
+            }
+            return;
+        }
+        grads[..rows * n].fill(0.0);
+        let used = std::mem::take(&mut self.used);
+        for first in (0..rows).step_by(DUAL_LANES) {
+            let count = DUAL_LANES.min(rows - first);
+            for chunk in used.chunks(DIRECTIONS) {
+                let out = self.eval_block(xs, n, t, first, count, chunk);
+                for (l, d) in out.0[..count].iter().enumerate() {
+                    let r = first + l;
+                    values[r] = d.v;
+                    for (k, &j) in chunk.iter().enumerate() {
+                        grads[r * n + j] = d.d[k];
+                    }
+                }
+            }
+        }
+        self.used = used;
+    }
+
+    /// One evaluation over the rows `first..first + count` of `xs` (the block's other
+    /// lanes repeat the first row), directions on the states `directions`.
+    #[inline]
+    fn eval_block(
+        &mut self,
+        xs: &[f64],
+        n: usize,
+        t: f64,
+        first: usize,
+        count: usize,
+        directions: &[usize],
+    ) -> DualBlock {
+        for (v, slot) in self.block_vars.iter_mut().zip(&self.slots) {
+            *v = match *slot {
+                Slot::Fixed(v) => DualBlock([Dual { v, d: Grad::ZERO }; DUAL_LANES]),
+                Slot::T => DualBlock(
+                    [Dual {
+                        v: t,
+                        d: Grad::ZERO,
+                    }; DUAL_LANES],
+                ),
+                Slot::State(i) => {
+                    let mut d = Grad::ZERO;
+                    if let Some(k) = directions.iter().position(|&j| j == i) {
+                        d.0[k] = 1.0;
+                    }
+                    DualBlock(std::array::from_fn(|l| {
+                        let r = first + if l < count { l } else { 0 };
+                        Dual {
+                            v: xs[r * n + i],
+                            d,
+                        }
+                    }))
+                }
+            };
+        }
+        // As in `eval`: NaN for the caller's finiteness check.
+        self.block.eval(&self.block_vars).unwrap_or(DualBlock(
+            [Dual {
+                v: f64::NAN,
+                d: Grad([f64::NAN; DIRECTIONS]),
+            }; DUAL_LANES],
+        ))
+    }
 }
 
 #[cfg(test)]
@@ -258,5 +352,40 @@ mod tests {
             "{}",
             e.message
         );
+    }
+    /// Many states at once give each state's single evaluation, bit for bit, for
+    /// every count around the block's width.
+    #[test]
+    fn many_states_at_once_equal_one_at_a_time() {
+        let texts = [
+            "-b*abs(x2)*x2/abs(x1)",
+            "x2",
+            "sin(t) + 2",
+            "x1*x2 + exp(-x2)*b",
+        ];
+        for text in texts {
+            let mut f =
+                StateFn::compile(&Value::Expr(text.into()), &states(), &params(), "f").unwrap();
+            for rows in [1, 2, 7, 8, 9, 17] {
+                let xs: Vec<f64> = (0..2 * rows).map(|i| 900.0 - 37.5 * i as f64).collect();
+                let (mut values, mut grads) = (vec![0.0; rows], vec![7.0; 2 * rows]);
+                f.eval_many_with_gradient(&xs, 2, 0.25, &mut values, &mut grads);
+                for r in 0..rows {
+                    let mut g = [0.0; 2];
+                    let v = f.eval_with_gradient(&xs[2 * r..2 * r + 2], 0.25, &mut g);
+                    assert_eq!(
+                        values[r].to_bits(),
+                        v.to_bits(),
+                        "{text}, {rows} rows, row {r}"
+                    );
+                    assert_eq!(grads[2 * r].to_bits(), g[0].to_bits(), "{text}, row {r}");
+                    assert_eq!(
+                        grads[2 * r + 1].to_bits(),
+                        g[1].to_bits(),
+                        "{text}, row {r}"
+                    );
+                }
+            }
+        }
     }
 }

@@ -82,7 +82,11 @@ pub struct Bank {
     /// How many measurements of each name were used (the same for every filter).
     pub measured: Vec<u64>,
     // Scratch.
-    fx: Vec<f64>,
+    /// Every filter's x⁺ (K × N), and f and ∂f/∂x there: per component i, the K
+    /// values and the K gradient rows.
+    xs: Vec<f64>,
+    f_values: Vec<f64>,
+    f_grads: Vec<f64>,
     phi: Vec<f64>,
     tmp: Vec<f64>,
     hx: Vec<f64>,
@@ -101,6 +105,7 @@ impl Bank {
     /// A bank of `designs` on `model`, each filter at (x⁰, P⁰).
     pub fn new(model: &super::model::Compiled, designs: Vec<Design>, residuals: Residuals) -> Bank {
         let (n, m) = (model.n_states(), model.n_measurements());
+        let count = designs.len();
         let filters = designs
             .into_iter()
             .map(|design| Filter {
@@ -127,7 +132,9 @@ impl Bank {
             residuals,
             filters,
             measured: vec![0; m],
-            fx: vec![0.0; n],
+            xs: vec![0.0; count * n],
+            f_values: vec![0.0; n * count],
+            f_grads: vec![0.0; n * count * n],
             phi: vec![0.0; n * n],
             tmp: vec![0.0; n * n],
             hx: vec![0.0; m],
@@ -165,9 +172,7 @@ impl Bank {
         t: f64,
         y: &[f64],
     ) -> Result<(), Error> {
-        for k in 0..self.filters.len() {
-            self.predict::<N>(k, step, t_prev)?;
-        }
+        self.predict_all::<N>(step, t_prev)?;
         self.a.clear();
         self.a.extend((0..self.m).filter(|&j| y[j].is_finite()));
         for &j in &self.a {
@@ -179,40 +184,54 @@ impl Bank {
         Ok(())
     }
 
+    /// Every filter's prediction from its posterior at t_{n−1}: f and F at all the
+    /// filters' states first (one evaluation per block of filters,
+    /// `StateFn::eval_many_with_gradient`), then each filter's x⁻ and P⁻.
     #[inline(always)]
-    fn predict<const N: usize>(&mut self, k: usize, step: u64, t_prev: f64) -> Result<(), Error> {
-        let (n, dt) = (if N == 0 { self.n } else { N }, self.dt);
-        let filter = &mut self.filters[k];
-        self.phi.fill(0.0);
-        for i in 0..n {
-            let v = self.f[i].eval_with_gradient(&filter.x, t_prev, &mut self.grad);
-            if !v.is_finite() || self.grad.iter().any(|g| !g.is_finite()) {
-                return Err(domain(
-                    &self.f[i],
-                    &format!("system.f[{i}]"),
-                    &self.states,
-                    &filter.x,
-                    &filter.design.label,
-                    step - 1,
-                    t_prev,
-                    "f",
-                ));
-            }
-            self.fx[i] = v;
-            for j in 0..n {
-                self.phi[i * n + j] = self.grad[j] * dt;
-            }
-            self.phi[i * n + i] += 1.0;
+    fn predict_all<const N: usize>(&mut self, step: u64, t_prev: f64) -> Result<(), Error> {
+        let (n, dt, count) = (if N == 0 { self.n } else { N }, self.dt, self.filters.len());
+        for (k, filter) in self.filters.iter().enumerate() {
+            self.xs[k * n..k * n + n].copy_from_slice(&filter.x);
         }
         for i in 0..n {
-            filter.x_prior[i] = filter.x[i] + self.fx[i] * dt;
+            self.f[i].eval_many_with_gradient(
+                &self.xs,
+                n,
+                t_prev,
+                &mut self.f_values[i * count..(i + 1) * count],
+                &mut self.f_grads[i * count * n..(i + 1) * count * n],
+            );
         }
-        // P⁻ = Φ P⁺ Φᵀ + q W Δt
-        mul(&mut self.tmp, &self.phi, &filter.p, n, n, n);
-        mul_abt_sym(&mut filter.p_prior, &self.tmp, &self.phi, None, n, n);
-        let q = filter.design.q;
-        for (p, w) in filter.p_prior.iter_mut().zip(&self.w_dt) {
-            *p += q * w;
+        for k in 0..count {
+            let filter = &mut self.filters[k];
+            for i in 0..n {
+                let v = self.f_values[i * count + k];
+                let grad = &self.f_grads[(i * count + k) * n..(i * count + k + 1) * n];
+                if !v.is_finite() || grad.iter().any(|g| !g.is_finite()) {
+                    return Err(domain(
+                        &self.f[i],
+                        &format!("system.f[{i}]"),
+                        &self.states,
+                        &filter.x,
+                        &filter.design.label,
+                        step - 1,
+                        t_prev,
+                        "f",
+                    ));
+                }
+                for j in 0..n {
+                    self.phi[i * n + j] = grad[j] * dt;
+                }
+                self.phi[i * n + i] += 1.0;
+                filter.x_prior[i] = filter.x[i] + v * dt;
+            }
+            // P⁻ = Φ P⁺ Φᵀ + q W Δt
+            mul(&mut self.tmp, &self.phi, &filter.p, n, n, n);
+            mul_abt_sym(&mut filter.p_prior, &self.tmp, &self.phi, None, n, n);
+            let q = filter.design.q;
+            for (p, w) in filter.p_prior.iter_mut().zip(&self.w_dt) {
+                *p += q * w;
+            }
         }
         Ok(())
     }

@@ -173,6 +173,19 @@ pub fn whole(
     n
 }
 
+/// A yes/no at `obj[name]`, if given; anything but `true` or `false` is an error.
+pub fn flag(obj: &Map<String, Value>, name: &str, errors: &mut Vec<FieldError>) -> Option<bool> {
+    let v = obj.get(name)?;
+    let b = v.as_bool();
+    if b.is_none() {
+        errors.push(FieldError::new(
+            name,
+            format!("expected true or false, got {}", got(v)),
+        ));
+    }
+    b
+}
+
 /// Which of `choices` (name, meaning) the text at `obj[name]` is, if given; anything
 /// else is an error listing them.
 pub fn choice(

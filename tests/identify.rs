@@ -307,6 +307,71 @@ fn case_d_is_said_to_be_unidentifiable_with_the_product_named() {
     assert!((cg - want).abs() < 1e-6, "c·g {cg} against {want}");
 }
 
+/// `expected_information: true`: the expected information at θ̂ equals the
+/// reference's at its θ̂ to 1e-6 (θ̂'s own tolerance moves it), and the Cramér–Rao
+/// SKOs are the square roots of its inverse's diagonal (computed here with nalgebra);
+/// without the member, both are null. Case d's expected information is singular: no
+/// bound.
+#[test]
+fn the_expected_information_and_the_cramer_rao_bound_on_request() {
+    let case = Case::load("case_b_oscillator");
+    let names = case.names();
+    let plain = identify(case.request("scoring", None)).unwrap();
+    assert_eq!(plain["expected_information"], Value::Null);
+    assert_eq!(plain["estimate"]["r"]["cramer_rao_sko"], Value::Null);
+    let mut request = case.request("scoring", None);
+    request["expected_information"] = json!(true);
+    let r = identify(request).unwrap();
+    // kea's order is the result's `parameters` (by name); the reference's its own.
+    let order: Vec<usize> = r["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| names.iter().position(|n| v == n).unwrap())
+        .collect();
+    // J is even in w (the mirror optimum −w, which scoring may reach from 0.5): the
+    // information there is the reference's with the signs of w's row and column.
+    let sign = |a: usize| {
+        let n = &names[a];
+        r["estimate"][n]["value"].as_f64().unwrap().signum() * case.theta_hat(n).signum()
+    };
+    let got = matrix(&r["expected_information"]);
+    let want = matrix(&case.expected["at_theta_hat"]["fisher_expected"]["decimal50"]);
+    let scale = want.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
+    for (i, &a) in order.iter().enumerate() {
+        for (j, &b) in order.iter().enumerate() {
+            let (x, y) = (got[i][j], sign(a) * sign(b) * want[a][b]);
+            assert!(
+                (x - y).abs() <= 1e-6 * scale,
+                "expected M[{}][{}]: {x} against {y}",
+                names[a],
+                names[b]
+            );
+        }
+    }
+    let p = names.len();
+    let m = nalgebra::DMatrix::from_fn(p, p, |i, j| got[i][j]);
+    let inv = m.try_inverse().unwrap();
+    for (i, &a) in order.iter().enumerate() {
+        let n = &names[a];
+        let bound = r["estimate"][n]["cramer_rao_sko"].as_f64().unwrap();
+        let want = inv[(i, i)].sqrt();
+        assert!(
+            (bound - want).abs() <= 1e-9 * want,
+            "{n}: {bound} against {want}"
+        );
+    }
+
+    let d = Case::load("case_d_unidentifiable");
+    let mut request = d.request("scoring", None);
+    request["expected_information"] = json!(true);
+    let r = identify(request).unwrap();
+    assert!(r["expected_information"].is_array());
+    for n in ["r", "c", "g"] {
+        assert_eq!(r["estimate"][n]["cramer_rao_sko"], Value::Null, "{n}");
+    }
+}
+
 /// Bad requests are refused at their paths, before any work.
 #[test]
 fn bad_requests_name_their_fields() {

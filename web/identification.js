@@ -20,6 +20,10 @@ const METHODS = [
   ['gradient', 'gradient descent'],
   ['conjugate', 'conjugate directions'],
 ];
+const BOUND_CHOICES = [
+  ['no', 'no'],
+  ['yes', 'yes: the expected information at θ̂'],
+];
 const MAX_ITERATIONS = 10000; // the core's limit (identification::request::MAX_ITERATIONS)
 const BOUNDS = ['initial', 'min', 'max'];
 // The example the tab loads (a copy of examples/identification/, served with the page).
@@ -80,6 +84,8 @@ export class IdentificationView extends RunView {
     this.method = select('id-method', METHODS, 'scoring');
     this.method.dataset.requestPath = 'method';
     this.maxIterations = input('id-max-iterations', '', { inputmode: 'numeric', placeholder: '100', 'data-request-path': 'max_iterations' });
+    this.expected = select('id-expected', BOUND_CHOICES, 'no');
+    this.expected.dataset.requestPath = 'expected_information';
     this.starts = el('textarea', {
       id: 'id-starts',
       rows: 3,
@@ -116,7 +122,13 @@ export class IdentificationView extends RunView {
         this.data.root(this.exampleButton),
         el('div', { class: 'scroll' }, this.paramsTable),
         startsField,
-        el('div', { class: 'row' }, field('Method', this.method), field('Max iterations', this.maxIterations)),
+        el(
+          'div',
+          { class: 'row' },
+          field('Method', this.method),
+          field('Max iterations', this.maxIterations),
+          field('Cramér–Rao bound', this.expected, 'The expected information at the estimate (its expectation over data drawn from the model there, with the data’s missing measurements) and the bound √((I⁻¹)ᵢᵢ) on each estimate’s SKO: one more pass, wider than a fit’s.'),
+        ),
         el('p', { class: 'help', text: 'Maximum likelihood by the square-root information filter (METHOD §3): J(θ) = −log-likelihood of the data, minimised within the bounds — scoring with a line search, gradient descent halving its step, or conjugate directions restarted every p iterations. Cost ∝ iterations × D × (N + L)³ × (1 + params).' }),
       ),
     );
@@ -128,7 +140,7 @@ export class IdentificationView extends RunView {
     this.chartParam = el('div', { id: 'id-chart-param', class: 'id-chart' });
     new ResizeObserver(() => this.plots.forEach((p) => p.setSize({ width: this.width(), height: CHART_HEIGHT }))).observe(this.out);
     this.root.append(this.form, this.bar.root, this.out);
-    this.kept = new KeptFields('kea-identification', [[this.method], [this.maxIterations], [this.starts]]);
+    this.kept = new KeptFields('kea-identification', [[this.method], [this.maxIterations], [this.starts], [this.expected]]);
     this.kept.restore();
     for (const type of ['input', 'change']) this.form.addEventListener(type, (e) => e.target !== this.data.text && this.saveFields());
     const data = readKept(KEEP_DATA);
@@ -197,6 +209,7 @@ export class IdentificationView extends RunView {
     this.method.value = request.method ?? 'scoring';
     this.maxIterations.value = shown(request.max_iterations);
     this.starts.value = startsText(request.starts);
+    this.expected.value = request.expected_information === true ? 'yes' : 'no';
     const data = request.data ?? {};
     if (typeof data.csv_text === 'string') this.data.set(data.csv_text, 'the request’s CSV');
     else if (Array.isArray(data.rows)) this.data.set(rowsToCsv(data.rows, this.ctx.model()?.measurement?.names ?? []), 'the request’s rows, as CSV');
@@ -259,6 +272,7 @@ export class IdentificationView extends RunView {
     const starts = parseStarts(this.starts.value, Object.keys(estimate));
     errors.push(...starts.errors);
     if (starts.starts.length) request.starts = starts.starts;
+    if (this.expected.value === 'yes') request.expected_information = true;
     if (errors.length) throw { kind: 'invalid', title: 'Invalid identification request', errors };
     return request;
   }
@@ -357,8 +371,10 @@ export class IdentificationView extends RunView {
 
   estimatesTable(r) {
     const table = el('table', { class: 'criteria id-estimates', id: 'id-estimates' });
-    table.append(el('caption', { text: 'Maximum-likelihood estimates, their standard errors from the sample information and 95 % intervals (±1.96 standard errors)' }));
-    table.append(el('thead', {}, el('tr', {}, ...['param', 'estimate', 'std error', '95 % interval', 'initial', 'at a bound'].map((t) => el('th', { scope: 'col', text: t })))));
+    table.append(el('caption', { text: 'Maximum-likelihood estimates, their standard errors from the sample information and 95 % intervals (±1.96 standard errors)' + (r.expected_information ? '; the Cramér–Rao bound on each SKO from the expected information' : '') }));
+    const bound = r.expected_information !== null && r.expected_information !== undefined;
+    const heads = ['param', 'estimate', 'std error', '95 % interval', ...(bound ? ['Cramér–Rao SKO'] : []), 'initial', 'at a bound'];
+    table.append(el('thead', {}, el('tr', {}, ...heads.map((t) => el('th', { scope: 'col', text: t })))));
     const body = el('tbody');
     const num = (key, x) => el('td', { class: 'num', 'data-key': key, 'data-value': x === null || x === undefined ? '' : String(x), title: x === null || x === undefined ? 'undefined' : String(x), text: fmt(x) });
     for (const name of r.parameters) {
@@ -373,6 +389,7 @@ export class IdentificationView extends RunView {
           num('value', e.value),
           num('std_error', e.std_error),
           el('td', { class: 'num', 'data-key': 'interval', 'data-value': e.interval ? JSON.stringify(e.interval) : '', text: interval }),
+          bound ? num('cramer_rao_sko', e.cramer_rao_sko) : null,
           num('initial', e.initial),
           el('td', { 'data-key': 'at_bound', 'data-value': String(Boolean(e.at_bound)), class: e.at_bound ? 'at-bound' : null, title: `bounds ${bounds}`, text: e.at_bound ? `yes, ${bounds}` : 'no' }),
         ),

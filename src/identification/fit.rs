@@ -1,7 +1,8 @@
 //! The fit: J(θ) of the request's data through the SRIF ([`super::srif`]) minimised
 //! over the estimated params ([`super::minimise`]), then the statistics at θ̂ — the
 //! sample information and the standard errors it gives, the observed information, the
-//! correlations and the identifiability verdict (METHOD §3 (2.3.2)).
+//! correlations and the identifiability verdict, and on request the expected
+//! information with the Cramér–Rao bound (METHOD §3 (2.3.2)).
 
 use super::discrete;
 use super::minimise::{self, Bounds, Evaluation, Failure, Objective, Options};
@@ -37,6 +38,18 @@ impl Likelihoods<'_> {
     /// J (and its gradient and sample information) at θ.
     fn at(&self, theta: &[f64], gradient: bool, information: bool) -> Result<Likelihood, Error> {
         self.at_recording(theta, gradient, information, false)
+    }
+
+    /// The expected information at θ (np × np) over the data's steps and missing
+    /// pattern ([`super::expected`]).
+    fn expected(&self, theta: &[f64]) -> Result<Vec<f64>, Error> {
+        let (model, prior, partials) = discrete::at(
+            &self.request.model,
+            &self.request.params_at(theta),
+            &self.names,
+        )?;
+        super::expected::expected_information(&model, &partials, &prior, &self.request.data)
+            .map_err(|e| noise_paths(e, &self.request.model))
     }
 
     /// [`Self::at`], the innovations recorded when `record`.
@@ -144,6 +157,16 @@ pub fn identify(
     let innovations = (at_hat.measurements > 0)
         .then(|| super::innovations::check(&at_hat.innovations, &at_hat.nis, &measurement_names));
     let observed = observed_information(&objective, &theta);
+    let expected = match request.expected_information {
+        true => Some(objective.expected(&theta)?),
+        false => None,
+    };
+    let bound = expected.as_ref().and_then(|m| {
+        identifiability(m, &names, &theta)
+            .identifiable
+            .then(|| crate::numerics::linalg::inverse_spd(m, p))
+            .flatten()
+    });
     let evaluations = objective.evaluations;
     let _ = objective.progress.report(1.0);
 
@@ -166,6 +189,7 @@ pub fn identify(
                     value: v,
                     std_error: se,
                     interval: se.map(|s| [v - Z_95 * s, v + Z_95 * s]),
+                    cramer_rao_sko: bound.as_ref().map(|m| m[i * p + i].sqrt()),
                     initial: e.initial,
                     min: e.min.is_finite().then_some(e.min),
                     max: e.max.is_finite().then_some(e.max),
@@ -207,6 +231,7 @@ pub fn identify(
         gradient: by_name(&at_hat.gradient),
         fisher_information: rows(&fisher, p),
         observed_information: observed.map(|m| rows(&m, p)),
+        expected_information: expected.map(|m| rows(&m, p)),
         correlation,
         identifiability,
         innovations,

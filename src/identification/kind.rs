@@ -1,5 +1,5 @@
 //! The identification as a kind of run ([`crate::kind`]): `{model, set?, data,
-//! estimate, method?, max_iterations?}` → the maximum-likelihood params with their
+//! estimate, method?, max_iterations?, starts?, expected_information?}` → the maximum-likelihood params with their
 //! standard errors (METHOD §3).
 
 use super::fit::identify;
@@ -28,6 +28,7 @@ impl Kind for Identification {
         "method",
         "max_iterations",
         "starts",
+        "expected_information",
     ];
     type Request = IdentificationRequest;
     type Outcome = IdentificationResult;

@@ -42,6 +42,15 @@ pub fn text(r: &IdentificationResult) -> String {
         r.steps
     );
     out += &format!("{}\n", r.identifiability.verdict);
+    if r.expected_information.is_some() {
+        let bounds = r
+            .parameters
+            .iter()
+            .map(|n| format!("{n} {}", cell(r.estimate[n].cramer_rao_sko).trim()))
+            .collect::<Vec<_>>()
+            .join(", ");
+        out += &format!("Cramér–Rao bound on the SKOs (expected information): {bounds}\n");
+    }
     if let Some(i) = &r.innovations {
         out += &format!(
             "innovations: NIS mean {} (95 % band [{}, {}]): {}\n",

@@ -41,6 +41,9 @@ pub struct IdentificationRequest {
     pub max_iterations: usize,
     /// Further starting points (`starts`), each in `estimate`'s order.
     pub starts: Vec<Vec<f64>>,
+    /// Whether the expected information and the Cramér–Rao bound are computed at θ̂
+    /// (`expected_information`, default false: one pass wider than a fit's).
+    pub expected_information: bool,
     pub data: Data,
 }
 
@@ -102,6 +105,8 @@ pub fn read(obj: &Map<String, Value>) -> Result<IdentificationRequest, Error> {
         }
         None => DEFAULT_MAX_ITERATIONS,
     };
+    let expected_information =
+        request::flag(obj, "expected_information", &mut errors).unwrap_or(false);
     let Some(model) = model else {
         return Err(Error::Invalid(errors));
     };
@@ -164,6 +169,7 @@ pub fn read(obj: &Map<String, Value>) -> Result<IdentificationRequest, Error> {
         method,
         max_iterations,
         starts,
+        expected_information,
         data,
     })
 }

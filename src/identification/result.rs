@@ -22,6 +22,10 @@ pub struct IdentificationResult {
     /// The observed information, the Hessian of J at θ̂ (central differences of the
     /// exact gradient, one Richardson step); null where θ̂ ± h leaves the model's domain.
     pub observed_information: Option<Vec<Vec<f64>>>,
+    /// The expected information at θ̂ (its expectation over data drawn from the model
+    /// at θ̂ on the data's steps, with their missing measurements): with
+    /// `expected_information: true` in the request, else null.
+    pub expected_information: Option<Vec<Vec<f64>>>,
     /// The estimates' correlations, from the inverse sample information; null when it
     /// is singular.
     pub correlation: Option<Vec<Vec<f64>>>,
@@ -66,6 +70,10 @@ pub struct ParamEstimate {
     pub std_error: Option<f64>,
     /// value ± 1.96 std_error (95 %); null with the standard error.
     pub interval: Option<[f64; 2]>,
+    /// The Cramér–Rao bound on the estimate's SKO at θ̂, √((I⁻¹)_ii) with I the
+    /// expected information: null unless the request asks for it
+    /// (`expected_information`) and I is regular.
+    pub cramer_rao_sko: Option<f64>,
     pub initial: f64,
     /// The bounds as given (absent: unbounded) and whether θ̂ sits on one.
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -57,15 +57,15 @@ impl Likelihood {
 /// The filter's arrays and buffers, sized once for a model and its parameters'
 /// [`Partial`]s; [`Srif::run`] then allocates nothing per step.
 pub struct Srif {
-    n: usize,
+    pub(super) n: usize,
     l: usize,
     m: usize,
     /// The parameters (derivative blocks), and whether the sample information is
     /// formed beside the gradient.
-    np: usize,
+    pub(super) np: usize,
     information: bool,
     /// [R̃ | z̃] (N × (N + 1)), then each parameter's [∂R̃ | ∂z̃], side by side.
-    info: Vec<f64>,
+    pub(super) info: Vec<f64>,
     /// The measurement-update array: (N + m) rows, as wide as `info`.
     meas: Vec<f64>,
     /// The time-update array: (L + N) × (L + N + 1) · (1 + np).
@@ -84,18 +84,22 @@ pub struct Srif {
     /// per parameter M = Φ(L⁻¹∂R L⁻ᵀ) (∂L = L M), tr(L⁻¹∂R L⁻ᵀ) = tr(R⁻¹∂R), and
     /// L⁻¹∂H of the available rows.
     r_chol: Vec<f64>,
-    r_mask: Vec<bool>,
+    pub(super) r_mask: Vec<bool>,
     r_ln_det: f64,
     m_r: Vec<f64>,
     /// Per parameter K (ma × ma) and U∂ν (ma) of a step's information term.
     k_info: Vec<f64>,
     k_tmp: Vec<f64>,
     a_info: Vec<f64>,
+    /// Whether a step's information includes its data term Σ ∂_iνᵀS⁻¹∂_jν (the
+    /// sample information's), or only ½ tr(S⁻¹∂_iS S⁻¹∂_jS) (the expected
+    /// information's other term, [`super::expected`]).
+    pub(super) data_term: bool,
     d_r_sub: Vec<f64>,
     tr_r: Vec<f64>,
     d_h_w: Vec<f64>,
     /// The available measurements' indices, the whitened H rows and z.
-    avail: Vec<usize>,
+    pub(super) avail: Vec<usize>,
     h_w: Vec<f64>,
     z_w: Vec<f64>,
     /// Work buffers of [`differentiate`] and of the sandwiches L⁻¹ X L⁻ᵀ.
@@ -176,6 +180,7 @@ impl Srif {
             k_info: vec![0.0; np * m * m],
             k_tmp: vec![0.0; m * m],
             a_info: vec![0.0; np * m],
+            data_term: true,
             tr_r: vec![0.0; np],
             d_h_w: vec![0.0; np * m * n],
             avail: Vec::with_capacity(m),
@@ -254,7 +259,7 @@ impl Srif {
 
     /// [R̃ | z̃] of x ~ N(x0, P0): L⁻¹ [I | x0] (P0 = L Lᵀ) made upper triangular; its
     /// derivative block −M L⁻¹[I | x0] + [0 | L⁻¹∂x0], M = Φ(L⁻¹∂P0 L⁻ᵀ) (∂L = L M).
-    fn set_prior(&mut self, prior: &Prior, partials: &[Partial]) -> Result<(), Error> {
+    pub(super) fn set_prior(&mut self, prior: &Prior, partials: &[Partial]) -> Result<(), Error> {
         let (n, np) = (self.n, self.np);
         let ic = n + 1;
         let w = ic * (1 + np);
@@ -326,7 +331,7 @@ impl Srif {
 
     /// The measurement update (2.1.10)–(2.1.12) with the available measurements:
     /// T [R̃ z̃; H̄ z̄] = [R̂ ẑ; 0 e], and its terms of J and of the gradient.
-    fn measurement_update(
+    pub(super) fn measurement_update(
         &mut self,
         model: &Discrete,
         partials: &[Partial],
@@ -465,7 +470,7 @@ impl Srif {
             }
             k.copy_from_slice(kk);
             // a = ∂e − K e
-            for r in 0..ma {
+            for r in (0..ma).filter(|_| self.data_term) {
                 let ke: f64 = (0..ma).map(|s| k[r * ma + s] * a[(n + s) * mw + n]).sum();
                 self.a_info[d * m + r] = a[(n + r) * mw + off + n] - ke;
             }
@@ -474,7 +479,10 @@ impl Srif {
             for j in 0..=i {
                 let ai = &self.a_info[i * m..i * m + ma];
                 let aj = &self.a_info[j * m..j * m + ma];
-                let mut v: f64 = ai.iter().zip(aj).map(|(x, y)| x * y).sum();
+                let mut v: f64 = match self.data_term {
+                    true => ai.iter().zip(aj).map(|(x, y)| x * y).sum(),
+                    false => 0.0,
+                };
                 // ½ tr(W_i W_j), W = −(K + Kᵀ)
                 let (ki, kj) = (&self.k_info[i * m * m..], &self.k_info[j * m * m..]);
                 let mut tr = 0.0;
@@ -547,7 +555,7 @@ impl Srif {
     /// The time update (2.1.13): with x_k = Φ⁻¹(x_{k+1} − u − G w),
     /// T [R_w 0 0; −R̂Φ⁻¹G R̂Φ⁻¹ ẑ + R̂Φ⁻¹u] = [R̃_w R̃_wx z̃_w; 0 R̃_{k+1} z̃_{k+1}];
     /// the derivative blocks with ∂(R̂Φ⁻¹) = ∂R̂ Φ⁻¹ + R̂ ∂(Φ⁻¹) (the seed's T1–T3).
-    fn time_update(&mut self) {
+    pub(super) fn time_update(&mut self) {
         let (n, l, np) = (self.n, self.l, self.np);
         let ic = n + 1;
         let w = ic * (1 + np);

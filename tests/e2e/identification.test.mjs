@@ -157,6 +157,14 @@ test('the example runs in the browser and on the server to the reference optimum
   // The same bits through the CLI (which reads the CSV file beside the request) and a server job.
   const cli = JSON.parse(kea('identify', path.join('examples', 'identification', 'oscillator.json'), '--json'));
   assert.deepStrictEqual(bits(inBrowser), bits(cli), 'browser and CLI: the same bits');
+  // The example asks for the expected information: the select shows it, and the
+  // table's Cramér–Rao column holds the CLI's bounds.
+  assert.equal(await page.inputValue('#id-expected'), 'yes');
+  for (const name of cli.parameters) {
+    const shown = await page.getAttribute(`#id-estimates tr[data-param="${name}"] td[data-key="cramer_rao_sko"]`, 'data-value');
+    assert.equal(Number(shown), cli.estimate[name].cramer_rao_sko, name);
+    assert.ok(cli.estimate[name].cramer_rao_sko > 0, name);
+  }
   const onServer = await runIdentification('server');
   assert.deepStrictEqual(bits(onServer), bits(cli), 'server job and CLI: the same bits');
   assert.match(await page.textContent('#id-summary'), /on the server$/);

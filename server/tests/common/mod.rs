@@ -362,6 +362,7 @@ pub fn identification_job() -> Value {
             "measurement": {"names": ["z"], "c": [[1]], "gamma": [[1]], "psi": [0.3]}
         },
         "data": {"rows": rows},
-        "estimate": {"a": {"initial": 0.5, "min": -0.99, "max": 0.99}, "q": {"initial": 0.5, "min": 0.01}}
+        "estimate": {"a": {"initial": 0.5, "min": -0.99, "max": 0.99}, "q": {"initial": 0.5, "min": 0.01}},
+        "expected_information": true
     })
 }

@@ -91,6 +91,46 @@ impl FromStr for Dual {
 /// `slope · dx`, and 0 when `dx` is 0 even where `slope` is infinite or NaN: a function
 /// of a constant sub-expression is constant (`sqrt(r - r)`, `0^0.5`), so only moving
 /// an argument where no derivative exists is an error.
+/// a + b, a − b, a·b, a/b and −a on dual numbers: the table's arithmetic, named so
+/// that [`super::tape`]'s kernels are the table's functions.
+#[inline(always)]
+pub(super) fn add(a: Dual, b: Dual) -> Dual {
+    Dual {
+        v: a.v + b.v,
+        d: a.d + b.d,
+    }
+}
+
+#[inline(always)]
+pub(super) fn sub(a: Dual, b: Dual) -> Dual {
+    Dual {
+        v: a.v - b.v,
+        d: a.d - b.d,
+    }
+}
+
+#[inline(always)]
+pub(super) fn mul(a: Dual, b: Dual) -> Dual {
+    Dual {
+        v: a.v * b.v,
+        d: term(b.v, a.d) + term(a.v, b.d),
+    }
+}
+
+#[inline(always)]
+pub(super) fn div(a: Dual, b: Dual) -> Dual {
+    let v = a.v / b.v;
+    Dual {
+        v,
+        d: term(1.0 / b.v, a.d) - term(v / b.v, b.d),
+    }
+}
+
+#[inline(always)]
+pub(super) fn neg(a: Dual) -> Dual {
+    Dual { v: -a.v, d: -a.d }
+}
+
 pub(super) fn term(slope: f64, dx: Grad) -> Grad {
     dx.map2(Grad::ZERO, |dx, _| if dx == 0.0 { 0.0 } else { slope * dx })
 }
@@ -181,10 +221,7 @@ macro_rules! dual_operators {
             Operator::make_bin(
                 "*",
                 BinOp {
-                    apply: $bin!(|a: Dual, b: Dual| Dual {
-                        v: a.v * b.v,
-                        d: term(b.v, a.d) + term(a.v, b.d),
-                    }),
+                    apply: $bin!(mul),
                     prio: 2,
                     is_commutative: true,
                 },
@@ -192,13 +229,7 @@ macro_rules! dual_operators {
             Operator::make_bin(
                 "/",
                 BinOp {
-                    apply: $bin!(|a: Dual, b: Dual| {
-                        let v = a.v / b.v;
-                        Dual {
-                            v,
-                            d: term(1.0 / b.v, a.d) - term(v / b.v, b.d),
-                        }
-                    }),
+                    apply: $bin!(div),
                     prio: 3,
                     is_commutative: false,
                 },
@@ -206,10 +237,7 @@ macro_rules! dual_operators {
             Operator::make_bin_unary(
                 "+",
                 BinOp {
-                    apply: $bin!(|a: Dual, b: Dual| Dual {
-                        v: a.v + b.v,
-                        d: a.d + b.d,
-                    }),
+                    apply: $bin!(add),
                     prio: 0,
                     is_commutative: true,
                 },
@@ -218,14 +246,11 @@ macro_rules! dual_operators {
             Operator::make_bin_unary(
                 "-",
                 BinOp {
-                    apply: $bin!(|a: Dual, b: Dual| Dual {
-                        v: a.v - b.v,
-                        d: a.d - b.d,
-                    }),
+                    apply: $bin!(sub),
                     prio: 1,
                     is_commutative: false,
                 },
-                $un!(|a: Dual| Dual { v: -a.v, d: -a.d }),
+                $un!(neg),
             ),
             Operator::make_bin(
                 "atan2",

@@ -8,7 +8,8 @@
 //! equals the [`Dual`] evaluation bit for bit (tested below).
 
 use super::dual::{
-    Dual, Grad, atan2, chain, chosen, dual_operators, flat, inv_sqrt, pow, sign, term,
+    Dual, Grad, add, atan2, chain, chosen, div, dual_operators, flat, inv_sqrt, mul, neg, pow,
+    sign, sub,
 };
 use exmex::{BinOp, MakeOperators, Operator};
 use std::str::FromStr;

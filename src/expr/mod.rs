@@ -39,6 +39,7 @@ mod dual_lanes;
 mod lex;
 mod limits;
 mod state_fn;
+mod tape;
 mod time_matrix;
 mod translate;
 mod trig;

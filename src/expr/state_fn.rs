@@ -12,6 +12,7 @@
 
 use super::dual::{DIRECTIONS, Dual, DualEx, Grad};
 use super::dual_lanes::{DUAL_LANES, DualBlock, DualBlockEx};
+use super::tape::DualTape;
 use super::translate::{translate, unknown};
 use super::{MAX_EXPRESSION_CHARS, Value, cannot_parse, names};
 use crate::error::FieldError;
@@ -39,6 +40,11 @@ pub struct StateFn {
     /// ([`StateFn::eval_many_with_gradient`]), and its variables' values.
     block: Arc<DualBlockEx>,
     block_vars: Vec<DualBlock>,
+    /// The same text as kea's own tape over blocks (in place, no copies per node;
+    /// None for a text it does not take, which `block` then evaluates), and its
+    /// registers.
+    tape: Option<Arc<DualTape>>,
+    registers: Vec<DualBlock>,
     slots: Vec<Slot>,
     /// The states the text names, each once, in state order.
     used: Vec<usize>,
@@ -113,11 +119,15 @@ impl StateFn {
         used.dedup();
         let vars = vec![Dual::default(); slots.len()];
         let block_vars = vec![DualBlock::default(); slots.len()];
+        let tape = DualTape::compile(&text, expr.var_names());
+        let registers = vec![DualBlock::default(); tape.as_ref().map_or(0, DualTape::registers)];
         let only = states.iter().position(|s| s == text.trim());
         Ok(StateFn {
             expr: Arc::new(expr),
             block: Arc::new(block),
             block_vars,
+            tape: tape.map(Arc::new),
+            registers,
             slots,
             used,
             vars,
@@ -274,6 +284,9 @@ impl StateFn {
                     }))
                 }
             };
+        }
+        if let Some(tape) = &self.tape {
+            return tape.eval(&self.block_vars, &mut self.registers);
         }
         // As in `eval`: NaN for the caller's finiteness check.
         self.block.eval(&self.block_vars).unwrap_or(DualBlock(

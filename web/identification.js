@@ -11,7 +11,7 @@ import { isDiscrete } from './editor.js';
 import { numberProblem, toNumber } from './numbers.js';
 import { DataBox, rowsToCsv } from './identification_data.js';
 import { fitBlock, optimaTable, parseStarts, startsText } from './identification_fit.js';
-import { CHART_HEIGHT, autocorrelationChart, iterationChart } from './identification_plots.js';
+import { CHART_HEIGHT, iterationChart } from './identification_plots.js';
 import { resumedText } from './results.js';
 import { KeptFields, RunBar, RunView, checkModel, duration, el, field, fmt, input, markControls, recheckControl, requestErrors, select } from './views.js';
 
@@ -437,9 +437,6 @@ export class IdentificationView extends RunView {
       for (const [k, end] of [[0, 'low'], [1, 'high']]) columns.push({ label: `95 % interval, ${end}`, values: flat(e.interval[k]), stroke: '#2ca02c', dash: [6, 4], width: 1 });
     }
     const path = iterationChart(this.chartParam, { title: `${name} against the iteration (estimate ${fmt(e.value)})`, yLabel: name, width, columns });
-    const acf = this.fitCharts.map((c) =>
-      autocorrelationChart(c.box, { title: `${c.measurement}: the innovations’ autocorrelations ρ(lag), ±1.96/√n`, rho: c.rho, count: c.count, width }),
-    );
-    this.plots = [j, path, ...acf];
+    this.plots = [j, path, ...this.fitCharts.map((c) => c.draw(width))];
   }
 }

@@ -6,6 +6,7 @@
 
 import { numberProblem, toNumber } from './numbers.js';
 import { el, fmt } from './views.js';
+import { autocorrelationChart, innovationsChart } from './identification_plots.js';
 
 /** The request's limit on `starts` (openapi.yaml: IdentificationJobRequest.starts). */
 export const MAX_STARTS = 100;
@@ -125,7 +126,14 @@ export function fitBlock(r) {
         cell('variance', w.variance),
       ),
     );
-    charts.push({ box: el('div', { id: `id-chart-acf-${i}`, class: 'id-chart', 'data-measurement': w.measurement }), measurement: w.measurement, rho: w.autocorrelation, count: w.count });
+    const acf = el('div', { id: `id-chart-acf-${i}`, class: 'id-chart', 'data-measurement': w.measurement });
+    charts.push({ box: acf, draw: (width) => autocorrelationChart(acf, { title: `${w.measurement}: the innovations’ autocorrelations ρ(lag), ±1.96/√n`, rho: w.autocorrelation, count: w.count, width }) });
+    const trace = inn.trace;
+    if (trace && trace.t.length) {
+      const over = el('div', { id: `id-chart-innovations-${i}`, class: 'id-chart', 'data-measurement': w.measurement, 'data-points': String(trace.t.length) });
+      const every = trace.bucket > 1 ? ` (of each ${trace.bucket} steps the one with the largest NIS; every step is in the CSV)` : '';
+      charts.push({ box: over, draw: (width) => innovationsChart(over, { title: `${w.measurement}: the standardized innovations ν/√S over time, ±1.96${every}`, t: trace.t, values: trace.innovations[i], width }) });
+    }
   });
   table.append(body);
   root.append(el('div', { class: 'scroll' }, table), ...charts.map((c) => c.box));

@@ -1,6 +1,7 @@
 // The Identification tab's charts (web/identification.js): a value against the
 // minimiser's iteration — J, or one param's path from its initial value to its estimate
-// (with the param's bounds, where it has them) — on the page's readable axes (plot.js).
+// (with the param's bounds, where it has them) —, and the innovations at the estimate
+// (over time, and their autocorrelations), on the page's readable axes (plot.js).
 
 import uPlot from './vendor/uplot/uPlot.esm.js';
 import { valueAxis } from './plot.js';
@@ -86,6 +87,41 @@ export function autocorrelationChart(box, { title, rho, count, width }) {
       hooks: { draw: [() => (box.dataset.yTicks = y.ticks().join(' | '))] },
     },
     [x.data(lags), y.data(rho), y.data(flat(band)), y.data(flat(-band))],
+    box,
+  );
+}
+
+/**
+ * A measurement's standardized innovations ν/√S at the estimate against t, as points
+ * (the result's trace: of each run of `bucket` steps, the step with the largest NIS),
+ * with ±1.96, the band 95 % of them keep under the model, into `box`. Returns the uPlot.
+ */
+export function innovationsChart(box, { title, t, values, width }) {
+  const x = valueAxis([t]);
+  const y = valueAxis([values, [1.96, -1.96]]);
+  const shown = (axis) => (_, v) => (v === null || v === undefined ? '—' : fmt(axis.value(v)));
+  const flat = (v) => t.map(() => v);
+  box.replaceChildren();
+  return new uPlot(
+    {
+      title,
+      width,
+      height: HEIGHT,
+      scales: { x: { time: false, ...x.scale }, y: y.scale },
+      axes: [
+        { label: 't', ...x.axis },
+        { label: 'ν/√S', size: 70, ...y.axis },
+      ],
+      series: [
+        { label: 't', value: shown(x) },
+        { label: 'ν/√S', stroke: '#1f77b4', width: 0, paths: () => null, points: { show: true, size: 3, fill: '#1f77b4' }, value: shown(y) },
+        { label: '+1.96', stroke: '#d62728', dash: [6, 4], width: 1, points: { show: false }, value: shown(y) },
+        { label: '−1.96', stroke: '#d62728', dash: [6, 4], width: 1, points: { show: false }, value: shown(y) },
+      ],
+      legend: { live: true },
+      hooks: { draw: [() => (box.dataset.yTicks = y.ticks().join(' | '))] },
+    },
+    [x.data(t), y.data(values), y.data(flat(1.96)), y.data(flat(-1.96))],
     box,
   );
 }

@@ -154,8 +154,14 @@ pub fn identify(
     let theta = outcome.theta.clone();
     let mut at_hat = objective.at_recording(&theta, true, true, true)?;
     let measurement_names = request.measurement_names();
-    let innovations = (at_hat.measurements > 0)
-        .then(|| super::innovations::check(&at_hat.innovations, &at_hat.nis, &measurement_names));
+    let innovations = (at_hat.measurements > 0).then(|| {
+        super::innovations::check(
+            &at_hat.innovations,
+            &at_hat.nis,
+            &measurement_names,
+            &request.data.t,
+        )
+    });
     let observed = observed_information(&objective, &theta);
     let expected = match request.expected_information {
         true => Some(objective.expected(&theta)?),

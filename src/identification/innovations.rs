@@ -9,6 +9,8 @@ use serde::Serialize;
 
 /// The most lags of the whiteness test (fewer for short records: a quarter of them).
 pub const MAX_LAGS: usize = 20;
+/// The most steps of [`InnovationTrace`].
+pub const TRACE_POINTS: usize = 1000;
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct InnovationCheck {
@@ -21,6 +23,21 @@ pub struct InnovationCheck {
     pub degrees_of_freedom: usize,
     /// Per measurement, in the model's order.
     pub whiteness: Vec<Whiteness>,
+    /// The innovations over time, for a plot.
+    pub trace: InnovationTrace,
+}
+
+/// At most [`TRACE_POINTS`] steps of the innovations: the steps cut into equal runs of
+/// `bucket` steps, and of each run the step with the largest NIS (an outlier is never
+/// decimated away); null where a measurement is missing. The whole series is the
+/// kind's CSV.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct InnovationTrace {
+    pub bucket: usize,
+    pub t: Vec<f64>,
+    pub nis: Vec<f64>,
+    /// Per measurement (the model's order), ν/√S at each of those steps.
+    pub innovations: Vec<Vec<Option<f64>>>,
 }
 
 /// The Ljung–Box test of one measurement's standardized innovations: Q = n(n + 2)
@@ -43,8 +60,8 @@ pub struct Whiteness {
     pub variance: f64,
 }
 
-/// The checks from the recorded innovations (D × m) and NIS (D).
-pub fn check(innovations: &[f64], nis: &[f64], names: &[String]) -> InnovationCheck {
+/// The checks from the recorded innovations (D × m) and NIS (D) at the steps `t`.
+pub fn check(innovations: &[f64], nis: &[f64], names: &[String], t: &[f64]) -> InnovationCheck {
     let m = names.len();
     let total: f64 = nis.iter().filter(|x| !x.is_nan()).sum();
     let dof = innovations.iter().filter(|x| !x.is_nan()).count();
@@ -55,6 +72,7 @@ pub fn check(innovations: &[f64], nis: &[f64], names: &[String]) -> InnovationCh
         nis_band,
         nis_consistent: nis_band[0] <= nis_mean && nis_mean <= nis_band[1],
         degrees_of_freedom: dof,
+        trace: trace(innovations, nis, m, t),
         whiteness: (0..m)
             .map(|j| {
                 let series: Vec<f64> = innovations.iter().skip(j).step_by(m).copied().collect();
@@ -102,5 +120,67 @@ fn whiteness(x: &[f64], name: &str) -> Whiteness {
         white: lags > 0 && ljung_box <= critical,
         mean,
         variance: c0 / nf,
+    }
+}
+
+/// [`InnovationTrace`]: of each run of `bucket` steps, the step with the largest NIS.
+fn trace(innovations: &[f64], nis: &[f64], m: usize, t: &[f64]) -> InnovationTrace {
+    let bucket = nis.len().div_ceil(TRACE_POINTS).max(1);
+    let steps: Vec<usize> = (0..nis.len())
+        .step_by(bucket)
+        .filter_map(|start| {
+            (start..(start + bucket).min(nis.len()))
+                .filter(|&k| !nis[k].is_nan())
+                .max_by(|&a, &b| nis[a].total_cmp(&nis[b]).then(b.cmp(&a)))
+        })
+        .collect();
+    let value = |x: f64| (!x.is_nan()).then_some(x);
+    InnovationTrace {
+        bucket,
+        t: steps.iter().map(|&k| t[k]).collect(),
+        nis: steps.iter().map(|&k| nis[k]).collect(),
+        innovations: (0..m)
+            .map(|j| {
+                steps
+                    .iter()
+                    .map(|&k| value(innovations[k * m + j]))
+                    .collect()
+            })
+            .collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 2500 steps in runs of 3: 834 points, each run's largest NIS (the outlier kept),
+    /// a run with nothing measured left out, a missing measurement null.
+    #[test]
+    fn the_trace_keeps_each_runs_largest_nis() {
+        let d = 2500;
+        let t: Vec<f64> = (1..=d).map(|k| k as f64 * 0.5).collect();
+        let mut nis: Vec<f64> = (0..d).map(|k| (k % 3) as f64 * 0.1 + 0.5).collect();
+        let mut innovations: Vec<f64> = (0..2 * d).map(|k| k as f64).collect();
+        nis[1000] = 40.0; // an outlier at the start of its run (999..1002)
+        for k in 3..6 {
+            nis[k] = f64::NAN; // a run with nothing measured
+            innovations[2 * k] = f64::NAN;
+            innovations[2 * k + 1] = f64::NAN;
+        }
+        innovations[2 * 8 + 1] = f64::NAN; // step 8, the largest of its run: one missing
+        let tr = trace(&innovations, &nis, 2, &t);
+        assert_eq!(tr.bucket, 3);
+        assert_eq!(tr.t.len(), 833);
+        assert!(tr.t.len() <= TRACE_POINTS);
+        let at =
+            tr.t.iter()
+                .position(|&x| x == 1001.0 * 0.5)
+                .expect("the outlier");
+        assert_eq!(tr.nis[at], 40.0);
+        assert_eq!(tr.t[0], 3.0 * 0.5); // step 2 of run 0..3 (NIS 0.7)
+        assert_eq!(tr.t[1], 9.0 * 0.5); // run 3..6 is empty: the next is step 8
+        assert_eq!(tr.innovations[0][1], Some(16.0));
+        assert_eq!(tr.innovations[1][1], None);
     }
 }

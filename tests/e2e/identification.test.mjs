@@ -145,6 +145,16 @@ test('the example runs in the browser and on the server to the reference optimum
   // The autocorrelations as bars with the band ±1.96/√n.
   assert.ok(await page.$('#id-chart-acf-0 .uplot'), 'the chart of the autocorrelations');
   assert.deepEqual(await page.$$eval('#id-chart-acf-0 .u-legend .u-series th', (ths) => ths.map((t) => t.textContent)), ['lag', 'ρ', '+1.96/√n', '−1.96/√n']);
+  // The innovations over time: the example's 1000 steps all drawn (a bucket of 1),
+  // with the ±1.96 band; the trace is the CSV's column at those steps.
+  assert.equal(inn.trace.bucket, 1);
+  assert.equal(inn.trace.t.length, 1000);
+  assert.equal(await page.getAttribute('#id-chart-innovations-0', 'data-points'), '1000');
+  assert.deepEqual(await page.$$eval('#id-chart-innovations-0 .u-legend .u-series th', (ths) => ths.map((t) => t.textContent)), ['t', 'ν/√S', '+1.96', '−1.96']);
+  const csvRows = kea('identify', path.join('examples', 'identification', 'oscillator.json'), '--csv', '-').trim().split('\n').slice(1);
+  const [t0, , nu0] = csvRows[0].split(',').map(Number);
+  assert.equal(inn.trace.t[0], t0);
+  assert.equal(inn.trace.innovations[0][0], nu0);
   assert.equal(await page.$('#id-optima'), null, 'one optimum: no table of optima');
   // J and a param's path over the iterations.
   assert.ok(await page.$('#id-chart-j .uplot'), 'the chart of J');

@@ -707,3 +707,75 @@ fn starts_list_every_distinct_optimum_lowest_first() {
     let paths: Vec<&str> = v.iter().map(|e| e.path.as_str()).collect();
     assert_eq!(paths, ["starts[0].phi11", "starts[1].q"]);
 }
+
+/// A continuous model (`a`) is discretised as the analysis does (METHOD §1.2: Φ = I +
+/// aΔt, G = bΔt, u Δt, Q = W): its fit is the fit of the discrete model written out by
+/// hand (Φ = 1 − k·Δt, G = Δt), on the same simulated data — the same estimates, J,
+/// standard errors and expected information. A time-varying entry and `"auto"` steps
+/// are refused at their paths.
+#[test]
+fn a_continuous_model_is_the_discrete_model_of_its_euler_step() {
+    let continuous = json!({
+        "params": {"k": 0.5, "q": 2.0, "r": 0.3},
+        "time": {"t0": 0, "t_end": 100, "steps": 1000},
+        "system": {"states": ["x"], "a": [["-k"]], "u": ["0.2*k"], "b": [[1]], "phi": ["q"],
+                   "eta0": [1]},
+        "measurement": {"names": ["z"], "c": [[1]], "gamma": [[1]], "psi": ["r"]}
+    });
+    let mut discrete = continuous.clone();
+    let system = discrete["system"].as_object_mut().unwrap();
+    system.remove("a");
+    system.insert("transition".into(), json!([["1 - k*0.1"]]));
+    system.insert("u".into(), json!(["0.2*k*0.1"]));
+    system.insert("b".into(), json!([[0.1]]));
+    let request = |model: &Value| {
+        json!({
+            "model": model,
+            "data": {"simulate": {"seed": 11}},
+            "estimate": {"k": {"initial": 1.0, "min": 0}, "q": {"initial": 1.0, "min": 0.01}},
+            "expected_information": true
+        })
+    };
+    let a = identify(request(&continuous)).unwrap();
+    let b = identify(request(&discrete)).unwrap();
+    let close = |x: &Value, y: &Value, what: &str| {
+        let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+        assert!(
+            (x - y).abs() <= 1e-10 * y.abs().max(1.0),
+            "{what}: {x} against {y}"
+        );
+    };
+    close(&a["neg_log_likelihood"], &b["neg_log_likelihood"], "J");
+    for p in ["k", "q"] {
+        for m in ["value", "std_error", "cramer_rao_sko"] {
+            close(
+                &a["estimate"][p][m],
+                &b["estimate"][p][m],
+                &format!("{p}.{m}"),
+            );
+        }
+    }
+    assert_eq!(a["converged"], json!(true));
+    // Close to the truth (k 0.5, q 2) within four standard errors.
+    for (p, truth) in [("k", 0.5), ("q", 2.0)] {
+        let e = &a["estimate"][p];
+        let (v, se) = (
+            e["value"].as_f64().unwrap(),
+            e["std_error"].as_f64().unwrap(),
+        );
+        assert!((v - truth).abs() < 4.0 * se, "{p}: {v} ± {se}");
+    }
+
+    let paths = |r: Value| -> Vec<String> {
+        match identify(r) {
+            Err(e) => e.field_errors().into_iter().map(|f| f.path).collect(),
+            Ok(_) => panic!("accepted"),
+        }
+    };
+    let mut varying = continuous.clone();
+    varying["system"]["a"] = json!([["-k*(1 + 0.01*t)"]]);
+    assert_eq!(paths(request(&varying)), ["model.system.a"]);
+    let mut auto = continuous.clone();
+    auto["time"]["steps"] = json!("auto");
+    assert_eq!(paths(request(&auto)), ["model.time.steps"]);
+}

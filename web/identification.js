@@ -1,5 +1,6 @@
 // The Identification tab (METHOD §3): the maximum-likelihood params of the editor's
-// discrete model (system.transition, Φ per step) from measured data (the data box,
+// model — discrete (system.transition, Φ per step), or continuous and discretised by the
+// core as the analysis does — from measured data (the data box,
 // identification_data.js), in this browser (wasm, the core's Sequential executor: the
 // same bits as the server and `kea identify`) or as a server job of kind
 // `identification`; the estimates with their standard errors and 95 % intervals, J, the
@@ -117,7 +118,7 @@ export class IdentificationView extends RunView {
       el(
         'fieldset',
         { class: 'section' },
-        el('legend', { text: 'Identification: the params of a discrete model from measured data' }),
+        el('legend', { text: 'Identification: the params of a model from measured data' }),
         this.formNote,
         this.data.root(this.exampleButton),
         el('div', { class: 'scroll' }, this.paramsTable),
@@ -195,7 +196,7 @@ export class IdentificationView extends RunView {
     if (!this.rows.length) this.paramsBody.append(el('tr', {}, el('td', { colspan: 5, class: 'help', text: 'The model has no params: add one (Params, above) to estimate it.' })));
     const discrete = isDiscrete(model);
     this.formNote.hidden = discrete;
-    this.formNote.textContent = discrete ? '' : 'The model in the editor is continuous (a): the identification reads a discrete model, Φ per step in place of a (system.transition). Load the example for one.';
+    this.formNote.textContent = discrete ? '' : 'The model in the editor is continuous (a): the identification discretises it as the analysis does — Φ = I + aΔt, u Δt and b Δt per step (METHOD §1.2) — and needs its entries constant in t and a fixed number of steps. Load the example for a discrete one (Φ, system.transition).';
   }
 
   /** A request's estimate, method and iterations (a server job opened, the example) in the fields. */
@@ -297,8 +298,8 @@ export class IdentificationView extends RunView {
     try {
       const request = this.request();
       markControls(this.form, []);
-      // The model as the identification reads it: a continuous one is refused in the core's words.
-      const invalid = await checkModel(request.model, this.ctx.pendingModelErrors?.() ?? [], { discrete: true });
+      // The model in its own form (a continuous one is discretised by the core), then the run says what the identification needs of it.
+      const invalid = await checkModel(request.model, this.ctx.pendingModelErrors?.() ?? []);
       if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
       return await this.follow(where, () => exec(request), request.model); // exec serialises the request at once
     } catch (e) {

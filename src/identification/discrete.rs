@@ -1,8 +1,10 @@
-//! A discrete model of kea's format (`system.transition`) at one θ, as the SRIF reads
-//! it: its [`Discrete`] matrices and [`Prior`] (METHOD §3 (1.4.1)–(1.4.2): Φ =
-//! `transition`, G = `b`, Q = W, H = C, R = Γ V Γᵀ, x0 = y0, P0 = diag η0²), and their
-//! derivatives with respect to the estimated params, from the entries' expressions
-//! (`expr::compile_const_with_derivatives`: exact, never a finite difference).
+//! A model of kea's format at one θ, as the SRIF reads it: its [`Discrete`] matrices
+//! and [`Prior`] (METHOD §3 (1.4.1)–(1.4.2): Φ = `transition`, G = `b`, Q = W, H = C,
+//! R = Γ V Γᵀ, x0 = y0, P0 = diag η0²) — or, for a continuous model (`a`), the
+//! analysis's discretisation (METHOD §1.2: Φ = I + aΔt, u Δt, G = bΔt, Q = W) — and
+//! their derivatives with respect to the estimated params, from the entries'
+//! expressions (`expr::compile_const_with_derivatives`: exact, never a finite
+//! difference).
 
 use super::model::{Discrete, Partial, Prior};
 use crate::error::{Error, FieldError};
@@ -11,32 +13,31 @@ use crate::model::compile::{CompiledModel, MeasurementNoise};
 use crate::model::params::{EntryRef, Member};
 use crate::model::{Model, Overrides};
 
-/// The model at the params `params` (the model's own with the overrides applied):
-/// compiled ([`crate::model::compile_discrete`]), checked for what the SRIF needs,
-/// with ∂/∂θ_i of every entry for each name in `estimated`.
-pub fn at(
-    model: &Model,
-    params: &Overrides,
-    estimated: &[&str],
-) -> Result<(Discrete, Prior, Vec<Partial>), Error> {
-    let compiled = crate::model::compile_discrete(model, params)?;
-    let (discrete, prior) = matrices(&compiled)?;
-    let mut values = model.params.clone();
-    values.extend(params.iter().map(|(k, v)| (k.clone(), *v)));
-    let partials = estimated
-        .iter()
-        .enumerate()
-        .map(|(i, name)| partial(model, &compiled, &discrete, &values, estimated, i, name))
-        .collect::<Result<Vec<_>, _>>()?;
-    Ok((discrete, prior, partials))
+/// The model compiled in its own form: a discrete one (`system.transition`, or
+/// neither `transition` nor `a`: the error says what is missing) by
+/// [`crate::model::compile_discrete`], a continuous one (`a`) by
+/// [`crate::model::compile`].
+pub fn compile(model: &Model, params: &Overrides) -> Result<CompiledModel, Error> {
+    if model.system.transition.is_some() || model.system.a.is_empty() {
+        crate::model::compile_discrete(model, params)
+    } else {
+        crate::model::compile(model, params)
+    }
 }
 
-/// The SRIF's matrices from a compiled discrete model; a time-varying entry or a
-/// schedule is refused (the identification's model is time-invariant; missing
-/// measurements are the data's empty cells).
-fn matrices(c: &CompiledModel) -> Result<(Discrete, Prior), Error> {
+/// Δt of a continuous model's discretisation, None for a discrete model.
+fn step(c: &CompiledModel) -> Option<f64> {
+    c.transition
+        .is_none()
+        .then(|| (c.t_end - c.t0) / c.max_steps() as f64)
+}
+
+/// What the identification needs of a compiled model beyond what compiling checks:
+/// entries constant in t, no schedule, a fixed number of steps.
+pub fn check(c: &CompiledModel) -> Result<(), Error> {
     let mut errors = Vec::new();
     let constant = [
+        ("system.a", c.a.is_constant()),
         ("system.u", c.u.is_constant()),
         ("system.b", c.b.is_constant()),
         (noise_path(&c.noise), c.noise.matrix().is_constant()),
@@ -55,20 +56,62 @@ fn matrices(c: &CompiledModel) -> Result<(Discrete, Prior), Error> {
             "the identification reads missing measurements from the data (an empty cell): leave the schedule out",
         ));
     }
-    if !errors.is_empty() {
-        return Err(Error::Invalid(errors));
+    if matches!(c.steps, crate::model::compile::StepPlan::Auto { .. }) {
+        errors.push(FieldError::new(
+            "time.steps",
+            "the identification's data sit on a fixed grid: give the number of steps D, not \"auto\"",
+        ));
     }
+    match errors.is_empty() {
+        true => Ok(()),
+        false => Err(Error::Invalid(errors)),
+    }
+}
+
+/// The model at the params `params` (the model's own with the overrides applied):
+/// compiled in its form ([`compile`]), checked for what the SRIF needs ([`check`]),
+/// with ∂/∂θ_i of every entry for each name in `estimated`.
+pub fn at(
+    model: &Model,
+    params: &Overrides,
+    estimated: &[&str],
+) -> Result<(Discrete, Prior, Vec<Partial>), Error> {
+    let compiled = compile(model, params)?;
+    let (discrete, prior) = matrices(&compiled)?;
+    let mut values = model.params.clone();
+    values.extend(params.iter().map(|(k, v)| (k.clone(), *v)));
+    let partials = estimated
+        .iter()
+        .enumerate()
+        .map(|(i, name)| partial(model, &compiled, &discrete, &values, estimated, i, name))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok((discrete, prior, partials))
+}
+
+/// The SRIF's matrices from a compiled model ([`check`]ed: missing measurements are
+/// the data's empty cells).
+fn matrices(c: &CompiledModel) -> Result<(Discrete, Prior), Error> {
+    check(c)?;
     let (n, nm) = (c.n_states(), c.n_measurements());
     let l = c.b.cols;
     let gamma = gamma(c, &c.noise.matrix().values, &c.c);
     let mm = c.noise.sources();
+    // A continuous model discretised as the analysis does (METHOD §1.2, (1.11)).
+    let dt = step(c);
+    let scaled = |v: &[f64]| -> Vec<f64> { v.iter().map(|x| x * dt.unwrap_or(1.0)).collect() };
+    let phi = match &c.transition {
+        Some(phi) => phi.clone(),
+        None => (0..n * n)
+            .map(|k| f64::from(u8::from(k / n == k % n)) + c.a.values[k] * dt.unwrap_or(1.0))
+            .collect(),
+    };
     let discrete = Discrete {
         n,
         l,
         m: nm,
-        phi: c.transition.clone().expect("a discrete model has Φ"),
-        u: c.u.values.clone(),
-        g: c.b.values.clone(),
+        phi,
+        u: scaled(&c.u.values),
+        g: scaled(&c.b.values),
         q: c.w.clone(),
         h: c.c.clone(),
         r: sandwich(&gamma, &c.v, None, nm, mm),
@@ -138,6 +181,8 @@ fn partial(
 ) -> Result<Partial, Error> {
     let mut p = Partial::zero(d);
     let (n, l, nm, mm) = (d.n, d.l, d.m, c.noise.sources());
+    // ∂(I + aΔt) = ∂a Δt, ∂(u Δt) = ∂u Δt, ∂(bΔt) = ∂b Δt; 1 in a discrete model.
+    let dt = step(c).unwrap_or(1.0);
     let mut d_noise = vec![0.0; c.noise.matrix().values.len()];
     let mut d_v = vec![0.0; mm * mm];
     let mut errors = Vec::new();
@@ -155,8 +200,9 @@ fn partial(
         let EntryRef { member, row, col } = *entry;
         match member {
             Member::Transition => p.phi[row * n + col] = dx,
-            Member::U => p.u[row] = dx,
-            Member::B => p.g[row * l + col] = dx,
+            Member::A => p.phi[row * n + col] = dx * dt,
+            Member::U => p.u[row] = dx * dt,
+            Member::B => p.g[row * l + col] = dx * dt,
             Member::W => p.q[row * l + col] = dx,
             Member::Phi => p.q[row * l + row] = 2.0 * c.phi[row] * dx,
             Member::C => p.h[row * n + col] = dx,
@@ -166,8 +212,8 @@ fn partial(
             Member::Psi => d_v[row * mm + row] = 2.0 * c.psi[row] * dx,
             Member::Y0 => p.x0[row] = dx,
             Member::Eta0 => p.p0[row * n + row] = 2.0 * c.eta0[row] * dx,
-            // Refused in a discrete model (`a`) or by `matrices` (a schedule).
-            Member::A | Member::When => {}
+            // Refused by `check` (a schedule).
+            Member::When => {}
         }
     }
     if !errors.is_empty() {

@@ -121,7 +121,9 @@ pub fn read(obj: &Map<String, Value>) -> Result<IdentificationRequest, Error> {
     for e in &estimate {
         at_initial.insert(e.name.clone(), e.initial);
     }
-    let compiled = crate::model::compile_discrete(&model, &at_initial).map_err(request::locate)?;
+    let compiled = super::discrete::compile(&model, &at_initial)
+        .and_then(|c| super::discrete::check(&c).map(|()| c))
+        .map_err(request::locate)?;
     if compiled.max_steps() > MAX_ROWS as u64 {
         return Err(Error::invalid(
             "model.time.steps",

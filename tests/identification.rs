@@ -602,6 +602,34 @@ fn vector_case() -> (Discrete, Vec<Partial>, Prior, Data) {
     (m0, partials, prior, data)
 }
 
+/// The vector case's matrices (2 × 2) for the second routes, and per param its
+/// derivatives [∂Φ, ∂G, ∂Q, ∂H, ∂R].
+struct VectorMatrices {
+    phi: nalgebra::DMatrix<f64>,
+    g: nalgebra::DMatrix<f64>,
+    q: nalgebra::DMatrix<f64>,
+    h: nalgebra::DMatrix<f64>,
+    r: nalgebra::DMatrix<f64>,
+    u: nalgebra::DVector<f64>,
+    partials: Vec<[nalgebra::DMatrix<f64>; 5]>,
+}
+
+fn vector_matrices(m0: &Discrete, partials: &[Partial]) -> VectorMatrices {
+    let mat = |v: &[f64]| nalgebra::DMatrix::from_row_slice(2, 2, v);
+    VectorMatrices {
+        phi: mat(&m0.phi),
+        g: mat(&m0.g),
+        q: mat(&m0.q),
+        h: mat(&m0.h),
+        r: mat(&m0.r),
+        u: nalgebra::DVector::from_column_slice(&m0.u),
+        partials: partials
+            .iter()
+            .map(|p| [mat(&p.phi), mat(&p.g), mat(&p.q), mat(&p.h), mat(&p.r)])
+            .collect(),
+    }
+}
+
 /// Vector measurements (m = 2, correlated R, some cells missing) against a second
 /// route: a covariance filter with the sensitivity equations (nalgebra, double
 /// precision; fine on this well-conditioned model): J, the gradient and the sample
@@ -615,26 +643,15 @@ fn vector_measurements_match_a_covariance_filter_with_sensitivities() {
 
     // The second route.
     let mat = |v: &[f64], r: usize, c: usize| DMatrix::from_row_slice(r, c, v);
-    let (phi, g, q, h, rr) = (
-        mat(&m0.phi, 2, 2),
-        mat(&m0.g, 2, 2),
-        mat(&m0.q, 2, 2),
-        mat(&m0.h, 2, 2),
-        mat(&m0.r, 2, 2),
-    );
-    let u = DVector::from_column_slice(&m0.u);
-    let dm: Vec<[DMatrix<f64>; 5]> = partials
-        .iter()
-        .map(|p| {
-            [
-                mat(&p.phi, 2, 2),
-                mat(&p.g, 2, 2),
-                mat(&p.q, 2, 2),
-                mat(&p.h, 2, 2),
-                mat(&p.r, 2, 2),
-            ]
-        })
-        .collect();
+    let VectorMatrices {
+        phi,
+        g,
+        q,
+        h,
+        r: rr,
+        u,
+        partials: dm,
+    } = vector_matrices(&m0, &partials);
     let np = partials.len();
     let mut x = DVector::from_column_slice(&prior.x0);
     let mut p = mat(&prior.p0, 2, 2);
@@ -872,26 +889,15 @@ fn augmented_expected_information(
     let (n, np) = (2usize, partials.len());
     let dim = n * (2 + np);
     let mat = |v: &[f64], r: usize, c: usize| DMatrix::from_row_slice(r, c, v);
-    let (phi, g, q, h, rr) = (
-        mat(&m0.phi, 2, 2),
-        mat(&m0.g, 2, 2),
-        mat(&m0.q, 2, 2),
-        mat(&m0.h, 2, 2),
-        mat(&m0.r, 2, 2),
-    );
-    let u = DVector::from_column_slice(&m0.u);
-    let dm: Vec<[DMatrix<f64>; 5]> = partials
-        .iter()
-        .map(|p| {
-            [
-                mat(&p.phi, 2, 2),
-                mat(&p.g, 2, 2),
-                mat(&p.q, 2, 2),
-                mat(&p.h, 2, 2),
-                mat(&p.r, 2, 2),
-            ]
-        })
-        .collect();
+    let VectorMatrices {
+        phi,
+        g,
+        q,
+        h,
+        r: rr,
+        u,
+        partials: dm,
+    } = vector_matrices(&m0, &partials);
     // The filter's P, ∂P (deterministic) and the augmented mean and covariance.
     let mut p = mat(&prior.p0, 2, 2);
     assert_eq!(prior.at, PriorAt::T0);

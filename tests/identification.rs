@@ -897,7 +897,7 @@ fn augmented_expected_information(
         r: rr,
         u,
         partials: dm,
-    } = vector_matrices(&m0, partials);
+    } = vector_matrices(m0, partials);
     // The filter's P, ∂P (deterministic) and the augmented mean and covariance.
     let mut p = mat(&prior.p0, 2, 2);
     assert_eq!(prior.at, PriorAt::T0);

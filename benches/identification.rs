@@ -1,5 +1,6 @@
 //! The identification's SRIF (METHOD §3): J alone, J with its gradient over three
-//! parameters, and both with the sample information, on the damped oscillator of
+//! parameters, and both with the sample information, and the expected information's
+//! pass (`identification::expected`), on the damped oscillator of
 //! `tests/data/identification/case_b` (N = 2, one measurement), its 1000 measurements
 //! repeated to D steps.
 //!
@@ -7,8 +8,8 @@
 //! changes it), median of 5 after a warm-up.
 
 use kea_core::identification::{
-    Data, Discrete, Partial, Prior, PriorAt, likelihood, likelihood_and_gradient,
-    likelihood_gradient_information,
+    Data, Discrete, Partial, Prior, PriorAt, expected_information, likelihood,
+    likelihood_and_gradient, likelihood_gradient_information,
 };
 use std::time::Instant;
 
@@ -90,6 +91,9 @@ fn main() {
             likelihood_gradient_information(&model, &partials, &prior, &data).expect("runs"),
         );
     });
+    let ei = median(&|| {
+        std::hint::black_box(expected_information(&model, &partials, &prior, &data).expect("runs"));
+    });
     println!(
         "identification J, N = 2, D = {d}:              median {j:.4} s ({:.0} ns/step)",
         j / d as f64 * 1e9
@@ -101,5 +105,9 @@ fn main() {
     println!(
         "identification J + gradient + information, D = {d}: median {gi:.4} s ({:.0} ns/step)",
         gi / d as f64 * 1e9
+    );
+    println!(
+        "identification expected information (3 params), D = {d}: median {ei:.4} s ({:.0} ns/step)",
+        ei / d as f64 * 1e9
     );
 }

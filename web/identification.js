@@ -128,7 +128,7 @@ export class IdentificationView extends RunView {
           { class: 'row' },
           field('Method', this.method),
           field('Max iterations', this.maxIterations),
-          field('Cramér–Rao bound', this.expected, 'The expected information at the estimate (its expectation over data drawn from the model there, with the data’s missing measurements) and the bound √((I⁻¹)ᵢᵢ) on each estimate’s SKO: one more pass, wider than a fit’s.'),
+          field('Cramér–Rao bound', this.expected, 'The expected information at the estimate (its expectation over data drawn from the model there, with the data’s missing measurements) and the bound √((I⁻¹)ᵢᵢ) on each estimate’s SKO: one more pass over the data.'),
         ),
         el('p', { class: 'help', text: 'Maximum likelihood by the square-root information filter (METHOD §3): J(θ) = −log-likelihood of the data, minimised within the bounds — scoring with a line search, gradient descent halving its step, or conjugate directions restarted every p iterations. Cost ∝ iterations × D × (N + L)³ × (1 + params).' }),
       ),

@@ -21,12 +21,12 @@ pub fn identification_work(r: &IdentificationRequest) -> Work {
     let step = 2.0 * (n + l + 1.0).powi(2) * (n + l + m + 1.0) * (1.0 + p) + 50.0;
     let starts = (1 + r.starts.len()) as f64;
     let evaluations = starts * EVALUATIONS_PER_ITERATION * r.max_iterations as f64 + 4.0 * p + 1.0;
-    // The expected information's one pass (identification::expected): the arrays carry
-    // 1 + N(1 + p) + N + m data columns, and the realisations are compressed each step.
+    // The expected information's one pass (identification::expected): an SRIF step,
+    // then N(1 + p) + N + m realisation rows of N(1 + p) values updated and compressed
+    // by a Householder triangularisation.
     let (expected, also) = if r.expected_information {
         let keep = n * (1.0 + p);
-        let cols = 1.0 + keep + n + m;
-        let pass = 2.0 * (n + l).powi(2) * (n + l + cols) * (1.0 + p) + keep.powi(3);
+        let pass = step + 2.0 * (keep + n + m) * keep * keep;
         (
             pass,
             format!(

@@ -644,30 +644,41 @@ fn simulated_data_have_the_models_moments_and_the_fit_finds_the_truth() {
 /// (w ≥ 0, where J is even in w), the errors of θ̂ in units of their standard errors
 /// have mean ≈ 0 and RMS ≈ 1 — the estimator is unbiased and its standard errors say
 /// what they mean. (For 40 normal z-scores the RMS is within [0.75, 1.25] with
-/// probability > 0.99, the mean within ±0.45.)
+/// probability > 0.99, the mean within ±0.45.) The same errors in units of kea's
+/// Cramér–Rao bound (the expected information at each θ̂) have an RMS in that range
+/// too: at D = 1000 the estimator is efficient, as the bound says it can be.
 #[test]
 fn standard_errors_are_calibrated_over_simulated_data_sets() {
     let case = Case::load("case_b_oscillator");
     let truth = [("r", 0.95), ("w", 0.3), ("sv", 0.5)];
     let mut z: Vec<Vec<f64>> = vec![Vec::new(); 3];
+    let mut z_bound: Vec<Vec<f64>> = vec![Vec::new(); 3];
     for seed in 0..40 {
         let mut request = case.request("scoring", None);
         request["data"] = json!({"simulate": {"seed": seed}});
         request["estimate"]["w"]["min"] = json!(0);
+        request["expected_information"] = json!(true);
         let r = identify(request).unwrap();
         assert_eq!(r["converged"], json!(true), "seed {seed}");
         for (i, (name, t)) in truth.iter().enumerate() {
             let e = &r["estimate"][name];
-            z[i].push((e["value"].as_f64().unwrap() - t) / e["std_error"].as_f64().unwrap());
+            let error = e["value"].as_f64().unwrap() - t;
+            z[i].push(error / e["std_error"].as_f64().unwrap());
+            z_bound[i].push(error / e["cramer_rao_sko"].as_f64().unwrap());
         }
     }
     for (i, (name, _)) in truth.iter().enumerate() {
         let n = z[i].len() as f64;
         let mean = z[i].iter().sum::<f64>() / n;
         let rms = (z[i].iter().map(|x| x * x).sum::<f64>() / n).sqrt();
+        let rms_bound = (z_bound[i].iter().map(|x| x * x).sum::<f64>() / n).sqrt();
         assert!(
             mean.abs() < 0.45 && (0.75..1.25).contains(&rms),
             "{name}: mean {mean}, RMS {rms}"
+        );
+        assert!(
+            (0.75..1.25).contains(&rms_bound),
+            "{name}: RMS in Cramér–Rao units {rms_bound}"
         );
     }
 }

@@ -18,6 +18,15 @@ fn read(name: &str) -> Json {
     serde_json::from_str(&text).expect("reference JSON")
 }
 
+/// The reference cases (`tests/data/identification/`).
+const CASES: [&str; 5] = [
+    "case_a1_seed_phi22",
+    "case_a2_seed_diag",
+    "case_b_oscillator",
+    "case_c_illcond",
+    "case_d_unidentifiable",
+];
+
 /// A reference case: its model at `params` (the case's own, with `theta` over them).
 struct Case {
     spec: Json,
@@ -499,13 +508,7 @@ fn gradient_through_u_g_x0_and_p0_matches_differences_of_j() {
 /// Case d's is singular — c and g enter only as c·g — and is compared all the same.
 #[test]
 fn sample_information_matches_the_50_digit_reference() {
-    for name in [
-        "case_a1_seed_phi22",
-        "case_a2_seed_diag",
-        "case_b_oscillator",
-        "case_c_illcond",
-        "case_d_unidentifiable",
-    ] {
+    for name in CASES {
         let case = Case::load(name);
         let data = case.data();
         let at = &case.expected["at_theta_hat"];
@@ -750,16 +753,10 @@ fn vector_measurements_match_a_covariance_filter_with_sensitivities() {
 /// missing pattern) at θ_true and at θ̂, against the 50-digit covariance recursion —
 /// case c included, where the double-precision covariance recursion of the
 /// reference gives a matrix off by 10¹⁴ (negative diagonal): kea's comes from the
-/// SRIF's arrays with realisation columns, no covariance formed.
+/// SRIF's arrays and the square-root covariance of [x̂; ∂x̂], no covariance recursion.
 #[test]
 fn expected_information_matches_the_50_digit_reference() {
-    for name in [
-        "case_a1_seed_phi22",
-        "case_a2_seed_diag",
-        "case_b_oscillator",
-        "case_c_illcond",
-        "case_d_unidentifiable",
-    ] {
+    for name in CASES {
         let case = Case::load(name);
         let data = case.data();
         let names = case.names();

@@ -393,7 +393,10 @@ fn bad_requests_name_their_fields() {
     r["method"] = json!("newton");
     r["max_iterations"] = json!(0);
     r["expected_information"] = json!("yes");
-    assert_eq!(paths(r), ["method", "max_iterations", "expected_information"]);
+    assert_eq!(
+        paths(r),
+        ["method", "max_iterations", "expected_information"]
+    );
     let mut r = case.request("scoring", None);
     r["data"] = json!({"csv": "case_b.csv"});
     assert_eq!(paths(r), ["data.csv"]);

@@ -851,7 +851,8 @@ fn expected_information_of_a_scalar_model_has_its_closed_form() {
 }
 
 /// The expected information with vector measurements, correlated R, missing cells,
-/// u ≠ 0, the prior at t0 and a parameter in each of Φ, G, Q, H and R, against a
+/// u ≠ 0, the prior at t0 and a parameter in each of Φ, G, Q, H and R (then also in x0
+/// and P0), against a
 /// second route: the covariance of the augmented state [x; x̂; ∂_1x̂; …; ∂_5x̂]
 /// (nalgebra, 14 × 14) and its mean, propagated through the covariance filter with
 /// the sensitivity equations; E[∂_iνᵀS⁻¹∂_jν] = tr(S⁻¹ A_j (Σ + μμᵀ) A_iᵀ)
@@ -870,6 +871,33 @@ fn expected_information_matches_an_augmented_covariance_recursion() {
             want[i],
             1e-11 * scale,
             &format!("expected M[{}][{}]", i / np, i % np),
+        );
+    }
+    // Params in the prior too: one moves x0, one P0 (its diagonal and its correlation).
+    let mut prior_params = partials.clone();
+    prior_params.push(Partial {
+        x0: vec![1.0, -0.5],
+        ..Partial::zero(&m0)
+    });
+    prior_params.push(Partial {
+        p0: vec![0.4, 0.1, 0.1, 0.0],
+        ..Partial::zero(&m0)
+    });
+    let got =
+        kea_core::identification::expected_information(&m0, &prior_params, &prior, &data).unwrap();
+    let want = augmented_expected_information(&m0, &prior_params, &prior, &data);
+    let np = prior_params.len();
+    let scale = want.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    for i in 0..np * np {
+        close(
+            got[i],
+            want[i],
+            1e-11 * scale,
+            &format!(
+                "with the prior's params: expected M[{}][{}]",
+                i / np,
+                i % np
+            ),
         );
     }
 }
@@ -898,12 +926,16 @@ fn augmented_expected_information(
     // The filter's P, ∂P (deterministic) and the augmented mean and covariance.
     let mut p = mat(&prior.p0, 2, 2);
     assert_eq!(prior.at, PriorAt::T0);
-    let mut dp = vec![DMatrix::<f64>::zeros(2, 2); np];
+    let mut dp: Vec<DMatrix<f64>> = partials.iter().map(|d| mat(&d.p0, 2, 2)).collect();
     let mut mu = DVector::<f64>::zeros(dim);
     mu.rows_mut(0, n)
         .copy_from(&DVector::from_column_slice(&prior.x0));
     mu.rows_mut(n, n)
         .copy_from(&DVector::from_column_slice(&prior.x0));
+    for (i, d) in partials.iter().enumerate() {
+        mu.rows_mut(n * (2 + i), n)
+            .copy_from(&DVector::from_column_slice(&d.x0));
+    }
     let mut sigma = DMatrix::<f64>::zeros(dim, dim);
     sigma.view_mut((0, 0), (n, n)).copy_from(&p);
     let blk = |i: usize| n * (2 + i);

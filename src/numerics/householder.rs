@@ -8,6 +8,11 @@
 //! step; `QR::new` takes its matrix by value and triangularises every column. The
 //! test compares R with nalgebra's.
 
+/// The columns' scales between which a reflection is formed as it is; outside, from
+/// the column divided by its scale.
+const SMALL: f64 = 1e-140;
+const LARGE: f64 = 1e140;
+
 /// Triangularise the first `p` columns of `a` (`rows` × `cols`, row-major) in place:
 /// on return a[i][j] = 0 for j < p, i > j, and every column has been multiplied by the
 /// same orthogonal matrix (a product of `min(p, rows − 1)` Householder reflections).
@@ -32,9 +37,20 @@ pub fn triangularise(a: &mut [f64], rows: usize, cols: usize, p: usize) {
         let ajj = a[j * cols + j];
         // alpha of the sign opposite to a_jj: v_0 = a_jj − alpha has no cancellation.
         let alpha = if ajj > 0.0 { -norm } else { norm };
-        let v0 = ajj - alpha;
-        // H = I − 2 v vᵀ / (vᵀv), vᵀv = −2 alpha v_0, v = (v_0, a_{j+1,j}, …).
-        let f = 1.0 / (alpha * v0);
+        // H = I − 2 v vᵀ / (vᵀv), vᵀv = −2 alpha v_0, v = (v_0, a_{j+1,j}, …). H is the
+        // same for any multiple of v: a column far from 1 (a derivative decayed to
+        // 1e-160) takes v / scale, so that alpha·v_0 neither underflows to 0 nor
+        // overflows.
+        let (v0, f) = if (SMALL..=LARGE).contains(&scale) {
+            let v0 = ajj - alpha;
+            (v0, 1.0 / (alpha * v0))
+        } else {
+            for i in j + 1..rows {
+                a[i * cols + j] /= scale;
+            }
+            let (alpha, v0) = (alpha / scale, ajj / scale - alpha / scale);
+            (v0, 1.0 / (alpha * v0))
+        };
         for c in j + 1..cols {
             let mut s = v0 * a[j * cols + c];
             for i in j + 1..rows {
@@ -115,6 +131,31 @@ pub fn differentiate(
 mod tests {
     use super::*;
     use nalgebra::DMatrix;
+
+    /// A matrix scaled by 1e-200 or 1e200 (a derivative decayed, or grown, far from 1)
+    /// triangularises to the unscaled one's result times the scale — with no NaN, where
+    /// alpha·v_0 once underflowed to 0 (found by the expected information's decayed
+    /// realisations of a prior's param).
+    #[test]
+    fn a_tiny_or_huge_matrix_triangularises_as_its_unscaled_one() {
+        let (rows, cols, p) = (6, 5, 4);
+        let a: Vec<f64> = (0..rows * cols)
+            .map(|k| ((k * 29 % 17) as f64 - 8.0) / 5.0)
+            .collect();
+        let mut unit = a.clone();
+        triangularise(&mut unit, rows, cols, p);
+        for scale in [1e-200, 1e200] {
+            let mut t: Vec<f64> = a.iter().map(|x| x * scale).collect();
+            triangularise(&mut t, rows, cols, p);
+            for (k, (x, y)) in t.iter().zip(&unit).enumerate() {
+                let want = y * scale;
+                assert!(
+                    (x - want).abs() <= 1e-13 * scale * (1.0 + y.abs()),
+                    "scale {scale:e}, entry {k}: {x:e} against {want:e}"
+                );
+            }
+        }
+    }
 
     /// R against nalgebra's QR (rows up to sign), and the transform orthogonal: the
     /// trailing columns keep their norms and their inner products with each other.

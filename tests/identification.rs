@@ -188,6 +188,21 @@ fn close(got: f64, want: f64, tol: f64, what: &str) {
     );
 }
 
+/// Square matrices (row-major) equal to `tol` of `want`'s largest entry.
+fn close_matrix(got: &[f64], want: &[f64], tol: f64, what: &str) {
+    assert_eq!(got.len(), want.len(), "{what}: sizes");
+    let np = want.len().isqrt();
+    let scale = want.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    for (i, (a, b)) in got.iter().zip(want).enumerate() {
+        close(
+            *a,
+            *b,
+            tol * scale,
+            &format!("{what}[{}][{}]", i / np, i % np),
+        );
+    }
+}
+
 /// J, its data part (2.2.3) and its model part (2.2.4) at θ_true and at θ̂, against the
 /// 50-digit covariance filter; J less the constant against J_full. Case c is the one
 /// where double-precision covariance filters are off by 0.17–0.94: the SRIF is not
@@ -523,17 +538,8 @@ fn sample_information_matches_the_50_digit_reference() {
             .iter()
             .flat_map(|r| r.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()))
             .collect();
-        let np = names.len();
-        assert_eq!(got.fisher_sample.len(), np * np);
-        let scale = want.iter().fold(0.0f64, |s, v| s.max(v.abs()));
-        for (i, (a, b)) in got.fisher_sample.iter().zip(&want).enumerate() {
-            close(
-                *a,
-                *b,
-                1e-11 * scale,
-                &format!("{name} M[{}][{}]", i / np, i % np),
-            );
-        }
+        assert_eq!(got.fisher_sample.len(), names.len().pow(2));
+        close_matrix(&got.fisher_sample, &want, 1e-11, &format!("{name} M"));
     }
 }
 
@@ -784,15 +790,12 @@ fn expected_information_matches_the_50_digit_reference() {
                 .flat_map(|r| r.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()))
                 .collect();
             assert_eq!(got.len(), np * np);
-            let scale = want.iter().fold(0.0f64, |s, v| s.max(v.abs()));
-            for (i, (a, b)) in got.iter().zip(&want).enumerate() {
-                close(
-                    *a,
-                    *b,
-                    1e-10 * scale,
-                    &format!("{name} at {where_}: expected M[{}][{}]", i / np, i % np),
-                );
-            }
+            close_matrix(
+                &got,
+                &want,
+                1e-10,
+                &format!("{name} at {where_}: expected M"),
+            );
         }
     }
 }
@@ -863,16 +866,7 @@ fn expected_information_matches_an_augmented_covariance_recursion() {
     let got =
         kea_core::identification::expected_information(&m0, &partials, &prior, &data).unwrap();
     let want = augmented_expected_information(&m0, &partials, &prior, &data);
-    let np = partials.len();
-    let scale = want.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-    for i in 0..np * np {
-        close(
-            got[i],
-            want[i],
-            1e-11 * scale,
-            &format!("expected M[{}][{}]", i / np, i % np),
-        );
-    }
+    close_matrix(&got, &want, 1e-11, "expected M");
     // Params in the prior too: one moves x0, one P0 (its diagonal and its correlation).
     let mut prior_params = partials.clone();
     prior_params.push(Partial {
@@ -886,20 +880,7 @@ fn expected_information_matches_an_augmented_covariance_recursion() {
     let got =
         kea_core::identification::expected_information(&m0, &prior_params, &prior, &data).unwrap();
     let want = augmented_expected_information(&m0, &prior_params, &prior, &data);
-    let np = prior_params.len();
-    let scale = want.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-    for i in 0..np * np {
-        close(
-            got[i],
-            want[i],
-            1e-11 * scale,
-            &format!(
-                "with the prior's params: expected M[{}][{}]",
-                i / np,
-                i % np
-            ),
-        );
-    }
+    close_matrix(&got, &want, 1e-11, "with the prior's params: expected M");
 }
 
 /// The second route of the expected information (2 states): the covariance of

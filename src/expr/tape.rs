@@ -67,6 +67,7 @@ impl DualTape {
     /// evaluates with exmex.
     pub fn compile(text: &str, vars: &[String]) -> Option<DualTape> {
         let tokens = lex(text).ok()?;
+        let table = <DualOps as MakeOperators<Dual>>::make();
         let mut p = Parser {
             text,
             tokens: &tokens,
@@ -78,12 +79,12 @@ impl DualTape {
                 registers: 0,
                 result: Operand::Const(0),
             },
-            unary: <DualOps as MakeOperators<Dual>>::make()
-                .into_iter()
+            unary: table
+                .iter()
                 .filter_map(|op| Some((op.repr(), op.unary().ok()?)))
                 .collect(),
-            binary: <DualOps as MakeOperators<Dual>>::make()
-                .into_iter()
+            binary: table
+                .iter()
                 .filter_map(|op| Some((op.repr(), op.bin().ok()?.apply)))
                 .collect(),
         };

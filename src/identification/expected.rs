@@ -24,7 +24,7 @@ use super::model::{Data, Discrete, Partial, Prior, PriorAt};
 use super::srif::{Likelihood, Srif};
 use crate::error::Error;
 use crate::numerics::householder::triangularise;
-use crate::numerics::linalg::{cholesky, cholesky_solve, solve_lower};
+use crate::numerics::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym, solve_lower};
 
 /// The expected information over the parameters whose `partials` are given (np × np,
 /// row-major), on `data`'s steps with its missing measurements (its values are not
@@ -99,6 +99,8 @@ struct Estimates {
     /// R̃ and its derivatives before the update (N × N each).
     r_prior: Vec<f64>,
     d_r_prior: Vec<f64>,
+    /// R̃⁻¹, once a step.
+    r_prior_inv: Vec<f64>,
     /// P̃, P̂, I − KH, K, Y = H_a R̃⁻¹, the factors of S and R, and per param ∂P̃, ∂K.
     p_prior: Vec<f64>,
     p_post: Vec<f64>,
@@ -130,6 +132,7 @@ impl Estimates {
             real: vec![0.0; (keep + n + m) * keep],
             rows: 0,
             r_prior: vec![0.0; n * n],
+            r_prior_inv: vec![0.0; n * n],
             d_r_prior: vec![0.0; np * n * n],
             p_prior: vec![0.0; n * n],
             p_post: vec![0.0; n * n],
@@ -212,12 +215,13 @@ impl Estimates {
         let ic = n + 1;
         let w = ic * (1 + np);
         let h = |r: usize, c: usize| model.h[avail[r] * n + c];
-        // P̃ = R̃⁻¹R̃⁻ᵀ (via R̃⁻¹ in nn), and Y = H_a R̃⁻¹.
-        upper_inverse(&self.r_prior, &mut self.nn, n);
-        gram_rows(&self.nn, &mut self.p_prior, n);
+        // P̃ = R̃⁻¹R̃⁻ᵀ, and Y = H_a R̃⁻¹.
+        upper_inverse(&self.r_prior, &mut self.r_prior_inv, n);
+        let r_inv = &self.r_prior_inv;
+        mul_abt_sym(&mut self.p_prior, r_inv, r_inv, None, n, n);
         for r in 0..ma {
             for c in 0..n {
-                self.y[r * n + c] = (0..=c).map(|j| h(r, j) * self.nn[j * n + c]).sum();
+                self.y[r * n + c] = (0..=c).map(|j| h(r, j) * r_inv[j * n + c]).sum();
             }
         }
         // S = YYᵀ + R_a and R_a, factored.
@@ -243,7 +247,7 @@ impl Estimates {
             self.x[i * n..i * n + n].copy_from_slice(&srif.info[i * w..i * w + n]);
         }
         upper_inverse(&self.x, &mut self.nn, n);
-        gram_rows(&self.nn, &mut self.p_post, n);
+        mul_abt_sym(&mut self.p_post, &self.nn, &self.nn, None, n, n);
         for i in 0..n {
             for j in 0..n {
                 // (R̃ᵀR̃)_ij
@@ -252,13 +256,7 @@ impl Estimates {
                     .sum();
             }
         }
-        for i in 0..n {
-            for j in 0..n {
-                self.a[i * n + j] = (0..n)
-                    .map(|q| self.p_post[i * n + q] * self.nn[q * n + j])
-                    .sum();
-            }
-        }
+        mul(&mut self.a, &self.p_post, &self.nn, n, n, n);
         // K = P̃ H_aᵀ S⁻¹ (n × ma): rows solved against S.
         for i in 0..n {
             for r in 0..ma {
@@ -273,7 +271,6 @@ impl Estimates {
         }
         // ∂P̃ = −X P̃ − P̃ Xᵀ, X = R̃⁻¹∂R̃; ∂S = H∂P̃Hᵀ + ∂H P̃Hᵀ + H P̃∂Hᵀ + ∂R;
         // ∂K = (∂P̃Hᵀ + P̃∂Hᵀ − K∂S) S⁻¹.
-        upper_inverse(&self.r_prior, &mut self.nn, n);
         for (d, p) in partials.iter().enumerate() {
             let dr = &self.d_r_prior[d * n * n..(d + 1) * n * n];
             let dp = &mut self.d_p[d * n * n..(d + 1) * n * n];
@@ -281,7 +278,9 @@ impl Estimates {
             let x = &mut self.x;
             for i in 0..n {
                 for j in 0..n {
-                    x[i * n + j] = (0..n).map(|q| self.nn[i * n + q] * dr[q * n + j]).sum();
+                    x[i * n + j] = (0..n)
+                        .map(|q| self.r_prior_inv[i * n + q] * dr[q * n + j])
+                        .sum();
                 }
             }
             for i in 0..n {
@@ -414,15 +413,6 @@ fn upper_inverse(r: &[f64], out: &mut [f64], n: usize) {
         for i in (0..c).rev() {
             let s: f64 = (i + 1..=c).map(|q| r[i * n + q] * out[q * n + c]).sum();
             out[i * n + c] = -s / r[i * n + i];
-        }
-    }
-}
-
-/// X Xᵀ of `x` (n × n) into `out`.
-fn gram_rows(x: &[f64], out: &mut [f64], n: usize) {
-    for i in 0..n {
-        for j in 0..n {
-            out[i * n + j] = (0..n).map(|q| x[i * n + q] * x[j * n + q]).sum();
         }
     }
 }

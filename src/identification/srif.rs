@@ -469,8 +469,11 @@ impl Srif {
                 }
             }
             k.copy_from_slice(kk);
-            // a = ∂e − K e
-            for r in (0..ma).filter(|_| self.data_term) {
+            // a = ∂e − K e (the sample information's data term only)
+            if !self.data_term {
+                continue;
+            }
+            for r in 0..ma {
                 let ke: f64 = (0..ma).map(|s| k[r * ma + s] * a[(n + s) * mw + n]).sum();
                 self.a_info[d * m + r] = a[(n + r) * mw + off + n] - ke;
             }

@@ -283,6 +283,52 @@ fn analyze_sync_and_job_equal_the_cli() {
     }
 }
 
+/// An analysis with its error budget: `kea analyze --budget`, the synchronous route and
+/// a job give the same bits; the job's progress ends at 1 (its two passes share it).
+#[test]
+fn a_budget_is_the_same_from_the_cli_the_api_and_a_job() {
+    let dir = tmp();
+    let s = Server::start(dir.path(), &[]);
+    let file = common::repo().join("presets").join("helicopter-range.json");
+    let args = vec![
+        "analyze".into(),
+        file.into_os_string(),
+        "--json".into(),
+        "--budget".into(),
+    ];
+    let cli = without_timing(kea_json(&args));
+    assert_eq!(cli["budget"]["sources"].as_array().unwrap().len(), 12);
+    let body = json!({"model": preset("helicopter-range"), "budget": true});
+    let sync = s.post("/v1/analyze", &body);
+    assert_eq!(sync.status, 200, "{}", sync.text);
+    assert_eq!(
+        without_timing(sync.json()),
+        cli,
+        "sync analysis with its budget"
+    );
+    let mut job_body = body.clone();
+    job_body["kind"] = json!("analysis");
+    let job = s.post("/v1/jobs", &job_body);
+    assert_eq!(job.status, 202, "{}", job.text);
+    let job_id = job.json()["id"].as_str().unwrap().to_string();
+    let done = s.wait_finished(&job_id, LONG);
+    assert_eq!(done["status"], "succeeded", "{done}");
+    assert_eq!(done["progress"], 1.0);
+    let result = s.get(&format!("/v1/jobs/{job_id}/result"));
+    assert_eq!(
+        without_timing(result.json()),
+        cli,
+        "job analysis with its budget"
+    );
+    // Not a yes/no: a 422 at its path.
+    let bad = s.post(
+        "/v1/analyze",
+        &json!({"model": preset("helicopter-range"), "budget": 1}),
+    );
+    assert_eq!(bad.status, 422, "{}", bad.text);
+    assert!(bad.text.contains("\"budget\""), "{}", bad.text);
+}
+
 /// A Monte Carlo job gives `kea monte-carlo`'s result, bit for bit — also without a
 /// seed, where both take the documented default (the server once took 0, the CLI 1).
 #[test]

@@ -642,6 +642,7 @@ impl<'m, const N: usize> Engine<'m, N> {
             final_,
             steady_state,
             traces,
+            budget: None,
             timing: Timing {
                 resumed_from_step: resumed_from,
                 ..Timing::default()

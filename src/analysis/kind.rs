@@ -1,5 +1,6 @@
-//! The analysis as a kind of run ([`crate::kind`]): `{model, set?}` → the analysis
-//! result (METHOD §1.2–§1.6).
+//! The analysis as a kind of run ([`crate::kind`]): `{model, set?, budget?}` → the
+//! analysis result (METHOD §1.2–§1.6), with its error budget when asked
+//! ([`super::budget`]).
 
 use super::result::{AnalysisResult, Timing};
 use crate::error::Error;
@@ -19,27 +20,40 @@ pub struct Analysis;
 pub struct Request {
     pub model: Model,
     pub compiled: CompiledModel,
+    /// Also the error budget (`"budget": true`; default false).
+    pub budget: bool,
 }
 
 impl Kind for Analysis {
     const NAME: &'static str = "analysis";
     const ALIASES: &'static [&'static str] = &[];
-    const MEMBERS: &'static [&'static str] = &["model", "model_id", "set"];
+    const MEMBERS: &'static [&'static str] = &["model", "model_id", "set", "budget"];
     type Request = Request;
     type Outcome = AnalysisResult;
 
     fn prepare(obj: Map<String, Value>) -> Result<Request, Error> {
         let mut errors = request::unknown_members(&obj, Self::MEMBERS);
         let (model, set) = request::model_and_set(&obj, &mut errors);
+        let budget = request::flag(&obj, "budget", &mut errors).unwrap_or(false);
         let Some(model) = model.filter(|_| errors.is_empty()) else {
             return Err(Error::Invalid(errors));
         };
         let compiled = request::compile(&model, &set).map_err(request::locate)?;
-        Ok(Request { model, compiled })
+        Ok(Request {
+            model,
+            compiled,
+            budget,
+        })
     }
 
     fn work(r: &Request) -> Work {
-        super::work::analysis_work(&r.compiled, Some(&r.model))
+        let mut work = super::work::analysis_work(&r.compiled, Some(&r.model));
+        if r.budget {
+            let (units, explain) = super::work::budget_work(&r.compiled);
+            work.units += units;
+            work.explain += &format!(" + the budget {explain}");
+        }
+        work
     }
 
     fn run<E: Executor>(
@@ -49,8 +63,27 @@ impl Kind for Analysis {
         memo: &dyn Memo,
     ) -> Result<AnalysisResult, Error> {
         // The step loop's state is kept in the memo as it goes: a run after a restart
-        // goes on from the last one kept (crate::resume).
-        super::run_resumable(&r.compiled, progress, memo).map_err(request::locate)
+        // goes on from the last one kept (crate::resume). The budget's pass runs after
+        // it (from the start again after a restart), progress split by their work.
+        if !r.budget {
+            return super::run_resumable(&r.compiled, progress, memo).map_err(request::locate);
+        }
+        let analysis = super::work::analysis_work(&r.compiled, Some(&r.model)).units;
+        let (budget, _) = super::work::budget_work(&r.compiled);
+        let split = analysis / (analysis + budget);
+        let mut first = |f: f64| progress.report(f * split);
+        let mut result =
+            super::run_resumable(&r.compiled, &mut first, memo).map_err(request::locate)?;
+        let frozen_at = result
+            .steady_state
+            .as_ref()
+            .filter(|s| s.shortcut_used)
+            .map(|s| s.reached_at_step);
+        let mut second = |f: f64| progress.report(split + f * (1.0 - split));
+        let b = super::budget::run(&r.compiled, result.steps, frozen_at, &mut second)
+            .map_err(request::locate)?;
+        result.budget = Some(b);
+        Ok(result)
     }
 
     fn timing(o: &mut AnalysisResult) -> &mut Timing {

@@ -21,6 +21,7 @@ use engine::Engine;
 pub use state::{SELECTION_KEY, STATE_KEY};
 use std::ops::ControlFlow;
 
+pub mod budget;
 pub mod inputs;
 pub mod kind;
 pub mod report;

@@ -1,5 +1,6 @@
 //! Plain-text and CSV renderings of a result, shared by the CLI, the server and wasm.
 
+use crate::analysis::budget::{Budget, Shares, StateBudget};
 use crate::analysis::result::{AnalysisResult, CriteriaSet};
 use crate::text::{CELL, cell, csv_text, num, short};
 use std::fmt::Write;
@@ -83,10 +84,76 @@ pub fn criteria_table(r: &AnalysisResult) -> String {
             }
         );
     }
+    if let Some(b) = &r.budget {
+        budget_tables(&mut s, b);
+    }
     for w in &r.warnings {
         let _ = writeln!(s, "warning: {w}");
     }
     s
+}
+
+/// The error budget: each source's share (%) of every state's filtered variance at t_D
+/// and averaged over the steps, and of the open-loop variance at t_D; the SKOs they
+/// split under each.
+fn budget_tables(s: &mut String, b: &Budget) {
+    type Pick = fn(&StateBudget) -> &Shares;
+    let tables: [(&str, Pick, bool); 3] = [
+        ("filtered variance at t_D", |x| &x.potential, true),
+        (
+            "filtered variance averaged over the steps",
+            |x| &x.potential,
+            false,
+        ),
+        ("open-loop variance at t_D", |x| &x.open_loop, true),
+    ];
+    let w = b
+        .sources
+        .iter()
+        .map(|x| x.name.chars().count())
+        .max()
+        .unwrap_or(0)
+        .max("SKO".len());
+    let cw = b
+        .states
+        .iter()
+        .map(|x| x.state.chars().count())
+        .max()
+        .unwrap_or(0)
+        .max(CELL);
+    for (title, pick, at_end) in tables {
+        let _ = writeln!(s, "\nerror budget: each source's share (%) of the {title}");
+        let mut head = format!("{:<w$} |", "source");
+        for st in &b.states {
+            let _ = write!(head, " {:>cw$}", st.state);
+        }
+        let _ = writeln!(s, "{head}");
+        let _ = writeln!(s, "{}", "-".repeat(head.chars().count()));
+        for (k, src) in b.sources.iter().enumerate() {
+            let mut line = format!("{:<w$} |", src.name);
+            for st in &b.states {
+                let sh = pick(st);
+                let share = if at_end {
+                    &sh.final_share
+                } else {
+                    &sh.mean_share
+                };
+                let _ = write!(line, " {:>cw$}", cell(share[k].map(|x| 100.0 * x)));
+            }
+            let _ = writeln!(s, "{line}");
+        }
+        let mut line = format!("{:<w$} |", "SKO");
+        for st in &b.states {
+            let sh = pick(st);
+            let v = if at_end {
+                sh.final_variance
+            } else {
+                sh.mean_variance
+            };
+            let _ = write!(line, " {:>cw$}", cell(Some(v.max(0.0).sqrt())));
+        }
+        let _ = writeln!(s, "{line}");
+    }
 }
 
 fn notes(s: &mut String, set: &str, c: &CriteriaSet) {

@@ -34,6 +34,9 @@ pub struct AnalysisResult {
     pub final_: Final,
     pub steady_state: Option<SteadyState>,
     pub traces: Traces,
+    /// The error budget, when the request asked for it (`"budget": true`).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub budget: Option<super::budget::Budget>,
     pub timing: Timing,
     /// Things the user should know (e.g. the shortcut was not applicable).
     pub warnings: Vec<String>,

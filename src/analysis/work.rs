@@ -304,6 +304,20 @@ pub fn analysis_work(compiled: &CompiledModel, model: Option<&Model>) -> Work {
     }
 }
 
+/// The error budget's pass ([`crate::analysis::budget`]): D (for `"auto"` the cap) ×
+/// its step, which runs the filter's step again and one recursion per source — the
+/// work grows with the number of sources. Its units and how they were computed.
+pub fn budget_work(compiled: &CompiledModel) -> (f64, String) {
+    let (n, nm) = (compiled.n_states(), compiled.n_measurements());
+    let sources = crate::analysis::budget::source_count(compiled);
+    let step = crate::analysis::budget::step_units(n, nm, sources);
+    let steps = compiled.max_steps();
+    (
+        steps as f64 * step,
+        format!("D = {steps} steps × {step:.0} ({sources} sources)"),
+    )
+}
+
 /// Units of parsing one expression (a distinct text of a member), constant or in t:
 /// exmex builds a parsed expression of tens of KB, and one in t is parsed twice (for
 /// one value and for blocks of values). Measured (a 2-core Zen 4, `kea analyze` of one

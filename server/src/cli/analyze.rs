@@ -1,4 +1,4 @@
-//! `kea analyze MODEL.json|preset:NAME [--set name=value]… [--json] [--csv FILE|-]`.
+//! `kea analyze MODEL.json|preset:NAME [--set name=value]… [--budget] [--json] [--csv FILE|-]`.
 
 use crate::Run;
 use std::path::PathBuf;
@@ -11,6 +11,10 @@ pub struct Args {
     /// Override a model parameter, e.g. `--set q=0.5` (repeatable).
     #[arg(long = "set", value_name = "NAME=VALUE", value_parser = super::parse_override)]
     pub set: Vec<(String, f64)>,
+    /// Also the error budget: each error source's share of every state's filtered and
+    /// open-loop variance (one more covariance recursion per source).
+    #[arg(long)]
+    pub budget: bool,
     /// Print the whole result as JSON instead of the criteria table.
     #[arg(long)]
     pub json: bool,
@@ -33,7 +37,7 @@ impl Run for Args {
             Ok(s) => s,
             Err(code) => return code,
         };
-        let request = serde_json::json!({ "model": model, "set": set });
+        let request = serde_json::json!({ "model": model, "set": set, "budget": self.budget });
         let run = super::KindRun {
             kind: "analysis",
             input: &self.model,

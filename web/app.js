@@ -8,6 +8,7 @@
 import { ModelEditor, isDiscrete, modelProblem } from './editor.js';
 import { api } from './api.js';
 import { BrowserRunner, ServerRunner, WasmWorker, problemOf } from './runner.js';
+import { BudgetView } from './budget.js';
 import { TraceChart, criteriaTable, duration, finalTable, fmt, resumedText, scrollHint } from './results.js';
 import { mountTabs } from './tabs.js';
 import { ProgressText, modelErrorsText, runAnyway, runPart } from './views.js';
@@ -385,7 +386,8 @@ async function run() {
     return;
   }
   const json = modelJson(); // the model as the run starts
-  await follow(where, runner, (onProgress) => runner.run(json, onProgress), state.edits);
+  const budget = $('run-budget').checked;
+  await follow(where, runner, (onProgress) => runner.run(json, onProgress, { budget }), state.edits);
 }
 
 /**
@@ -530,6 +532,7 @@ function showResult(r, where, elapsed, current) {
   $('summary').dataset.elapsedMs = String(elapsed);
   $('warnings').replaceChildren(...r.warnings.map((w) => Object.assign(document.createElement('li'), { textContent: w })));
   $('criteria').replaceChildren(criteriaTable(r));
+  budget.show(r);
   $('final').replaceChildren(finalTable(r));
   for (const box of [$('criteria'), $('final')]) scrollHint(box);
   const select = $('trace-state');
@@ -542,6 +545,7 @@ function showResult(r, where, elapsed, current) {
 }
 
 const chart = new TraceChart($('chart'));
+const budget = new BudgetView($('budget'));
 
 // ------------------------------------------------------------------ wiring
 

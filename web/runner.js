@@ -118,17 +118,21 @@ export class WorkGate {
   }
 }
 
-/** Runs in the browser: analyze on its own worker, so cancel can terminate it. */
+/**
+ * Runs in the browser: analyze on its own worker, so cancel can terminate it. Both
+ * runners' `run(modelJson, onProgress, {budget})` also ask for the error budget.
+ */
 export class BrowserRunner {
   constructor() {
     this.worker = null;
     this.gate = new WorkGate('analysis_work');
   }
 
-  async run(modelJson, onProgress) {
+  async run(modelJson, onProgress, { budget = false } = {}) {
     this.worker ??= new WasmWorker();
-    await this.gate.check(this.worker, { model: modelJson, set: '' }, modelJson);
-    const result = await this.worker.call('analyze', { model: modelJson, set: '' }, onProgress);
+    const args = { model: modelJson, set: '', budget };
+    await this.gate.check(this.worker, args, `${budget}${modelJson}`);
+    const result = await this.worker.call('analyze', args, onProgress);
     return { result };
   }
 
@@ -222,8 +226,9 @@ export class ServerRunner {
     this.cancelRequested = false;
   }
 
-  run(modelJson, onProgress) {
-    return this.runJob(`{"kind":"analysis","model":${modelJson}}`, onProgress);
+  run(modelJson, onProgress, { budget = false } = {}) {
+    const also = budget ? ',"budget":true' : '';
+    return this.runJob(`{"kind":"analysis","model":${modelJson}${also}}`, onProgress);
   }
 
   /** A refused request's or a failed job's problem, as the page reports it. */

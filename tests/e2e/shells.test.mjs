@@ -70,6 +70,19 @@ test('an analysis gives the same bits through the CLI, a job and wasm', async ()
   assert.equal(bits(browser), bits(cli));
 });
 
+test('an analysis with its error budget gives the same bits through the CLI, a job and wasm', async () => {
+  const request = { model: model(), set: { q: 2 }, budget: true };
+  const cli = JSON.parse(kea('analyze', file('model.json', request.model), '--set', 'q=2', '--budget', '--json'));
+  assert.equal(cli.budget.sources.length, 4, 'η0 ×2, one model error, one measurement error');
+  const job = await viaJob('analysis', request);
+  const browser = viaWasm('analysis', request);
+  // The page's own call: the worker's analyze(model, set, budget, progress).
+  const page = JSON.parse(wasm.analyze(JSON.stringify(request.model), '{"q": 2}', true, () => true));
+  assert.equal(bits(job), bits(cli));
+  assert.equal(bits(browser), bits(cli));
+  assert.equal(bits(page), bits(cli));
+});
+
 test('a Monte Carlo gives the same bits through the CLI, a job and wasm', async () => {
   const request = { model: model(), runs: 40, seed: 11, truth: 'mean', model_error: 'constant', trace_points: 12 };
   const cli = JSON.parse(

@@ -153,11 +153,13 @@ fn run_as(kind: &str, request_json: &str, progress: &js_sys::Function) -> Result
 }
 
 /// The analysis request of a model and its overrides (JSON texts; an empty `set` is
-/// none).
-fn analysis_request(model_json: &str, set_json: &str) -> Result<String, Error> {
+/// none), with its error budget when `budget`.
+fn analysis_request(model_json: &str, set_json: &str, budget: bool) -> Result<String, Error> {
     let set = overrides(set_json)?;
     let set = serde_json::to_string(&set).expect("overrides serialise");
-    Ok(format!(r#"{{"model": {model_json}, "set": {set}}}"#))
+    Ok(format!(
+        r#"{{"model": {model_json}, "set": {set}, "budget": {budget}}}"#
+    ))
 }
 
 /// [`work`] of a synthesis request (an alias kept for older pages).
@@ -178,24 +180,26 @@ pub fn simulation_work(request_json: &str) -> Result<String, JsValue> {
     monte_carlo_work(request_json)
 }
 
-/// [`work`] of the analysis of a model with overrides, its errors at the model's
-/// own paths (`system.a[1][2]`).
+/// [`work`] of the analysis of a model with overrides (and its error budget when
+/// `budget`), its errors at the model's own paths (`system.a[1][2]`).
 #[wasm_bindgen]
-pub fn analysis_work(model_json: &str, set_json: &str) -> Result<String, JsValue> {
-    let request = analysis_request(model_json, set_json).map_err(|e| to_js(&e))?;
+pub fn analysis_work(model_json: &str, set_json: &str, budget: bool) -> Result<String, JsValue> {
+    let request = analysis_request(model_json, set_json, budget).map_err(|e| to_js(&e))?;
     let prepared = prepare("analysis", &request).map_err(|e| to_js(&e.without_prefix("model")))?;
     Ok(work_json(prepared.work()))
 }
 
-/// [`run`] of the analysis of a model with overrides, its errors at the model's own
-/// paths (`system.a[1][2]`), for the editor's cells.
+/// [`run`] of the analysis of a model with overrides (and its error budget when
+/// `budget`), its errors at the model's own paths (`system.a[1][2]`), for the
+/// editor's cells.
 #[wasm_bindgen]
 pub fn analyze(
     model_json: &str,
     set_json: &str,
+    budget: bool,
     progress: &js_sys::Function,
 ) -> Result<String, JsValue> {
-    analysis_request(model_json, set_json)
+    analysis_request(model_json, set_json, budget)
         .and_then(|request| run_as("analysis", &request, progress))
         .map_err(|e| to_js(&e.without_prefix("model")))
 }
@@ -332,7 +336,7 @@ mod tests {
     fn work_is_the_servers_estimate_with_its_default_limit() {
         let model = kea_core::presets::get_json("cv-tracker").unwrap();
         let out: serde_json::Value =
-            serde_json::from_str(&analysis_work(model, "").unwrap()).unwrap();
+            serde_json::from_str(&analysis_work(model, "", false).unwrap()).unwrap();
         let parsed = kea_core::model_from_json(model).unwrap();
         let compiled = kea_core::model::compile(&parsed, &Overrides::new()).unwrap();
         let expected = kea_core::analysis::work::analysis_work(&compiled, Some(&parsed));

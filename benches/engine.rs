@@ -1,7 +1,8 @@
 //! The engine's performance workloads (BENCHMARKS.md): the seed's Table 1 (D = 10⁶,
 //! P states, n = P measurements, time-varying a(t)), N = 30, the steady-state
 //! shortcut, the Python peer's model (the whole analysis, and the filter's covariance
-//! recursion alone), and the cost of expression evaluation.
+//! recursion alone), the error budget's cost per source, and the cost of expression
+//! evaluation.
 //!
 //!     cargo bench -p kea-core --bench engine            # everything (~2 min)
 //!     cargo bench -p kea-core --bench engine -- table1  # a filter on the names
@@ -148,6 +149,30 @@ fn main() {
         if want(name) {
             time(name, &chain(10, d, 0, shortcut), runs(5));
         }
+    }
+    if want("budget P=10") {
+        // The error budget's pass (kea_core::analysis::budget) on the Table 1 chain: its
+        // cost per source and step against the filter's covariance recursion alone.
+        let steps = d / 10;
+        let model = chain(10, steps, 10, false);
+        let compiled = kea_core::model::compile(&model, &Default::default()).expect("compiles");
+        let sources = kea_core::analysis::budget::source_count(&compiled);
+        let alone = time_with("budget P=10: recursion only", &model, runs(5), || {
+            let r = covariance_recursion(&model, &Default::default(), &mut NoProgress)
+                .expect("bench runs");
+            std::hint::black_box(&r);
+        });
+        let pass = time_with("budget P=10: the budget's pass", &model, runs(3), || {
+            let b = kea_core::analysis::budget::run(&compiled, steps, None, &mut NoProgress)
+                .expect("bench runs");
+            std::hint::black_box(&b);
+        });
+        let per = (pass - alone) / sources as f64;
+        println!(
+            "budget per source: {:.1} ns/step, {:.2}× the covariance recursion alone ({sources} sources)",
+            per / steps as f64 * 1e9,
+            per / alone
+        );
     }
     if want("expressions") {
         let with = time(

@@ -318,3 +318,42 @@ fn budget_is_a_flag_and_costs_per_source() {
     let r = analyse(json!({ "model": model }));
     assert!(r.budget.is_none());
 }
+
+/// Past N = 12 the pass is runtime-sized: its parts still add up to the analysis's
+/// variances (a 13-state chain, 5 of its states measured).
+#[test]
+fn a_runtime_sized_model_adds_up_too() {
+    let n = 13;
+    let a = common::chain_a(n, |i| json!(-0.3 - 0.05 * i as f64), json!(1.0));
+    let eye = |k: usize, m: usize| -> Vec<Vec<f64>> {
+        (0..k)
+            .map(|i| (0..m).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
+            .collect()
+    };
+    let model = json!({
+        "kea_model": 1,
+        "time": { "t0": 0, "t_end": 5, "steps": 2000 },
+        "system": {
+            "states": (0..n).map(|i| format!("x{i}")).collect::<Vec<_>>(),
+            "a": a, "b": eye(n, n), "phi": vec![0.3; n], "eta0": vec![0.5; n]
+        },
+        "measurement": {
+            "names": (0..5).map(|i| format!("z{i}")).collect::<Vec<_>>(),
+            "c": eye(5, n), "gamma": eye(5, 5), "psi": vec![0.1; 5]
+        }
+    });
+    let (r, b) = budget_of(model, json!({}));
+    assert_eq!(b.sources.len(), n + n + 5);
+    for (i, s) in b.states.iter().enumerate() {
+        let e = rel(
+            s.potential.final_variance,
+            r.final_.potential_sko[i].powi(2),
+        );
+        assert!(e <= 1e-12, "{}: {e:e}", s.state);
+        let e = rel(
+            s.open_loop.final_variance,
+            r.final_.open_loop_sko[i].powi(2),
+        );
+        assert!(e <= 1e-12, "{}: open loop {e:e}", s.state);
+    }
+}

@@ -20,15 +20,13 @@
 //! A source's share of a state's variance is R^s_ii / Σ_s R^s_ii, at t_D and averaged
 //! over the steps (the share of Σ_k R_ii: the share of the time-averaged variance).
 
-use crate::analysis::Checkpoints;
-use crate::analysis::inputs::{Inputs, time_err};
 use crate::error::Error;
 use crate::model::compile::{CompiledModel, MeasurementNoise};
-use crate::numerics::lanes::Scalar;
-use crate::numerics::linalg::{predict_cov, predict_in_place, predict_work};
-use crate::numerics::riccati::{Prepared, SequentialJoseph};
+use crate::numerics::lanes::Lanes;
 use crate::progress::Progress;
 use serde::{Deserialize, Serialize};
+
+mod pass;
 
 /// The error budget of an analysis (`"budget": true`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -220,17 +218,7 @@ pub fn run(
     frozen_at: Option<u64>,
     progress: &mut dyn Progress,
 ) -> Result<Budget, Error> {
-    let (n, nm) = (m.n_states(), m.n_measurements());
-    let dt = (m.t_end - m.t0) / steps as f64;
-    let nl = m.b.cols;
-    let ms = m.noise.sources();
-    let mut inp = Inputs::new(m, n, dt);
-    let mut prep = Prepared::new(n, nm);
-    let mut joseph = SequentialJoseph::new(n, nm);
-    let mut big_r = vec![0.0; n * n];
-    for i in 0..n {
-        big_r[i * n + i] = m.eta0[i] * m.eta0[i];
-    }
+    let n = m.n_states();
     let mut parts: Vec<Part> = levels(m)
         .into_iter()
         .map(|level| {
@@ -249,128 +237,7 @@ pub fn run(
             }
         })
         .collect();
-    let mut schedule = m.schedule.clone();
-    let mut avail = vec![true; nm];
-    let mut avail_prev = vec![true; nm];
-    // Work buffers: the prediction's, a source's predicted part, h r, p Γ_G, its product with V_GG.
-    let mut u = predict_work(n);
-    let mut r_pred = vec![0.0; n * n];
-    let mut hr = vec![0.0; n * n];
-    let mut pg = vec![0.0; n * ms];
-    let mut pgv = vec![0.0; n * ms];
-    let per_step = step_units(n, nm, parts.len());
-    let mut checkpoints = Checkpoints::new(per_step);
-
-    for k in 1..=steps {
-        let t_k = m.t0 + k as f64 * dt;
-        inp.at(m, k, k == 1)?;
-        let frozen = frozen_at.is_some_and(|f| k > f);
-        if !frozen {
-            let all = match schedule.as_mut() {
-                None => true,
-                Some(sc) => sc
-                    .mask(k, t_k, &mut avail)
-                    .map_err(|p| time_err(&p, k, t_k))?,
-            };
-            if k == 1 || inp.rv_changed || avail != avail_prev {
-                let mask = (!all).then_some(&avail[..]);
-                prep.prepare(&m.c, &inp.rv, mask, n, nm)
-                    .map_err(|_| lost(k, t_k))?;
-                avail_prev.copy_from_slice(&avail);
-            }
-            if !joseph.step::<0, Scalar>(n, &mut big_r, &inp.e, &inp.big_b, &prep) {
-                return Err(lost(k, t_k));
-            }
-        }
-        // B's parts (1.15), where b changed.
-        if k == 1 || !inp.b_fn.is_constant() {
-            for part in &mut parts {
-                if let Level::Model(g) = &part.level {
-                    let b = &mut part.big_b;
-                    for i in 0..n {
-                        for j in i..n {
-                            let mut s = 0.0;
-                            for &a in g {
-                                for &c in g {
-                                    s += inp.bd[i * nl + a] * m.w[a * nl + c] * inp.bd[j * nl + c];
-                                }
-                            }
-                            b[i * n + j] = s;
-                            b[j * n + i] = s;
-                        }
-                    }
-                }
-            }
-        }
-        let ht = &joseph.ht;
-        for part in &mut parts {
-            // r^s = A R^s Aᵀ + B^s (2.1), then R^s = h r^s hᵀ (+ p Rv^s pᵀ) (2.7)
-            predict_cov::<0, Scalar>(&mut r_pred, &part.r, &inp.e, &part.big_b, &mut u, n);
-            // (h r)_i· = Σ_b h_ib r_b· (h_ib = hᵀ_bi)
-            hr.fill(0.0);
-            for b in 0..n {
-                let rb = &r_pred[b * n..b * n + n];
-                let hb = &ht[b * n..b * n + n];
-                for i in 0..n {
-                    let h = hb[i];
-                    if h != 0.0 {
-                        for (o, r) in hr[i * n..i * n + n].iter_mut().zip(rb) {
-                            *o += h * r;
-                        }
-                    }
-                }
-            }
-            // R^s_ij = Σ_b (h r)_ib h_jb, the upper triangle, mirrored
-            for i in 0..n {
-                for j in i..n {
-                    let mut s = 0.0;
-                    for b in 0..n {
-                        s += hr[i * n + b] * ht[b * n + j];
-                    }
-                    part.r[i * n + j] = s;
-                }
-            }
-            if let Level::Measurement(g) = &part.level {
-                // p Γ_G (N × |G|), times V_GG, times (p Γ_G)ᵀ
-                let w = g.len();
-                for i in 0..n {
-                    for (x, &c) in g.iter().enumerate() {
-                        pg[i * w + x] = (0..nm)
-                            .map(|j| joseph.gain_t[j * n + i] * inp.gamma[j * ms + c])
-                            .sum();
-                    }
-                }
-                for i in 0..n {
-                    for (x, &c) in g.iter().enumerate() {
-                        pgv[i * w + x] = g
-                            .iter()
-                            .enumerate()
-                            .map(|(y, &d)| pg[i * w + y] * m.v[d * ms + c])
-                            .sum();
-                    }
-                }
-                for i in 0..n {
-                    for j in i..n {
-                        let s: f64 = (0..w).map(|x| pgv[i * w + x] * pg[j * w + x]).sum();
-                        part.r[i * n + j] += s;
-                    }
-                }
-            }
-            for i in 0..n {
-                for j in i + 1..n {
-                    part.r[j * n + i] = part.r[i * n + j];
-                }
-                part.sum_r[i] += part.r[i * n + i];
-            }
-            if let Some(p_y) = &mut part.p_y {
-                predict_in_place::<0, Scalar>(p_y, &inp.e, &part.big_b, &mut u, n);
-                for i in 0..n {
-                    part.sum_p[i] += p_y[i * n + i];
-                }
-            }
-        }
-        checkpoints.at(progress, k, || k as f64 / steps as f64)?;
-    }
+    dispatch(m, steps, frozen_at, &mut parts, progress)?;
 
     let sources = parts.iter().map(|p| describe(m, &p.level)).collect();
     let states = (0..n)
@@ -390,6 +257,59 @@ pub fn run(
         })
         .collect();
     Ok(Budget { sources, states })
+}
+
+/// The pass in the analysis's widest build ([`crate::analysis::build`]).
+fn dispatch(
+    m: &CompiledModel,
+    steps: u64,
+    frozen_at: Option<u64>,
+    parts: &mut [Part],
+    progress: &mut dyn Progress,
+) -> Result<(), Error> {
+    #[cfg(target_arch = "x86_64")]
+    if crate::analysis::build() != crate::analysis::Build::Baseline {
+        #[target_feature(enable = "avx2,fma")]
+        fn avx2(
+            m: &CompiledModel,
+            steps: u64,
+            frozen_at: Option<u64>,
+            parts: &mut [Part],
+            progress: &mut dyn Progress,
+        ) -> Result<(), Error> {
+            sized::<crate::numerics::lanes::Avx2>(m, steps, frozen_at, parts, progress)
+        }
+        // SAFETY: `build` chose AVX2 + FMA (or wider) only where the CPU has them.
+        return unsafe { avx2(m, steps, frozen_at, parts, progress) };
+    }
+    sized::<crate::numerics::lanes::Scalar>(m, steps, frozen_at, parts, progress)
+}
+
+/// The pass compiled for the model's state dimension (1..=12, else runtime-sized).
+#[inline(always)]
+fn sized<L: Lanes>(
+    m: &CompiledModel,
+    steps: u64,
+    frozen_at: Option<u64>,
+    parts: &mut [Part],
+    progress: &mut dyn Progress,
+) -> Result<(), Error> {
+    let (s, f, p) = (steps, frozen_at, progress);
+    match m.n_states() {
+        1 => pass::run::<1, L>(m, s, f, parts, p),
+        2 => pass::run::<2, L>(m, s, f, parts, p),
+        3 => pass::run::<3, L>(m, s, f, parts, p),
+        4 => pass::run::<4, L>(m, s, f, parts, p),
+        5 => pass::run::<5, L>(m, s, f, parts, p),
+        6 => pass::run::<6, L>(m, s, f, parts, p),
+        7 => pass::run::<7, L>(m, s, f, parts, p),
+        8 => pass::run::<8, L>(m, s, f, parts, p),
+        9 => pass::run::<9, L>(m, s, f, parts, p),
+        10 => pass::run::<10, L>(m, s, f, parts, p),
+        11 => pass::run::<11, L>(m, s, f, parts, p),
+        12 => pass::run::<12, L>(m, s, f, parts, p),
+        _ => pass::run::<0, L>(m, s, f, parts, p),
+    }
 }
 
 fn shares(fin: &[f64], mean: &[f64]) -> Shares {

@@ -32,6 +32,7 @@ pub mod analysis;
 pub mod identification;
 pub mod monte_carlo;
 pub mod nonlinear;
+pub mod sensitivity;
 pub mod synthesis;
 
 pub mod registry;

@@ -129,6 +129,7 @@ kinds! {
     Synthesis => crate::synthesis::kind::Synthesis,
     Identification => crate::identification::kind::Identification,
     Nonlinear => crate::nonlinear::kind::Nonlinear,
+    Sensitivity => crate::sensitivity::kind::Sensitivity,
 }
 
 /// The error for a `kind` that names none (at the request's `kind`).

@@ -51,6 +51,8 @@ commands! {
     MonteCarlo(cli::monte_carlo::Args),
     /// Synthesis: the error levels that reach a desired filtering effect.
     Synthesize(cli::synthesize::Args),
+    /// Sensitivity: which param moves the filtering effect most (d ln F / d ln p).
+    Sensitivity(cli::sensitivity::Args),
     /// Identification: the maximum-likelihood params of a model from measured data.
     Identify(cli::identify::Args),
     /// Nonlinear: the EKF and the iterative regularised procedure over measured data.

@@ -606,6 +606,7 @@ fn responses_validate_against_the_spec() {
                "procedure": {"alpha": [1, 0.6, 0.5], "earlier_residuals": "posterior"},
                "data": {"truth": {"seed": 1, "y0": [1000, 50], "phi": [0, 1]}},
                "q_scale": [0.1, 1, 10], "checkpoints": [1, 2000], "trace_points": 20}),
+        json!({"kind": "sensitivity", "model": cv, "params": ["q", "r"], "rank_by": "covariance.zx"}),
     ];
     let schemas = &spec["components"]["schemas"];
     let mut kinds_run = BTreeSet::new();
@@ -638,7 +639,7 @@ fn responses_validate_against_the_spec() {
         );
         let tp = format!("/v1/jobs/{jid}/traces.csv");
         let csv = s.get(&tp);
-        if kind == "synthesis" {
+        if kind == "synthesis" || kind == "sensitivity" {
             expect("get", &tp, &csv, 404);
         } else {
             expect("get", &tp, &csv, 200);

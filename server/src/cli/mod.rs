@@ -6,6 +6,7 @@ pub mod identify;
 pub mod monte_carlo;
 pub mod nonlinear;
 pub mod presets;
+pub mod sensitivity;
 pub mod synthesize;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};

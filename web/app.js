@@ -496,6 +496,7 @@ async function openJob(job, tabs) {
     tabs.open(job.kind, job.id, request, model, body);
     return;
   }
+  $('run-budget').checked = request.budget === true;
   const runner = runners.server;
   runner.store({ id: job.id, body });
   follow('server', runner, (onProgress) => runner.attach(job.id, onProgress), state.edits, job.id, true);

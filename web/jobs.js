@@ -12,7 +12,7 @@ import { modelName } from './models.js';
 
 const PAGE = 50;
 /** Each job kind's tab, as the page names it. */
-export const KINDS = { analysis: 'Analysis', synthesis: 'Synthesis', monte_carlo: 'Monte Carlo', identification: 'Identification', nonlinear: 'Nonlinear' };
+export const KINDS = { analysis: 'Analysis', synthesis: 'Synthesis', monte_carlo: 'Monte Carlo', identification: 'Identification', nonlinear: 'Nonlinear', sensitivity: 'Sensitivity' };
 const POLL_MS = 2000;
 
 /**

@@ -1,6 +1,7 @@
 // The tabs of the run pane: Analysis (app.js), Synthesis (synthesis.js), Monte Carlo
 // (monte_carlo.js) and Identification (identification.js), all on the model in the
-// editor; Nonlinear (nonlinear.js), on a nonlinear model of its own; and Server: the
+// editor; Sensitivity (sensitivity.js), too; Nonlinear (nonlinear.js), on a nonlinear
+// model of its own; and Server: the
 // models (models.js) and jobs (jobs.js) the kea server keeps.
 // Arrow keys move between the tabs; Ctrl+Enter runs and Esc cancels in the tab shown.
 
@@ -9,6 +10,7 @@ import { JobsView, KINDS } from './jobs.js';
 import { ModelsView } from './models.js';
 import { MonteCarloView } from './monte_carlo.js';
 import { NonlinearView } from './nonlinear.js';
+import { SensitivityView } from './sensitivity.js';
 import { SynthesisView } from './synthesis.js';
 
 /**
@@ -31,6 +33,7 @@ export function mountTabs(ctx) {
     monte_carlo: new MonteCarloView(document.getElementById('monte-carlo-panel'), ctx),
     identification: new IdentificationView(document.getElementById('identification-panel'), ctx),
     nonlinear: new NonlinearView(document.getElementById('nonlinear-panel'), ctx),
+    sensitivity: new SensitivityView(document.getElementById('sensitivity-panel'), ctx),
   };
   if (!ctx.server) {
     for (const v of Object.values(views)) v.bar.disableServer('No kea server answers here (open the page through `kea serve`).');

@@ -3,7 +3,7 @@
 // Messages in:  {id, op: 'presets' | 'preset' | 'presetSynthesis' | 'check' | 'analyze' | 'analysis_work' | 'traces_csv', ...args}
 //               ('analyze' and 'analysis_work' with `budget: true`: also the error budget)
 //               ('check' with `discrete: true`: a discrete model, as the identification reads it)
-//               or {id, op: 'synthesize' | 'simulate' | 'identify' | 'nonlinear' | 'synthesis_work' | 'monte_carlo_work' | 'identification_work' | 'nonlinear_work', request}
+//               or {id, op: 'synthesize' | 'simulate' | 'identify' | 'nonlinear' | 'sensitivity' | 'synthesis_work' | 'monte_carlo_work' | 'identification_work' | 'nonlinear_work' | 'sensitivity_work', request}
 //               or {id, op: 'nonlinear_preset', name} (a nonlinear preset's model JSON text, exactly as shipped)
 //               or {id, op: 'monte_carlo_csv', result} | {id, op: 'parse', bytes}
 // Messages out: {id, progress} while analysing (at most every 50 ms), then
@@ -42,6 +42,8 @@ const KINDS = {
   identification_work: 'identification',
   nonlinear: 'nonlinear',
   nonlinear_work: 'nonlinear',
+  sensitivity: 'sensitivity',
+  sensitivity_work: 'sensitivity',
 };
 
 self.onmessage = async (event) => {
@@ -75,7 +77,8 @@ self.onmessage = async (event) => {
       case 'synthesis_work':
       case 'monte_carlo_work':
       case 'identification_work':
-      case 'nonlinear_work': // the core's work(kind, request), as for a server job of that kind
+      case 'nonlinear_work':
+      case 'sensitivity_work': // the core's work(kind, request), as for a server job of that kind
         value = JSON.parse(kea.work(KINDS[op], event.data.request));
         break;
       case 'check': // a discrete model (system.transition) is checked in the identification's form
@@ -97,7 +100,8 @@ self.onmessage = async (event) => {
       case 'synthesize':
       case 'simulate':
       case 'identify':
-      case 'nonlinear': {
+      case 'nonlinear':
+      case 'sensitivity': {
         // Synthesis, Monte Carlo, identification and nonlinear (web/synthesis.js,
         // web/monte_carlo.js, web/identification.js, web/nonlinear.js): one request JSON,
         // run by the core's run(kind, request) as a server job of that kind is.

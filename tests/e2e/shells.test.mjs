@@ -83,6 +83,16 @@ test('an analysis with its error budget gives the same bits through the CLI, a j
   assert.equal(bits(page), bits(cli));
 });
 
+test('a sensitivity gives the same bits through the CLI, a job and wasm', async () => {
+  const request = { model: model(), set: { q: 2 }, params: ['q', 'r'], relative_step: 0.01 };
+  const cli = JSON.parse(kea('sensitivity', file('sens-model.json', request.model), '--set', 'q=2', '--param', 'q', '--param', 'r', '--relative-step', '0.01', '--json'));
+  assert.equal(cli.analyses, 5);
+  const job = await viaJob('sensitivity', request);
+  const browser = viaWasm('sensitivity', request);
+  assert.equal(bits(job), bits(cli));
+  assert.equal(bits(browser), bits(cli));
+});
+
 test('a Monte Carlo gives the same bits through the CLI, a job and wasm', async () => {
   const request = { model: model(), runs: 40, seed: 11, truth: 'mean', model_error: 'constant', trace_points: 12 };
   const cli = JSON.parse(

@@ -123,7 +123,11 @@ impl Error {
     }
 
     /// The error with every path mapped by `path` and every message by `message`.
-    fn map(self, path: impl Fn(&str) -> String, message: impl Fn(String) -> String) -> Self {
+    pub(crate) fn map(
+        self,
+        path: impl Fn(&str) -> String,
+        message: impl Fn(String) -> String,
+    ) -> Self {
         match self {
             Error::Invalid(v) => Error::Invalid(
                 v.into_iter()

@@ -589,7 +589,8 @@ fn responses_validate_against_the_spec() {
     let mut cv = preset("cv-tracker");
     cv["options"]["trace_points"] = json!(20);
     let jobs = [
-        json!({"kind": "analysis", "model": preset("helicopter-range"), "budget": true}),
+        json!({"kind": "analysis", "model": preset("helicopter-range"), "budget": true,
+               "truth": {"set": {"sd": 10, "f_f": 0.3}}}),
         json!({"kind": "monte_carlo", "model": cv, "runs": 20, "seed": 1,
                "truth": "process", "model_error": "white", "trace_points": 10}),
         json!({"kind": "synthesis", "model": cv,

@@ -638,11 +638,13 @@ impl<'m, const N: usize> Engine<'m, N> {
                 bound: bound_set,
                 covariance: cov_set,
                 monte_carlo: None,
+                actual: None,
             },
             final_,
             steady_state,
             traces,
             budget: None,
+            mismatch: None,
             timing: Timing {
                 resumed_from_step: resumed_from,
                 ..Timing::default()

@@ -22,12 +22,14 @@ pub struct Request {
     pub compiled: CompiledModel,
     /// Also the error budget (`"budget": true`; default false).
     pub budget: bool,
+    /// A mismatched filter's truth (`"truth": {...}`), compiled.
+    pub truth: Option<CompiledModel>,
 }
 
 impl Kind for Analysis {
     const NAME: &'static str = "analysis";
     const ALIASES: &'static [&'static str] = &[];
-    const MEMBERS: &'static [&'static str] = &["model", "model_id", "set", "budget"];
+    const MEMBERS: &'static [&'static str] = &["model", "model_id", "set", "budget", "truth"];
     type Request = Request;
     type Outcome = AnalysisResult;
 
@@ -35,14 +37,19 @@ impl Kind for Analysis {
         let mut errors = request::unknown_members(&obj, Self::MEMBERS);
         let (model, set) = request::model_and_set(&obj, &mut errors);
         let budget = request::flag(&obj, "budget", &mut errors).unwrap_or(false);
+        let truth = super::mismatch::from_request(&obj, &mut errors);
         let Some(model) = model.filter(|_| errors.is_empty()) else {
             return Err(Error::Invalid(errors));
         };
         let compiled = request::compile(&model, &set).map_err(request::locate)?;
+        let truth = truth
+            .map(|t| super::mismatch::compile(&t, &model, &set, &compiled))
+            .transpose()?;
         Ok(Request {
             model,
             compiled,
             budget,
+            truth,
         })
     }
 
@@ -52,6 +59,11 @@ impl Kind for Analysis {
             let (units, explain) = super::work::budget_work(&r.compiled);
             work.units += units;
             work.explain += &format!(" + the budget {explain}");
+        }
+        if let Some(t) = &r.truth {
+            let (units, explain) = super::work::mismatch_work(&r.compiled, t);
+            work.units += units;
+            work.explain += &format!(" + the mismatch {explain}");
         }
         work
     }
@@ -63,26 +75,45 @@ impl Kind for Analysis {
         memo: &dyn Memo,
     ) -> Result<AnalysisResult, Error> {
         // The step loop's state is kept in the memo as it goes: a run after a restart
-        // goes on from the last one kept (crate::resume). The budget's pass runs after
-        // it (from the start again after a restart), progress split by their work.
-        if !r.budget {
-            return super::run_resumable(&r.compiled, progress, memo).map_err(request::locate);
-        }
+        // goes on from the last one kept (crate::resume). The budget's pass and the
+        // mismatch's run after it (from the start again after a restart), progress
+        // split by their work.
         let analysis = super::work::analysis_work(&r.compiled, Some(&r.model)).units;
-        let (budget, _) = super::work::budget_work(&r.compiled);
-        let split = analysis / (analysis + budget);
-        let mut first = |f: f64| progress.report(f * split);
+        let budget = r.budget.then(|| super::work::budget_work(&r.compiled).0);
+        let mismatch = r
+            .truth
+            .as_ref()
+            .map(|t| super::work::mismatch_work(&r.compiled, t).0);
+        let total = analysis + budget.unwrap_or(0.0) + mismatch.unwrap_or(0.0);
+        let mut first = |f: f64| progress.report(analysis * f / total);
         let mut result =
             super::run_resumable(&r.compiled, &mut first, memo).map_err(request::locate)?;
-        let frozen_at = result
-            .steady_state
-            .as_ref()
-            .filter(|s| s.shortcut_used)
-            .map(|s| s.reached_at_step);
-        let mut second = |f: f64| progress.report(split + f * (1.0 - split));
-        let b = super::budget::run(&r.compiled, result.steps, frozen_at, &mut second)
-            .map_err(request::locate)?;
-        result.budget = Some(b);
+        let mut done = analysis;
+        if let Some(units) = budget {
+            let frozen_at = result
+                .steady_state
+                .as_ref()
+                .filter(|s| s.shortcut_used)
+                .map(|s| s.reached_at_step);
+            let mut report = |f: f64| progress.report((done + units * f) / total);
+            let b = super::budget::run(&r.compiled, result.steps, frozen_at, &mut report)
+                .map_err(request::locate)?;
+            result.budget = Some(b);
+            done += units;
+        }
+        if let (Some(truth), Some(units)) = (&r.truth, mismatch) {
+            // The truth on the design's steps (an "auto" selection made once).
+            let mut truth = truth.clone();
+            truth.steps = crate::model::compile::StepPlan::Fixed(result.steps);
+            let half = units / 2.0;
+            let mut report = |f: f64| progress.report((done + half * f) / total);
+            let optimal = super::run(&truth, &mut report).map_err(|e| e.with_prefix("truth"))?;
+            let mut report = |f: f64| progress.report((done + half + half * f) / total);
+            let m = super::mismatch::run(&r.compiled, &result, &truth, &optimal, &mut report)
+                .map_err(request::locate)?;
+            result.criteria.actual = Some(m.1);
+            result.mismatch = Some(m.0);
+        }
         Ok(result)
     }
 

@@ -24,6 +24,7 @@ use std::ops::ControlFlow;
 pub mod budget;
 pub mod inputs;
 pub mod kind;
+pub mod mismatch;
 pub mod report;
 pub mod result;
 mod state;

@@ -1,6 +1,7 @@
 //! Plain-text and CSV renderings of a result, shared by the CLI, the server and wasm.
 
 use crate::analysis::budget::{Budget, Shares, StateBudget};
+use crate::analysis::mismatch::Mismatch;
 use crate::analysis::result::{AnalysisResult, CriteriaSet};
 use crate::text::{CELL, cell, csv_text, num, short};
 use std::fmt::Write;
@@ -87,10 +88,86 @@ pub fn criteria_table(r: &AnalysisResult) -> String {
     if let Some(b) = &r.budget {
         budget_tables(&mut s, b);
     }
+    if let (Some(m), Some(actual)) = (&r.mismatch, &r.criteria.actual) {
+        mismatch_table(&mut s, m, actual);
+    }
     for w in &r.warnings {
         let _ = writeln!(s, "warning: {w}");
     }
     s
+}
+
+/// The mismatched filter: per state its actual, believed and optimal SKO at t_D, the
+/// loss, the bias; then the actual criteria beside the optimal filter's.
+fn mismatch_table(s: &mut String, m: &Mismatch, actual: &CriteriaSet) {
+    let _ = writeln!(
+        s,
+        "\nmismatched filter (the truth differs in {}): SKOs at t_D",
+        m.differs_in
+    );
+    let w = m
+        .states
+        .iter()
+        .map(|x| x.state.chars().count())
+        .max()
+        .unwrap_or(0)
+        .max("weighted".len());
+    let cw = CELL;
+    let head = format!(
+        "{:<w$} | {:>cw$} {:>cw$} {:>cw$} {:>cw$} {:>cw$}",
+        "state", "actual", "believed", "optimal", "loss", "bias"
+    );
+    let _ = writeln!(s, "{head}");
+    let _ = writeln!(s, "{}", "-".repeat(head.chars().count()));
+    for x in &m.states {
+        let _ = writeln!(
+            s,
+            "{:<w$} | {:>cw$} {:>cw$} {:>cw$} {:>cw$} {:>cw$}",
+            x.state,
+            cell(Some(x.actual_sko)),
+            cell(Some(x.believed_sko)),
+            cell(Some(x.optimal_sko)),
+            cell(x.loss),
+            cell(Some(x.bias))
+        );
+    }
+    let set_w = 3 * cw + 2;
+    let _ = writeln!(
+        s,
+        "\n{:<w$} | {:^set_w$} | {:^set_w$}",
+        "", "actual (mismatched filter)", "optimal (designed on the truth)"
+    );
+    let _ = writeln!(
+        s,
+        "{:<w$} | {:>cw$} {:>cw$} {:>cw$} | {:>cw$} {:>cw$} {:>cw$}",
+        "state", "F_YZ", "F_ZX", "F_YX", "F_YZ", "F_ZX", "F_YX"
+    );
+    let rows = actual.per_state.iter().zip(&m.optimal.per_state);
+    for (a, o) in rows {
+        let _ = writeln!(
+            s,
+            "{:<w$} | {:>cw$} {:>cw$} {:>cw$} | {:>cw$} {:>cw$} {:>cw$}",
+            a.state,
+            cell(a.yz),
+            cell(a.zx),
+            cell(a.yx),
+            cell(o.yz),
+            cell(o.zx),
+            cell(o.yx)
+        );
+    }
+    let (a, o) = (&actual.weighted, &m.optimal.weighted);
+    let _ = writeln!(
+        s,
+        "{:<w$} | {:>cw$} {:>cw$} {:>cw$} | {:>cw$} {:>cw$} {:>cw$}",
+        "weighted",
+        cell(a.yz),
+        cell(a.zx),
+        cell(a.yx),
+        cell(o.yz),
+        cell(o.zx),
+        cell(o.yx)
+    );
 }
 
 /// The error budget: each source's share (%) of every state's filtered variance at t_D

@@ -37,6 +37,9 @@ pub struct AnalysisResult {
     /// The error budget, when the request asked for it (`"budget": true`).
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub budget: Option<super::budget::Budget>,
+    /// The mismatched filter, when the request gave a `truth`.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub mismatch: Option<super::mismatch::Mismatch>,
     pub timing: Timing,
     /// Things the user should know (e.g. the shortcut was not applicable).
     pub warnings: Vec<String>,
@@ -73,6 +76,9 @@ pub struct CriteriaSets {
     /// Filled by a Monte Carlo run only.
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub monte_carlo: Option<CriteriaSet>,
+    /// From a mismatched filter's actual SKOs (a request's `truth`).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub actual: Option<CriteriaSet>,
 }
 
 /// One set of criteria: averaged per state (3.24) and weighted (3.25).

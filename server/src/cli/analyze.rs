@@ -1,4 +1,5 @@
-//! `kea analyze MODEL.json|preset:NAME [--set name=value]… [--budget] [--json] [--csv FILE|-]`.
+//! `kea analyze MODEL.json|preset:NAME [--set name=value]… [--budget]
+//! [--truth FILE|preset:NAME] [--truth-set name=value]… [--json] [--csv FILE|-]`.
 
 use crate::Run;
 use std::path::PathBuf;
@@ -15,6 +16,14 @@ pub struct Args {
     /// open-loop variance (one more covariance recursion per source).
     #[arg(long)]
     pub budget: bool,
+    /// The mismatched filter: the world is this model (same states and measurements),
+    /// the filter is designed on MODEL. With --truth-set only: MODEL with those params.
+    #[arg(long, value_name = "FILE")]
+    pub truth: Option<String>,
+    /// A param the truth has another value of, e.g. `--truth-set sd=10` (repeatable):
+    /// the filter is designed on MODEL (and --set), the world has these values.
+    #[arg(long = "truth-set", value_name = "NAME=VALUE", value_parser = super::parse_override)]
+    pub truth_set: Vec<(String, f64)>,
     /// Print the whole result as JSON instead of the criteria table.
     #[arg(long)]
     pub json: bool,
@@ -37,7 +46,21 @@ impl Run for Args {
             Ok(s) => s,
             Err(code) => return code,
         };
-        let request = serde_json::json!({ "model": model, "set": set, "budget": self.budget });
+        let mut request = serde_json::json!({ "model": model, "set": set, "budget": self.budget });
+        if self.truth.is_some() || !self.truth_set.is_empty() {
+            let truth_set = match super::overrides(&self.truth_set) {
+                Ok(s) => s,
+                Err(code) => return code,
+            };
+            let mut truth = serde_json::json!({ "set": truth_set });
+            if let Some(file) = &self.truth {
+                truth["model"] = match super::read_json(file) {
+                    Ok(m) => m,
+                    Err(code) => return code,
+                };
+            }
+            request["truth"] = truth;
+        }
         let run = super::KindRun {
             kind: "analysis",
             input: &self.model,

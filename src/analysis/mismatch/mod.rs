@@ -1,0 +1,310 @@
+//! The mismatched filter (`"truth": {...}`): a filter designed on the model — its
+//! gains from the model's Riccati recursion, what it *believes* — run in a world that
+//! is the `truth`: the same model with some params replaced (`truth.set`), or a whole
+//! second model of the same dimensions (`truth.model`). Its *actual* error covariance
+//! ([`pass`]), the criteria computed from it (the `actual` set), and what the mismatch
+//! costs against the filter designed on the truth (the truth's own analysis, its
+//! potential accuracy: the `optimal`).
+
+use crate::analysis::criteria::{Avg, SetSums, criteria_set};
+use crate::analysis::result::{AnalysisResult, CriteriaSet};
+use crate::error::{Error, FieldError, got};
+use crate::model::compile::CompiledModel;
+use crate::model::{Model, Overrides};
+use crate::progress::Progress;
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+
+mod pass;
+
+/// The truth, read from a request's `truth`.
+#[derive(Clone, Debug)]
+pub struct Truth {
+    /// `truth.model`, or None: the request's model.
+    pub model: Option<Model>,
+    /// `truth.set`: overrides on top of the request's `set` (for the request's model)
+    /// or of the truth model's own params.
+    pub set: Overrides,
+}
+
+/// Read `truth` (an object with `set` and/or `model`); errors at `truth.…`.
+pub fn read(v: &Value) -> Result<Truth, Vec<FieldError>> {
+    let Some(obj) = v.as_object() else {
+        return Err(vec![FieldError::new(
+            "truth",
+            format!(
+                "expected an object such as {{\"set\": {{\"sv\": 1.0}}}} or {{\"model\": {{…}}}}, got {}",
+                got(v)
+            ),
+        )]);
+    };
+    let mut errors: Vec<FieldError> = crate::request::unknown_members(obj, &["set", "model"])
+        .into_iter()
+        .map(|e| under("truth", e))
+        .collect();
+    if obj.is_empty() {
+        errors.push(FieldError::new(
+            "truth",
+            "give `set` (params the truth has other values of) or `model` (a whole truth model)",
+        ));
+    }
+    let set = match crate::request::overrides(obj.get("set")) {
+        Ok(s) => s,
+        Err(e) => {
+            errors.extend(e.into_iter().map(|e| under("truth", e)));
+            Overrides::new()
+        }
+    };
+    let model = match obj.get("model") {
+        None => None,
+        Some(m) => match crate::model::model_from_value(m.clone()) {
+            Ok(m) => Some(m),
+            Err(e) => {
+                errors.extend(e.with_prefix("truth.model").field_errors());
+                None
+            }
+        },
+    };
+    if errors.is_empty() {
+        Ok(Truth { model, set })
+    } else {
+        Err(errors)
+    }
+}
+
+fn under(prefix: &str, e: FieldError) -> FieldError {
+    Error::Invalid(vec![e])
+        .with_prefix(prefix)
+        .field_errors()
+        .remove(0)
+}
+
+/// Compile the truth beside the design: its errors at `truth.model.…` / `truth.set.…`;
+/// its dimensions must be the design's.
+pub fn compile(
+    truth: &Truth,
+    design_model: &Model,
+    design_set: &Overrides,
+    design: &CompiledModel,
+) -> Result<CompiledModel, Error> {
+    let (model, set, prefix) = match &truth.model {
+        Some(m) => (m, truth.set.clone(), "truth.model"),
+        None => {
+            let mut set = design_set.clone();
+            set.extend(truth.set.iter().map(|(k, v)| (k.clone(), *v)));
+            (design_model, set, "truth")
+        }
+    };
+    let compiled = crate::model::compile(model, &set).map_err(|e| {
+        let placed = e.field_errors().into_iter().map(|fe| {
+            if fe.path == "set" || fe.path.starts_with("set.") {
+                FieldError::new(format!("truth.{}", fe.path), fe.message)
+            } else if truth.model.is_some() {
+                FieldError::new(format!("{prefix}.{}", fe.path), fe.message)
+            } else {
+                let at = if fe.path.is_empty() {
+                    "the model".into()
+                } else {
+                    fe.path
+                };
+                FieldError::new("truth.set", format!("with truth.set, {at}: {}", fe.message))
+            }
+        });
+        Error::Invalid(placed.collect())
+    })?;
+    let mut errors = Vec::new();
+    if compiled.n_states() != design.n_states() {
+        errors.push(FieldError::new(
+            "truth.model.system.states",
+            format!(
+                "the truth has {} states, the model {}: a mismatched filter needs the same states",
+                compiled.n_states(),
+                design.n_states()
+            ),
+        ));
+    }
+    if compiled.n_measurements() != design.n_measurements() {
+        errors.push(FieldError::new(
+            "truth.model.measurement.names",
+            format!(
+                "the truth has {} measurements, the model {}: a mismatched filter needs the same measurements",
+                compiled.n_measurements(),
+                design.n_measurements()
+            ),
+        ));
+    }
+    if compiled.t0 != design.t0 || compiled.t_end != design.t_end {
+        errors.push(FieldError::new(
+            "truth.model.time",
+            "the truth's interval must be the model's (t0, t_end)",
+        ));
+    }
+    if errors.is_empty() {
+        Ok(compiled)
+    } else {
+        Err(Error::Invalid(errors))
+    }
+}
+
+/// The mismatched filter's result.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Mismatch {
+    /// `noise` where only the noise levels and the initial SKOs differ (A, C, u and y0
+    /// the same at every step), else `structure`.
+    pub differs_in: String,
+    pub states: Vec<MismatchState>,
+    /// The covariance set of the filter designed on the truth (the truth's analysis).
+    pub optimal: CriteriaSet,
+    /// Per state over time: actual, believed, optimal SKOs, at `t`.
+    pub traces: MismatchTraces,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MismatchState {
+    pub state: String,
+    /// √(diag Cov e_D): the actual SKO of the filter's error at t_D.
+    pub actual_sko: f64,
+    /// E e_D: the filter's mean error at t_D (0 unless y0, u, a or C differ).
+    pub bias: f64,
+    /// √(R_D)_ii of the design: what the filter believes.
+    pub believed_sko: f64,
+    /// The potential SKO of the filter designed on the truth.
+    pub optimal_sko: f64,
+    /// actual_sko / optimal_sko: what the mismatch costs (≥ 1 up to rounding for
+    /// zero bias).
+    pub loss: Option<f64>,
+    /// actual_sko / believed_sko: > 1, the filter is optimistic.
+    pub actual_over_believed: Option<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MismatchTraces {
+    pub t: Vec<f64>,
+    pub states: Vec<MismatchTrace>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MismatchTrace {
+    pub state: String,
+    pub actual_sko: Vec<f64>,
+    pub believed_sko: Vec<f64>,
+    pub optimal_sko: Vec<f64>,
+}
+
+/// Run the mismatch beside a finished design analysis `design_result`, given the
+/// truth's own analysis (`truth_result`): the pass, and the criteria from the actual
+/// SKOs (with the truth's open-loop and measured SKOs and its y_B, z_B) — the result's
+/// `criteria.actual`, the fourth set beside `bound`, `covariance`, `monte_carlo`.
+pub fn run(
+    design: &CompiledModel,
+    design_result: &AnalysisResult,
+    truth: &CompiledModel,
+    truth_result: &AnalysisResult,
+    progress: &mut dyn Progress,
+) -> Result<(Mismatch, CriteriaSet), Error> {
+    let n = design.n_states();
+    let steps = design_result.steps;
+    // Trace points: the last step of every bucket (as many as the design's traces).
+    let points = (design_result.traces.t.len() / 2).max(1) as u64;
+    let bucket = steps.div_ceil(points).max(1);
+    let mut tr_t = Vec::new();
+    let mut tr_actual = vec![Vec::new(); n];
+    let mut tr_believed = vec![Vec::new(); n];
+    let mut tr_optimal = vec![Vec::new(); n];
+    let mut sums = SetSums {
+        yz: vec![Avg::default(); n],
+        zx: vec![Avg::default(); n],
+        yx: vec![Avg::default(); n],
+    };
+    let (mut fin_var, mut fin_mean) = (vec![0.0; n], vec![0.0; n]);
+    let every = crate::progress::steps_between_reports(50.0 * (2 * n * 2 * n * 2 * n) as f64);
+    let structural = pass::run(design, truth, steps, |s| {
+        for i in 0..n {
+            let actual = s.err_var[i].max(0.0).sqrt();
+            let open = s.open_var[i].max(0.0).sqrt();
+            match truth.pair_of_state[i] {
+                Some(j) if s.avail[j] => {
+                    sums.yz[i].add(open, s.meas_sko[j]);
+                    sums.zx[i].add(s.meas_sko[j], actual);
+                }
+                Some(_) => {
+                    sums.yz[i].add(f64::NAN, 0.0);
+                    sums.zx[i].add(f64::NAN, 0.0);
+                }
+                None => {}
+            }
+            sums.yx[i].add(open, actual);
+        }
+        if s.k % bucket == 0 || s.k == steps {
+            tr_t.push(design.t0 + s.k as f64 * (design.t_end - design.t0) / steps as f64);
+            for i in 0..n {
+                tr_actual[i].push(s.err_var[i].max(0.0).sqrt());
+                tr_believed[i].push(s.believed_var[i].max(0.0).sqrt());
+                tr_optimal[i].push(s.optimal_var[i].max(0.0).sqrt());
+            }
+        }
+        if s.k == steps {
+            fin_var.copy_from_slice(s.err_var);
+            fin_mean.copy_from_slice(s.err_mean);
+        }
+        if s.k % every == 0 && progress.report(s.k as f64 / steps as f64).is_break() {
+            return Err(Error::Cancelled);
+        }
+        Ok(())
+    })?;
+    let actual = criteria_set(
+        truth,
+        &sums,
+        &truth_result.y_max,
+        &truth_result.z_max,
+        "actual",
+        [None, None, None],
+    );
+    let states = (0..n)
+        .map(|i| {
+            let actual_sko = fin_var[i].max(0.0).sqrt();
+            let believed_sko = design_result.final_.potential_sko[i];
+            let optimal_sko = truth_result.final_.potential_sko[i];
+            let ratio = |a: f64, b: f64| (b > 0.0).then(|| a / b);
+            MismatchState {
+                state: design.states[i].clone(),
+                actual_sko,
+                bias: fin_mean[i],
+                believed_sko,
+                optimal_sko,
+                loss: ratio(actual_sko, optimal_sko),
+                actual_over_believed: ratio(actual_sko, believed_sko),
+            }
+        })
+        .collect();
+    let traces = MismatchTraces {
+        t: tr_t,
+        states: (0..n)
+            .map(|i| MismatchTrace {
+                state: design.states[i].clone(),
+                actual_sko: std::mem::take(&mut tr_actual[i]),
+                believed_sko: std::mem::take(&mut tr_believed[i]),
+                optimal_sko: std::mem::take(&mut tr_optimal[i]),
+            })
+            .collect(),
+    };
+    let mismatch = Mismatch {
+        differs_in: if structural { "structure" } else { "noise" }.into(),
+        states,
+        optimal: truth_result.criteria.covariance.clone(),
+        traces,
+    };
+    Ok((mismatch, actual))
+}
+
+/// The `truth` member of a request object, read, if present.
+pub fn from_request(obj: &Map<String, Value>, errors: &mut Vec<FieldError>) -> Option<Truth> {
+    let v = obj.get("truth")?;
+    match read(v) {
+        Ok(t) => Some(t),
+        Err(e) => {
+            errors.extend(e);
+            None
+        }
+    }
+}

@@ -1,0 +1,246 @@
+//! The mismatched filter's recursion: the design's gains, the truth's world.
+//!
+//! With x the true state and e = x − x̂ the filter's error, one step of the truth
+//! (A^t, u^t, C^t, B^t, Rv^t) and of the filter designed on (A^d, u^d, C^d), whose
+//! gain K and h = I − K C^d come from the design's own Riccati step:
+//!
+//! ```text
+//! x_k = A^t x + u^t Δt + w                                       w ~ (0, B^t)
+//! ε⁻  = x_k − (A^d x̂ + u^d Δt) = ΔA x + A^d e + Δu + w           ΔA = A^t − A^d, Δu = (u^t − u^d) Δt
+//! e_k = h ε⁻ − K (ΔC x_k + v)                                    ΔC = C^t − C^d, v ~ (0, Rv^t)
+//!     = (h ΔA − K ΔC A^t) x + h A^d e + (h Δu − K ΔC u^t Δt) + (h − K ΔC) w − K v
+//! ```
+//!
+//! so z = [x; e] follows z_k = F z + c + G_w w + G_v v, and its mean and covariance
+//! μ_k = F μ + c, S_k = F S Fᵀ + G_w B^t G_wᵀ + G_v Rv^t G_vᵀ (2N × 2N). The error's
+//! block is computed as itself, not as the difference of x's and x̂'s (which would
+//! cancel). With the same A, C and u the e-block is the Joseph form with the design's
+//! gains and the truth's noises, e = h (A e + w) − K v.
+
+use crate::analysis::inputs::{Inputs, time_err};
+use crate::error::Error;
+use crate::model::compile::CompiledModel;
+use crate::numerics::lanes::Scalar;
+use crate::numerics::riccati::{Prepared, SequentialJoseph};
+
+/// What the pass gives per step: the error's covariance diagonal and mean, the truth's
+/// open-loop variance (S's x-block), each measurement's true SKO and availability, and
+/// the filtered variances the design believes and the truth's own filter reaches.
+pub(super) struct Step<'a> {
+    pub k: u64,
+    pub err_var: &'a [f64],
+    pub believed_var: &'a [f64],
+    pub optimal_var: &'a [f64],
+    pub err_mean: &'a [f64],
+    pub open_var: &'a [f64],
+    pub meas_sko: &'a [f64],
+    pub avail: &'a [bool],
+}
+
+/// Runs the recursion over `steps` steps, calling `each` after every step. Returns
+/// whether the structure differed (ΔA, ΔC, Δu or y0 not 0 at some step).
+pub(super) fn run(
+    design: &CompiledModel,
+    truth: &CompiledModel,
+    steps: u64,
+    mut each: impl FnMut(Step) -> Result<(), Error>,
+) -> Result<bool, Error> {
+    let n = design.n_states();
+    let nm = design.n_measurements();
+    let n2 = 2 * n;
+    let dt = (design.t_end - design.t0) / steps as f64;
+    let mut di = Inputs::new(design, n, dt);
+    let mut ti = Inputs::new(truth, n, dt);
+    let mut prep = Prepared::new(n, nm);
+    let mut joseph = SequentialJoseph::new(n, nm);
+    let mut big_r = vec![0.0; n * n];
+    // The filter designed on the truth (the optimal one), beside.
+    let mut tprep = Prepared::new(n, nm);
+    let mut tjoseph = SequentialJoseph::new(n, nm);
+    let mut tbig_r = vec![0.0; n * n];
+    for i in 0..n {
+        big_r[i * n + i] = design.eta0[i] * design.eta0[i];
+        tbig_r[i * n + i] = truth.eta0[i] * truth.eta0[i];
+    }
+    // z = [x; e]: x_0 ~ (y0^t, P0^t), x̂_0 = y0^d.
+    let mut mu = vec![0.0; n2];
+    let mut s = vec![0.0; n2 * n2];
+    for i in 0..n {
+        mu[i] = truth.y0[i];
+        mu[n + i] = truth.y0[i] - design.y0[i];
+        let v = truth.eta0[i] * truth.eta0[i];
+        for (a, b) in [(i, i), (i, n + i), (n + i, i), (n + i, n + i)] {
+            s[a * n2 + b] = v;
+        }
+    }
+    let dc: Vec<f64> = truth.c.iter().zip(&design.c).map(|(t, d)| t - d).collect();
+    let mut structural = truth.y0 != design.y0 || dc.iter().any(|&x| x != 0.0);
+    let mut schedule = design.schedule.clone();
+    let mut avail = vec![true; nm];
+    let mut avail_prev = vec![true; nm];
+    // Work: A^t and A^d dense, F, G_w (2N × N), G_v (2N × n), products.
+    let (mut at, mut ad) = (vec![0.0; n * n], vec![0.0; n * n]);
+    let mut f = vec![0.0; n2 * n2];
+    let mut gw = vec![0.0; n2 * n];
+    let mut gv = vec![0.0; n2 * nm];
+    let mut tmp = vec![0.0; n2 * n2];
+    let mut gq = vec![0.0; n2 * n.max(nm)];
+    let mut mu_next = vec![0.0; n2];
+    let (mut err_var, mut err_mean, mut open_var) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    let (mut believed_var, mut optimal_var) = (vec![0.0; n], vec![0.0; n]);
+    let mut meas_sko = vec![0.0; nm];
+
+    for k in 1..=steps {
+        let t_k = design.t0 + k as f64 * dt;
+        di.at(design, k, k == 1)?;
+        ti.at(truth, k, k == 1)?;
+        let all = match schedule.as_mut() {
+            None => true,
+            Some(sc) => sc
+                .mask(k, t_k, &mut avail)
+                .map_err(|p| time_err(&p, k, t_k))?,
+        };
+        if k == 1 || di.rv_changed || avail != avail_prev {
+            let mask = (!all).then_some(&avail[..]);
+            prep.prepare(&design.c, &di.rv, mask, n, nm)
+                .map_err(|_| lost(k, t_k))?;
+            avail_prev.copy_from_slice(&avail);
+        }
+        if k == 1 || ti.rv_changed || di.rv_changed || !all {
+            let mask = (!all).then_some(&avail[..]);
+            tprep
+                .prepare(&truth.c, &ti.rv, mask, n, nm)
+                .map_err(|_| lost(k, t_k))?;
+        }
+        if !joseph.step::<0, Scalar>(n, &mut big_r, &di.e, &di.big_b, &prep)
+            || !tjoseph.step::<0, Scalar>(n, &mut tbig_r, &ti.e, &ti.big_b, &tprep)
+        {
+            return Err(lost(k, t_k));
+        }
+        dense(&mut at, &ti, n);
+        dense(&mut ad, &di, n);
+        structural |= at != ad || ti.u_dt != di.u_dt;
+        // K (N × n) = gain_tᵀ; h = htᵀ.
+        let kk = |i: usize, j: usize| joseph.gain_t[j * n + i];
+        let h = |i: usize, b: usize| joseph.ht[b * n + i];
+        // F = [[A^t, 0], [h ΔA − K ΔC A^t, h A^d]]
+        f.fill(0.0);
+        for i in 0..n {
+            for j in 0..n {
+                f[i * n2 + j] = at[i * n + j];
+                let (mut lower_left, mut lower_right) = (0.0, 0.0);
+                for b in 0..n {
+                    lower_left += h(i, b) * (at[b * n + j] - ad[b * n + j]);
+                    lower_right += h(i, b) * ad[b * n + j];
+                }
+                for r in 0..nm {
+                    let kdc: f64 =
+                        kk(i, r) * (0..n).map(|b| dc[r * n + b] * at[b * n + j]).sum::<f64>();
+                    lower_left -= kdc;
+                }
+                f[(n + i) * n2 + j] = lower_left;
+                f[(n + i) * n2 + n + j] = lower_right;
+            }
+        }
+        // G_w = [I; h − K ΔC], G_v = [0; −K]
+        gw.fill(0.0);
+        gv.fill(0.0);
+        for i in 0..n {
+            gw[i * n + i] = 1.0;
+            for j in 0..n {
+                let kdc: f64 = (0..nm).map(|r| kk(i, r) * dc[r * n + j]).sum();
+                gw[(n + i) * n + j] = h(i, j) - kdc;
+            }
+            for r in 0..nm {
+                gv[(n + i) * nm + r] = -kk(i, r);
+            }
+        }
+        // μ ← F μ + c, c = [u^t Δt; h Δu − K ΔC u^t Δt]
+        for i in 0..n2 {
+            mu_next[i] = (0..n2).map(|j| f[i * n2 + j] * mu[j]).sum();
+        }
+        for i in 0..n {
+            mu_next[i] += ti.u_dt[i];
+            let du: f64 = (0..n).map(|b| h(i, b) * (ti.u_dt[b] - di.u_dt[b])).sum();
+            let kdcu: f64 = (0..nm)
+                .map(|r| kk(i, r) * (0..n).map(|b| dc[r * n + b] * ti.u_dt[b]).sum::<f64>())
+                .sum();
+            mu_next[n + i] += du - kdcu;
+        }
+        mu.copy_from_slice(&mu_next);
+        // S ← F S Fᵀ + G_w B^t G_wᵀ + G_v Rv^t G_vᵀ, the upper triangle mirrored
+        for i in 0..n2 {
+            for j in 0..n2 {
+                tmp[i * n2 + j] = (0..n2).map(|b| f[i * n2 + b] * s[b * n2 + j]).sum();
+            }
+        }
+        for i in 0..n2 {
+            for j in i..n2 {
+                s[i * n2 + j] = (0..n2).map(|b| tmp[i * n2 + b] * f[j * n2 + b]).sum();
+            }
+        }
+        add_gqgt(&mut s, &gw, &ti.big_b, &mut gq, n2, n);
+        add_gqgt(&mut s, &gv, &ti.rv, &mut gq, n2, nm);
+        for i in 1..n2 {
+            for j in 0..i {
+                s[i * n2 + j] = s[j * n2 + i];
+            }
+        }
+        for i in 0..n {
+            err_var[i] = s[(n + i) * n2 + n + i];
+            err_mean[i] = mu[n + i];
+            open_var[i] = s[i * n2 + i];
+            believed_var[i] = big_r[i * n + i];
+            optimal_var[i] = tbig_r[i * n + i];
+        }
+        for j in 0..nm {
+            meas_sko[j] = ti.meas_sko[j];
+        }
+        each(Step {
+            k,
+            err_var: &err_var,
+            believed_var: &believed_var,
+            optimal_var: &optimal_var,
+            err_mean: &err_mean,
+            open_var: &open_var,
+            meas_sko: &meas_sko,
+            avail: &avail,
+        })?;
+    }
+    Ok(structural)
+}
+
+/// A = I + E of `inp`, dense.
+fn dense(out: &mut [f64], inp: &Inputs, n: usize) {
+    out.fill(0.0);
+    for i in 0..n {
+        out[i * n + i] = 1.0;
+    }
+    for &(i, j, v) in inp.e.nonzeros() {
+        out[i * n + j] += v;
+    }
+}
+
+/// S's upper triangle += G Q Gᵀ (G: m × q, Q: q × q); `gq` holds G Q.
+fn add_gqgt(s: &mut [f64], g: &[f64], q: &[f64], gq: &mut [f64], m: usize, k: usize) {
+    for i in 0..m {
+        for j in 0..k {
+            gq[i * k + j] = (0..k).map(|b| g[i * k + b] * q[b * k + j]).sum();
+        }
+    }
+    for i in 0..m {
+        for j in i..m {
+            s[i * m + j] += (0..k).map(|b| gq[i * k + b] * g[j * k + b]).sum::<f64>();
+        }
+    }
+}
+
+#[cold]
+fn lost(k: u64, t: f64) -> Error {
+    Error::Numerical {
+        step: k,
+        t,
+        path: "truth".into(),
+        message: "the design filter's covariance recursion failed in the mismatch's pass where the analysis's did not".into(),
+    }
+}

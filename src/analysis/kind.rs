@@ -23,7 +23,7 @@ pub struct Request {
     /// Also the error budget (`"budget": true`; default false).
     pub budget: bool,
     /// A mismatched filter's truth (`"truth": {...}`), compiled.
-    pub truth: Option<CompiledModel>,
+    pub truth: Option<Box<CompiledModel>>,
 }
 
 impl Kind for Analysis {
@@ -43,7 +43,7 @@ impl Kind for Analysis {
         };
         let compiled = request::compile(&model, &set).map_err(request::locate)?;
         let truth = truth
-            .map(|t| super::mismatch::compile(&t, &model, &set, &compiled))
+            .map(|t| super::mismatch::compile(&t, &model, &set, &compiled).map(Box::new))
             .transpose()?;
         Ok(Request {
             model,
@@ -103,7 +103,7 @@ impl Kind for Analysis {
         }
         if let (Some(truth), Some(units)) = (&r.truth, mismatch) {
             // The truth on the design's steps (an "auto" selection made once).
-            let mut truth = truth.clone();
+            let mut truth = CompiledModel::clone(truth);
             truth.steps = crate::model::compile::StepPlan::Fixed(result.steps);
             let half = units / 2.0;
             let mut report = |f: f64| progress.report((done + half * f) / total);
@@ -112,7 +112,7 @@ impl Kind for Analysis {
             let m = super::mismatch::run(&r.compiled, &result, &truth, &optimal, &mut report)
                 .map_err(request::locate)?;
             result.criteria.actual = Some(m.1);
-            result.mismatch = Some(m.0);
+            result.mismatch = Some(Box::new(m.0));
         }
         Ok(result)
     }

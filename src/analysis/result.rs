@@ -39,7 +39,7 @@ pub struct AnalysisResult {
     pub budget: Option<super::budget::Budget>,
     /// The mismatched filter, when the request gave a `truth`.
     #[serde(skip_serializing_if = "Option::is_none", default)]
-    pub mismatch: Option<super::mismatch::Mismatch>,
+    pub mismatch: Option<Box<super::mismatch::Mismatch>>,
     pub timing: Timing,
     /// Things the user should know (e.g. the shortcut was not applicable).
     pub warnings: Vec<String>,

@@ -88,7 +88,6 @@ pub(super) fn run(
     let mut mu_next = vec![0.0; n2];
     let (mut err_var, mut err_mean, mut open_var) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
     let (mut believed_var, mut optimal_var) = (vec![0.0; n], vec![0.0; n]);
-    let mut meas_sko = vec![0.0; nm];
 
     for k in 1..=steps {
         let t_k = design.t0 + k as f64 * dt;
@@ -193,9 +192,6 @@ pub(super) fn run(
             believed_var[i] = big_r[i * n + i];
             optimal_var[i] = tbig_r[i * n + i];
         }
-        for j in 0..nm {
-            meas_sko[j] = ti.meas_sko[j];
-        }
         each(Step {
             k,
             err_var: &err_var,
@@ -203,7 +199,7 @@ pub(super) fn run(
             optimal_var: &optimal_var,
             err_mean: &err_mean,
             open_var: &open_var,
-            meas_sko: &meas_sko,
+            meas_sko: &ti.meas_sko,
             avail: &avail,
         })?;
     }

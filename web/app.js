@@ -9,6 +9,7 @@ import { ModelEditor, isDiscrete, modelProblem } from './editor.js';
 import { api } from './api.js';
 import { BrowserRunner, ServerRunner, WasmWorker, problemOf } from './runner.js';
 import { BudgetView } from './budget.js';
+import { MismatchView, parseTruth } from './mismatch.js';
 import { TraceChart, criteriaTable, duration, finalTable, fmt, resumedText, scrollHint } from './results.js';
 import { mountTabs } from './tabs.js';
 import { ProgressText, modelErrorsText, runAnyway, runPart } from './views.js';
@@ -386,8 +387,16 @@ async function run() {
     return;
   }
   const json = modelJson(); // the model as the run starts
-  const budget = $('run-budget').checked;
-  await follow(where, runner, (onProgress) => runner.run(json, onProgress, { budget }), state.edits);
+  const options = {};
+  if ($('run-budget').checked) options.budget = true;
+  try {
+    const truth = parseTruth($('run-truth').value);
+    if (truth) options.truth = truth;
+  } catch (message) {
+    setStatus(String(message), true);
+    return;
+  }
+  await follow(where, runner, (onProgress) => runner.run(json, onProgress, options), state.edits);
 }
 
 /**
@@ -497,6 +506,8 @@ async function openJob(job, tabs) {
     return;
   }
   $('run-budget').checked = request.budget === true;
+  const truthSet = request.truth?.model ? null : request.truth?.set;
+  $('run-truth').value = truthSet ? Object.entries(truthSet).map(([k, v]) => `${k}=${v}`).join(', ') : '';
   const runner = runners.server;
   runner.store({ id: job.id, body });
   follow('server', runner, (onProgress) => runner.attach(job.id, onProgress), state.edits, job.id, true);
@@ -534,6 +545,7 @@ function showResult(r, where, elapsed, current) {
   $('warnings').replaceChildren(...r.warnings.map((w) => Object.assign(document.createElement('li'), { textContent: w })));
   $('criteria').replaceChildren(criteriaTable(r));
   budget.show(r);
+  mismatch.show(r);
   $('final').replaceChildren(finalTable(r));
   for (const box of [$('criteria'), $('final')]) scrollHint(box);
   const select = $('trace-state');
@@ -547,6 +559,7 @@ function showResult(r, where, elapsed, current) {
 
 const chart = new TraceChart($('chart'));
 const budget = new BudgetView($('budget'));
+const mismatch = new MismatchView($('mismatch'));
 
 // ------------------------------------------------------------------ wiring
 

@@ -120,7 +120,8 @@ export class WorkGate {
 
 /**
  * Runs in the browser: analyze on its own worker, so cancel can terminate it. Both
- * runners' `run(modelJson, onProgress, {budget})` also ask for the error budget.
+ * runners' `run(modelJson, onProgress, options)` add `options` ({budget, truth}) to
+ * the request.
  */
 export class BrowserRunner {
   constructor() {
@@ -128,10 +129,10 @@ export class BrowserRunner {
     this.gate = new WorkGate('analysis_work');
   }
 
-  async run(modelJson, onProgress, { budget = false } = {}) {
+  async run(modelJson, onProgress, options = {}) {
     this.worker ??= new WasmWorker();
-    const args = { model: modelJson, set: '', budget };
-    await this.gate.check(this.worker, args, `${budget}${modelJson}`);
+    const args = { model: modelJson, set: '', options: JSON.stringify(options) };
+    await this.gate.check(this.worker, args, `${args.options}${modelJson}`);
     const result = await this.worker.call('analyze', args, onProgress);
     return { result };
   }
@@ -226,8 +227,8 @@ export class ServerRunner {
     this.cancelRequested = false;
   }
 
-  run(modelJson, onProgress, { budget = false } = {}) {
-    const also = budget ? ',"budget":true' : '';
+  run(modelJson, onProgress, options = {}) {
+    const also = Object.entries(options).map(([k, v]) => `,${JSON.stringify(k)}:${JSON.stringify(v)}`).join('');
     return this.runJob(`{"kind":"analysis","model":${modelJson}${also}}`, onProgress);
   }
 

@@ -1,7 +1,7 @@
 // The wasm build of kea-core, in a Web Worker so the page never freezes.
 //
 // Messages in:  {id, op: 'presets' | 'preset' | 'presetSynthesis' | 'check' | 'analyze' | 'analysis_work' | 'traces_csv', ...args}
-//               ('analyze' and 'analysis_work' with `budget: true`: also the error budget)
+//               ('analyze' and 'analysis_work' with `options`: the request's other members as JSON text, e.g. '{"budget":true}')
 //               ('check' with `discrete: true`: a discrete model, as the identification reads it)
 //               or {id, op: 'synthesize' | 'simulate' | 'identify' | 'nonlinear' | 'sensitivity' | 'synthesis_work' | 'monte_carlo_work' | 'identification_work' | 'nonlinear_work' | 'sensitivity_work', request}
 //               or {id, op: 'nonlinear_preset', name} (a nonlinear preset's model JSON text, exactly as shipped)
@@ -72,7 +72,7 @@ self.onmessage = async (event) => {
         value = JSON.parse(new TextDecoder().decode(event.data.bytes)); // (a byte-order mark dropped)
         break;
       case 'analysis_work': // the estimated work of a run, with the server's default limit
-        value = JSON.parse(kea.analysis_work(event.data.model, event.data.set ?? '', event.data.budget === true));
+        value = JSON.parse(kea.analysis_work(event.data.model, event.data.set ?? '', event.data.options ?? ''));
         break;
       case 'synthesis_work':
       case 'monte_carlo_work':
@@ -86,7 +86,7 @@ self.onmessage = async (event) => {
         break;
       case 'analyze': {
         let last = 0;
-        const text = kea.analyze(event.data.model, event.data.set ?? '', event.data.budget === true, (fraction) => {
+        const text = kea.analyze(event.data.model, event.data.set ?? '', event.data.options ?? '', (fraction) => {
           const now = performance.now();
           if (now - last > 50) {
             last = now;

@@ -77,7 +77,7 @@ test('an analysis with its error budget gives the same bits through the CLI, a j
   const job = await viaJob('analysis', request);
   const browser = viaWasm('analysis', request);
   // The page's own call: the worker's analyze(model, set, budget, progress).
-  const page = JSON.parse(wasm.analyze(JSON.stringify(request.model), '{"q": 2}', true, () => true));
+  const page = JSON.parse(wasm.analyze(JSON.stringify(request.model), '{"q": 2}', '{"budget": true}', () => true));
   assert.equal(bits(job), bits(cli));
   assert.equal(bits(browser), bits(cli));
   assert.equal(bits(page), bits(cli));

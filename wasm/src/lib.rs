@@ -153,12 +153,26 @@ fn run_as(kind: &str, request_json: &str, progress: &js_sys::Function) -> Result
 }
 
 /// The analysis request of a model and its overrides (JSON texts; an empty `set` is
-/// none), with its error budget when `budget`.
-fn analysis_request(model_json: &str, set_json: &str, budget: bool) -> Result<String, Error> {
+/// none), with the request's other members from `options_json` (an object, e.g.
+/// `{"budget": true, "truth": {"set": {"sd": 10}}}`; empty: none).
+fn analysis_request(model_json: &str, set_json: &str, options_json: &str) -> Result<String, Error> {
     let set = overrides(set_json)?;
     let set = serde_json::to_string(&set).expect("overrides serialise");
+    let options = if options_json.trim().is_empty() {
+        String::new()
+    } else {
+        let parsed = kea_core::parse_json(options_json.as_bytes())
+            .map_err(|e| Error::invalid("", format!("the analysis's options: {e}")))?;
+        match parsed {
+            serde_json::Value::Object(o) => o
+                .iter()
+                .map(|(k, v)| format!(", {}: {v}", serde_json::Value::from(k.as_str())))
+                .collect(),
+            _ => return Err(Error::invalid("", "the analysis's options are an object")),
+        }
+    };
     Ok(format!(
-        r#"{{"model": {model_json}, "set": {set}, "budget": {budget}}}"#
+        r#"{{"model": {model_json}, "set": {set}{options}}}"#
     ))
 }
 
@@ -180,26 +194,31 @@ pub fn simulation_work(request_json: &str) -> Result<String, JsValue> {
     monte_carlo_work(request_json)
 }
 
-/// [`work`] of the analysis of a model with overrides (and its error budget when
-/// `budget`), its errors at the model's own paths (`system.a[1][2]`).
+/// [`work`] of the analysis of a model with overrides (and the request's other members,
+/// `options_json`: `budget`, `truth`), its errors at the model's own paths
+/// (`system.a[1][2]`).
 #[wasm_bindgen]
-pub fn analysis_work(model_json: &str, set_json: &str, budget: bool) -> Result<String, JsValue> {
-    let request = analysis_request(model_json, set_json, budget).map_err(|e| to_js(&e))?;
+pub fn analysis_work(
+    model_json: &str,
+    set_json: &str,
+    options_json: &str,
+) -> Result<String, JsValue> {
+    let request = analysis_request(model_json, set_json, options_json).map_err(|e| to_js(&e))?;
     let prepared = prepare("analysis", &request).map_err(|e| to_js(&e.without_prefix("model")))?;
     Ok(work_json(prepared.work()))
 }
 
-/// [`run`] of the analysis of a model with overrides (and its error budget when
-/// `budget`), its errors at the model's own paths (`system.a[1][2]`), for the
-/// editor's cells.
+/// [`run`] of the analysis of a model with overrides (and the request's other members,
+/// `options_json`: `budget`, `truth`), its errors at the model's own paths
+/// (`system.a[1][2]`), for the editor's cells.
 #[wasm_bindgen]
 pub fn analyze(
     model_json: &str,
     set_json: &str,
-    budget: bool,
+    options_json: &str,
     progress: &js_sys::Function,
 ) -> Result<String, JsValue> {
-    analysis_request(model_json, set_json, budget)
+    analysis_request(model_json, set_json, options_json)
         .and_then(|request| run_as("analysis", &request, progress))
         .map_err(|e| to_js(&e.without_prefix("model")))
 }
@@ -336,7 +355,7 @@ mod tests {
     fn work_is_the_servers_estimate_with_its_default_limit() {
         let model = kea_core::presets::get_json("cv-tracker").unwrap();
         let out: serde_json::Value =
-            serde_json::from_str(&analysis_work(model, "", false).unwrap()).unwrap();
+            serde_json::from_str(&analysis_work(model, "", "").unwrap()).unwrap();
         let parsed = kea_core::model_from_json(model).unwrap();
         let compiled = kea_core::model::compile(&parsed, &Overrides::new()).unwrap();
         let expected = kea_core::analysis::work::analysis_work(&compiled, Some(&parsed));

@@ -1,0 +1,66 @@
+// The mismatched filter in the page, in a real browser against the real server: a
+// truth typed beside Run (NAME=VALUE) gives, in this browser and on the server, the
+// table and chart of believed, actual and optimal SKOs that `kea analyze --truth-set`
+// gives; a malformed truth is refused before a run.
+
+import { after, before, test } from 'node:test';
+import assert from 'node:assert/strict';
+import { choosePreset, kea, openApp } from './lib.mjs';
+
+let app;
+let page;
+const consoleErrors = [];
+
+before(async () => {
+  app = await openApp(consoleErrors);
+  ({ page } = app);
+});
+
+after(() => app?.close());
+
+async function runIn(where) {
+  await page.check(`input[name=mode][value=${where}]`);
+  const before = await page.evaluate(() => document.querySelector('#summary').textContent);
+  await page.click('#run');
+  await page.waitForFunction(
+    (b) => !document.querySelector('#results').hidden && document.querySelector('#summary').textContent !== b && !document.querySelector('#run').disabled,
+    before,
+    { timeout: 30000 },
+  );
+}
+
+test('a truth beside Run shows believed, actual and optimal SKOs as the CLI gives them', async () => {
+  const cli = JSON.parse(kea('analyze', 'preset:helicopter-range', '--truth-set', 'sd=10', '--truth-set', 'f_f=0.3', '--json'));
+  await choosePreset(page, 'helicopter-range');
+  await page.fill('#run-truth', 'sd=10, f_f=0.3');
+  for (const where of ['browser', 'server']) {
+    await runIn(where);
+    const rows = await page.evaluate(() =>
+      [...document.querySelectorAll('#mismatch-table tbody tr')].map((tr) => [tr.dataset.state, ...[...tr.querySelectorAll('td')].map((td) => td.textContent)]),
+    );
+    assert.equal(rows.length, 6, where);
+    const fmt = (x) => (Math.abs(x) >= 1e-3 && Math.abs(x) < 1e6 ? Number(x.toPrecision(5)).toString() : x === 0 ? '0' : x.toExponential(4));
+    cli.mismatch.states.forEach((s, i) => {
+      assert.equal(rows[i][0], s.state);
+      assert.equal(rows[i][1], fmt(s.actual_sko), `${where} ${s.state} actual`);
+      assert.equal(rows[i][2], fmt(s.believed_sko), `${where} ${s.state} believed`);
+      assert.equal(rows[i][3], fmt(s.optimal_sko), `${where} ${s.state} optimal`);
+    });
+    assert.match(await page.textContent('#mismatch-table caption'), /differs in structure/);
+    assert.equal(await page.locator('#mismatch-chart .uplot').count(), 1, `${where}: the chart`);
+  }
+  // Without a truth the section goes.
+  await page.fill('#run-truth', '');
+  await runIn('browser');
+  assert.equal(await page.isHidden('#mismatch'), true);
+  assert.deepEqual(consoleErrors, []);
+});
+
+test('a malformed truth is refused before a run', async () => {
+  await choosePreset(page, 'cv-tracker');
+  await page.fill('#run-truth', 'q=abc');
+  await page.click('#run');
+  await page.waitForFunction(() => document.querySelector('#status').classList.contains('error'));
+  assert.match(await page.textContent('#status'), /Truth: expected NAME=VALUE \(such as sd=10\), got "q=abc"/);
+  await page.fill('#run-truth', '');
+});

@@ -5,20 +5,14 @@
 
 mod common;
 use common::{assert_error_at, preset_value};
+use kea_core::AnalysisResult;
 use kea_core::analysis::budget::{Budget, SourceKind};
-use kea_core::exec::{Forgetful, Sequential};
-use kea_core::registry::{self, Outcome};
-use kea_core::{AnalysisResult, NoProgress};
+use kea_core::registry;
 use nalgebra::DMatrix;
 use serde_json::{Value, json};
 
 fn analyse(request: Value) -> AnalysisResult {
-    let prepared = registry::prepare("analysis", request).expect("a valid request");
-    match prepared.run(&Sequential, &mut NoProgress, &Forgetful) {
-        Ok(Outcome::Analysis(r)) => r,
-        Ok(_) => panic!("an analysis"),
-        Err(e) => panic!("the analysis runs: {e:?}"),
-    }
+    common::run_analysis(request)
 }
 
 fn budget_of(model: Value, set: Value) -> (AnalysisResult, Budget) {

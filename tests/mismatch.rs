@@ -6,19 +6,12 @@
 mod common;
 use common::{assert_error_at, preset_value};
 use kea_core::AnalysisResult;
-use kea_core::NoProgress;
-use kea_core::exec::{Forgetful, Sequential};
-use kea_core::registry::{self, Outcome};
+use kea_core::registry;
 use nalgebra::{DMatrix, DVector};
 use serde_json::{Value, json};
 
 fn analyse(request: Value) -> AnalysisResult {
-    let prepared = registry::prepare("analysis", request).expect("a valid request");
-    match prepared.run(&Sequential, &mut NoProgress, &Forgetful) {
-        Ok(Outcome::Analysis(r)) => r,
-        Ok(_) => panic!("an analysis"),
-        Err(e) => panic!("the analysis runs: {e:?}"),
-    }
+    common::run_analysis(request)
 }
 
 fn rel(a: f64, b: f64) -> f64 {
@@ -211,6 +204,38 @@ fn noise_mismatch_equals_the_plain_recursion() {
     }
 }
 
+/// The traces end at the values at t_D, with a schedule (every second step) too: the
+/// optimal filter's trace is the truth's own analysis, on the model's availability.
+#[test]
+fn traces_end_at_the_final_values() {
+    let mut m = model();
+    m["options"]["trace_points"] = json!(50);
+    for truth in [json!({"r": 0.5}), json!({"k": 3.0, "q": 0.1})] {
+        let r = analyse(json!({ "model": m, "truth": { "set": truth } }));
+        let mm = r.mismatch.as_ref().unwrap();
+        assert_eq!(mm.traces.t.len(), 50);
+        assert_eq!(*mm.traces.t.last().unwrap(), 4.0);
+        for (s, tr) in mm.states.iter().zip(&mm.traces.states) {
+            assert_eq!(*tr.actual_sko.last().unwrap(), s.actual_sko);
+            assert!(
+                rel(*tr.optimal_sko.last().unwrap(), s.optimal_sko) <= 1e-12,
+                "{truth} {}: {} against {}",
+                s.state,
+                tr.optimal_sko.last().unwrap(),
+                s.optimal_sko
+            );
+            assert!(
+                rel(*tr.believed_sko.last().unwrap(), s.believed_sko) <= 1e-12,
+                "{truth} {}",
+                s.state
+            );
+        }
+    }
+    // No trace points, no traces.
+    let r = mismatch(&[("r", 0.5)]);
+    assert!(r.mismatch.unwrap().traces.t.is_empty());
+}
+
 /// Another a, C, u and y0: the error's covariance and mean against the joint [x; x̂]
 /// recursion (which forms e = x − x̂ by difference: the tolerance is its cancellation's).
 #[test]
@@ -277,6 +302,12 @@ fn truth_equal_to_design_is_the_filter() {
             );
         }
         assert_eq!(m.optimal, r.criteria.covariance);
+        for t in &m.traces.states {
+            assert_eq!(
+                t.optimal_sko, t.believed_sko,
+                "{name}: the same filter, the same bits"
+            );
+        }
     }
 }
 

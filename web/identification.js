@@ -14,7 +14,7 @@ import { DataBox, rowsToCsv } from './identification_data.js';
 import { fitBlock, optimaTable, parseStarts, startsText } from './identification_fit.js';
 import { CHART_HEIGHT, iterationChart } from './identification_plots.js';
 import { resumedText } from './results.js';
-import { KeptFields, RunBar, RunView, checkModel, duration, el, field, fmt, input, markControls, recheckControl, requestErrors, select } from './views.js';
+import { KeptFields, RunBar, RunView, duration, el, field, fmt, input, recheckControl, requestErrors, select } from './views.js';
 
 const METHODS = [
   ['scoring', 'Fisher scoring (the default)'],
@@ -294,18 +294,8 @@ export class IdentificationView extends RunView {
     }
   }
 
-  async run(where, exec) {
-    try {
-      const request = this.request();
-      markControls(this.form, []);
-      // The model in its own form (a continuous one is discretised by the core), then the run says what the identification needs of it.
-      const invalid = await checkModel(request.model, this.ctx.pendingModelErrors?.() ?? []);
-      if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
-      return await this.follow(where, () => exec(request), request.model); // exec serialises the request at once
-    } catch (e) {
-      throw this.failed(e);
-    }
-  }
+  // run: RunView's — the model checked in its own form (a continuous one is discretised
+  // by the core), then the run says what the identification needs of it.
 
   /** The tab is shown: the data read against the model as it is now. */
   shown() {
@@ -313,9 +303,7 @@ export class IdentificationView extends RunView {
   }
 
   markStale() {
-    this.edits++;
-    if (!this.out.hidden) this.out.classList.add('stale');
-    if (this.bar.status.classList.contains('error')) this.bar.setStatus('');
+    super.markStale();
     this.refreshParams();
     this.data.check(); // read against the model as it is now
   }

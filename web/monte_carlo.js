@@ -8,7 +8,7 @@ import uPlot from './vendor/uplot/uPlot.esm.js';
 import { MAX_SAFE, numberProblem, toNumber } from './numbers.js';
 import { valueAxis } from './plot.js';
 import { noTraces, resumedText } from './results.js';
-import { KeptFields, RunBar, RunView, checkModel, duration, el, field, fmt, input, markControls, recheckControl, requestErrors, select, wasmCall } from './views.js';
+import { KeptFields, RunBar, RunView, duration, el, field, fmt, input, recheckControl, requestErrors, select, wasmCall } from './views.js';
 
 const SETS = ['bound', 'covariance', 'monte_carlo'];
 const CRITERIA = [
@@ -118,25 +118,6 @@ export class MonteCarloView extends RunView {
     return request;
   }
 
-  async run(where, exec) {
-    try {
-      const request = this.request();
-      markControls(this.form, []);
-      const invalid = await checkModel(request.model, this.ctx.pendingModelErrors?.() ?? []);
-      if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
-      return await this.follow(where, () => exec(request), request.model); // exec serialises the request at once
-    } catch (e) {
-      throw this.failed(e);
-    }
-  }
-
-
-  markStale() {
-    this.edits++;
-    if (!this.out.hidden) this.out.classList.add('stale');
-    // A run's error was about the model before (as on the Analysis tab).
-    if (this.bar.status.classList.contains('error')) this.bar.setStatus('');
-  }
 
   /** Show a result; `current`: the model has not changed since the run started. */
   show(r, where, current = true) {

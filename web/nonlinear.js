@@ -231,6 +231,9 @@ export class NonlinearView extends RunView {
     return request;
   }
 
+  /** Not RunView's: this tab's model is its own, so the editor's changes leave its result current. */
+  markStale() {}
+
   async run(where, exec) {
     try {
       const request = await this.strictRequest();

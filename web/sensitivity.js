@@ -5,7 +5,7 @@
 // criterion that falls as the param grows, right for one that rises) and the table of
 // all six. The bars are plain elements sized in percent, as the error budget's.
 
-import { KeptFields, RunBar, RunView, checkModel, duration, el, field, fmt, input, markControls, recheckControl, requestErrors, select } from './views.js';
+import { KeptFields, RunBar, RunView, duration, el, field, fmt, input, recheckControl, requestErrors, select } from './views.js';
 import { resumedText } from './results.js';
 
 /** The criteria a ranking may name, as the core lists them, with their labels. */
@@ -79,23 +79,6 @@ export class SensitivityView extends RunView {
     return request;
   }
 
-  async run(where, exec) {
-    try {
-      const request = this.request();
-      markControls(this.form, []);
-      const invalid = await checkModel(request.model, this.ctx.pendingModelErrors?.() ?? []);
-      if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
-      return await this.follow(where, () => exec(request), request.model);
-    } catch (e) {
-      throw this.failed(e);
-    }
-  }
-
-  markStale() {
-    this.edits++;
-    if (!this.out.hidden) this.out.classList.add('stale');
-    if (this.bar.status.classList.contains('error')) this.bar.setStatus('');
-  }
 
   /** Show a result; `current`: the model has not changed since the run started. */
   show(r, where, current = true) {

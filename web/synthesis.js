@@ -538,12 +538,6 @@ export class SynthesisView extends RunView {
     );
   }
 
-  markStale() {
-    this.edits++;
-    if (!this.out.hidden) this.out.classList.add('stale');
-    // A run's error was about the model before (as on the Analysis tab).
-    if (this.bar.status.classList.contains('error')) this.bar.setStatus('');
-  }
 
   /** Grid tables: rows × columns, one table per page; cells F_YZ / F_ZX / F_YX. */
   gridTables(r, g) {

@@ -506,6 +506,29 @@ export function recheckControl(control, local) {
  * `show(result, where, current)`.
  */
 export class RunView {
+  /**
+   * A run of the tab's `request()` on the editor's model: the model checked first (its
+   * errors at its cells), then the run followed. A tab with more to check overrides it.
+   */
+  async run(where, exec) {
+    try {
+      const request = this.request();
+      markControls(this.form, []);
+      const invalid = await checkModel(request.model, this.ctx.pendingModelErrors?.() ?? []);
+      if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
+      return await this.follow(where, () => exec(request), request.model); // exec serialises the request at once
+    } catch (e) {
+      throw this.failed(e);
+    }
+  }
+
+  /** The editor's model changed: a result shown is stale, and a run's error (about the model before) goes. */
+  markStale() {
+    this.edits++;
+    if (!this.out.hidden) this.out.classList.add('stale');
+    if (this.bar.status.classList.contains('error')) this.bar.setStatus('');
+  }
+
   /** A server job opened from the Server tab: its request in the fields, then the job followed as a run. */
   openJob(id, request, model, body) {
     this.fill(request);

@@ -24,6 +24,8 @@ pub struct Request {
     pub budget: bool,
     /// A mismatched filter's truth (`"truth": {...}`), compiled.
     pub truth: Option<Box<CompiledModel>>,
+    /// The truth is a model of its own (`truth.model`), not the model with `truth.set`.
+    pub truth_is_model: bool,
 }
 
 impl Kind for Analysis {
@@ -42,6 +44,7 @@ impl Kind for Analysis {
             return Err(Error::Invalid(errors));
         };
         let compiled = request::compile(&model, &set).map_err(request::locate)?;
+        let truth_is_model = truth.as_ref().is_some_and(|t| t.model.is_some());
         let truth = truth
             .map(|t| super::mismatch::compile(&t, &model, &set, &compiled).map(Box::new))
             .transpose()?;
@@ -50,6 +53,7 @@ impl Kind for Analysis {
             compiled,
             budget,
             truth,
+            truth_is_model,
         })
     }
 
@@ -96,8 +100,7 @@ impl Kind for Analysis {
                 .filter(|s| s.shortcut_used)
                 .map(|s| s.reached_at_step);
             let mut report = |f: f64| progress.report((done + units * f) / total);
-            let b = super::budget::run(&r.compiled, result.steps, frozen_at, &mut report)
-                .map_err(request::locate)?;
+            let b = super::budget::run(&r.compiled, result.steps, frozen_at, &mut report)?;
             result.budget = Some(b);
             done += units;
         }
@@ -107,10 +110,11 @@ impl Kind for Analysis {
             truth.steps = crate::model::compile::StepPlan::Fixed(result.steps);
             let half = units / 2.0;
             let mut report = |f: f64| progress.report((done + half * f) / total);
-            let optimal = super::run(&truth, &mut report).map_err(|e| e.with_prefix("truth"))?;
+            let place = |e| super::mismatch::place_in(e, r.truth_is_model);
+            let optimal = super::run(&truth, &mut report).map_err(place)?;
             let mut report = |f: f64| progress.report((done + half + half * f) / total);
-            let m = super::mismatch::run(&r.compiled, &result, &truth, &optimal, &mut report)
-                .map_err(request::locate)?;
+            let m =
+                super::mismatch::run(&r.compiled, &result, &truth, &optimal, place, &mut report)?;
             result.criteria.actual = Some(m.1);
             result.mismatch = Some(Box::new(m.0));
         }

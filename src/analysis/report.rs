@@ -1,6 +1,6 @@
 //! Plain-text and CSV renderings of a result, shared by the CLI, the server and wasm.
 
-use crate::analysis::budget::{Budget, Shares, StateBudget};
+use crate::analysis::budget::{Budget, BudgetSource, Shares, SourceKind, StateBudget};
 use crate::analysis::mismatch::Mismatch;
 use crate::analysis::result::{AnalysisResult, CriteriaSet};
 use crate::text::{CELL, cell, csv_text, num, short};
@@ -43,35 +43,15 @@ pub fn criteria_table(r: &AnalysisResult) -> String {
         "state", "F_YZ", "F_ZX", "F_YX", "F_YZ", "F_ZX", "F_YX"
     );
     let _ = writeln!(s, "{rule}");
-    let (b, c) = (&r.criteria.bound, &r.criteria.covariance);
-    for (i, name) in r.states.iter().enumerate() {
-        let (pb, pc) = (&b.per_state[i], &c.per_state[i]);
-        let _ = writeln!(
-            s,
-            "{:<w$} | {:>cw$} {:>cw$} {:>cw$} | {:>cw$} {:>cw$} {:>cw$}",
-            name,
-            cell(pb.yz),
-            cell(pb.zx),
-            cell(pb.yx),
-            cell(pc.yz),
-            cell(pc.zx),
-            cell(pc.yx)
-        );
-    }
-    let _ = writeln!(s, "{rule}");
-    let _ = writeln!(
-        s,
-        "{:<w$} | {:>cw$} {:>cw$} {:>cw$} | {:>cw$} {:>cw$} {:>cw$}",
-        "weighted",
-        cell(b.weighted.yz),
-        cell(b.weighted.zx),
-        cell(b.weighted.yx),
-        cell(c.weighted.yz),
-        cell(c.weighted.zx),
-        cell(c.weighted.yx)
+    two_sets(
+        &mut s,
+        w,
+        &r.criteria.bound,
+        &r.criteria.covariance,
+        Some(&rule),
     );
-    notes(&mut s, "bound", b);
-    notes(&mut s, "covariance", c);
+    notes(&mut s, "bound", &r.criteria.bound);
+    notes(&mut s, "covariance", &r.criteria.covariance);
     if let Some(ss) = &r.steady_state {
         let _ = writeln!(
             s,
@@ -142,31 +122,34 @@ fn mismatch_table(s: &mut String, m: &Mismatch, actual: &CriteriaSet) {
         "{:<w$} | {:>cw$} {:>cw$} {:>cw$} | {:>cw$} {:>cw$} {:>cw$}",
         "state", "F_YZ", "F_ZX", "F_YX", "F_YZ", "F_ZX", "F_YX"
     );
-    let rows = actual.per_state.iter().zip(&m.optimal.per_state);
-    for (a, o) in rows {
-        let _ = writeln!(
-            s,
-            "{:<w$} | {:>cw$} {:>cw$} {:>cw$} | {:>cw$} {:>cw$} {:>cw$}",
-            a.state,
-            cell(a.yz),
-            cell(a.zx),
-            cell(a.yx),
-            cell(o.yz),
-            cell(o.zx),
-            cell(o.yx)
-        );
+    two_sets(s, w, actual, &m.optimal, None);
+}
+
+/// Two criteria sets side by side: a row per state, then (after `rule`, if any) the
+/// weighted row, each F_YZ, F_ZX, F_YX of `left` then of `right`.
+fn two_sets(s: &mut String, w: usize, left: &CriteriaSet, right: &CriteriaSet, rule: Option<&str>) {
+    for (a, b) in left.per_state.iter().zip(&right.per_state) {
+        six(s, w, &a.state, [a.yz, a.zx, a.yx], [b.yz, b.zx, b.yx]);
     }
-    let (a, o) = (&actual.weighted, &m.optimal.weighted);
+    if let Some(rule) = rule {
+        let _ = writeln!(s, "{rule}");
+    }
+    let (a, b) = (&left.weighted, &right.weighted);
+    six(s, w, "weighted", [a.yz, a.zx, a.yx], [b.yz, b.zx, b.yx]);
+}
+
+/// One row of [`two_sets`].
+fn six(s: &mut String, w: usize, name: &str, a: [Option<f64>; 3], b: [Option<f64>; 3]) {
+    let cw = CELL;
     let _ = writeln!(
         s,
-        "{:<w$} | {:>cw$} {:>cw$} {:>cw$} | {:>cw$} {:>cw$} {:>cw$}",
-        "weighted",
-        cell(a.yz),
-        cell(a.zx),
-        cell(a.yx),
-        cell(o.yz),
-        cell(o.zx),
-        cell(o.yx)
+        "{name:<w$} | {:>cw$} {:>cw$} {:>cw$} | {:>cw$} {:>cw$} {:>cw$}",
+        cell(a[0]),
+        cell(a[1]),
+        cell(a[2]),
+        cell(b[0]),
+        cell(b[1]),
+        cell(b[2])
     );
 }
 
@@ -184,10 +167,14 @@ fn budget_tables(s: &mut String, b: &Budget) {
         ),
         ("open-loop variance at t_D", |x| &x.open_loop, true),
     ];
+    let label = |x: &BudgetSource| match (&x.enters, x.kind) {
+        (Some(e), k) if k != SourceKind::Initial => format!("{} → {e}", x.name),
+        _ => x.name.clone(),
+    };
     let w = b
         .sources
         .iter()
-        .map(|x| x.name.chars().count())
+        .map(|x| label(x).chars().count())
         .max()
         .unwrap_or(0)
         .max("SKO".len());
@@ -207,7 +194,7 @@ fn budget_tables(s: &mut String, b: &Budget) {
         let _ = writeln!(s, "{head}");
         let _ = writeln!(s, "{}", "-".repeat(head.chars().count()));
         for (k, src) in b.sources.iter().enumerate() {
-            let mut line = format!("{:<w$} |", src.name);
+            let mut line = format!("{:<w$} |", label(src));
             for st in &b.states {
                 let sh = pick(st);
                 let share = if at_end {

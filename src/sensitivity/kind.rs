@@ -112,8 +112,8 @@ impl Kind for Sensitivity {
     }
 }
 
-/// `params`: names of the model's params, each once (default: all of them, in the
-/// model's order); at most [`MAX_PARAMS`].
+/// `params`: names of the model's params, each once (default: all of them, in
+/// alphabetical order); at most [`MAX_PARAMS`].
 fn params(v: Option<&Value>, model: &crate::model::Model) -> Result<Vec<String>, Error> {
     let Some(v) = v else {
         if model.params.is_empty() {

@@ -50,7 +50,8 @@ pub const CRITERIA: &[&str] = &[
 pub struct SensitivityRequest {
     pub model: Model,
     pub set: Overrides,
-    /// The params, in the request's order (default: every param of the model).
+    /// The params, in the request's order (default: every param of the model, in
+    /// alphabetical order; ties in the ranking keep this order).
     pub params: Vec<String>,
     pub relative_step: f64,
     /// Index into [`CRITERIA`]: the params are listed by |S| of this criterion.

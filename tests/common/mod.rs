@@ -53,3 +53,14 @@ pub fn matrix(v: &serde_json::Value) -> Vec<Vec<f64>> {
     };
     v.as_array().unwrap().iter().map(row).collect()
 }
+
+/// An analysis request (`{model, set?, budget?, truth?}`) through the registry, as every shell runs it.
+pub fn run_analysis(request: serde_json::Value) -> kea_core::AnalysisResult {
+    use kea_core::exec::{Forgetful, Sequential};
+    let prepared = kea_core::registry::prepare("analysis", request).expect("a valid request");
+    match prepared.run(&Sequential, &mut kea_core::NoProgress, &Forgetful) {
+        Ok(kea_core::registry::Outcome::Analysis(r)) => r,
+        Ok(_) => panic!("an analysis"),
+        Err(e) => panic!("the analysis runs: {e:?}"),
+    }
+}

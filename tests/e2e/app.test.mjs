@@ -124,15 +124,15 @@ test('"Run in" is one setting for every tab that runs, kept over a reload', asyn
   const chosen = () =>
     page.$$eval('.run-controls .mode input:checked', (cs) => cs.map((c) => `${c.name}=${c.value}`).sort().join(' '));
   await page.check('input[name=mode][value=browser]');
-  assert.equal(await chosen(), 'id-where=browser mc-where=browser mode=browser nl-where=browser syn-where=browser');
+  assert.equal(await chosen(), 'id-where=browser mc-where=browser mode=browser nl-where=browser sens-where=browser syn-where=browser');
   await page.check('input[name=mode][value=server]');
-  assert.equal(await chosen(), 'id-where=server mc-where=server mode=server nl-where=server syn-where=server');
+  assert.equal(await chosen(), 'id-where=server mc-where=server mode=server nl-where=server sens-where=server syn-where=server');
   await page.reload();
   await ready();
-  assert.equal(await chosen(), 'id-where=server mc-where=server mode=server nl-where=server syn-where=server');
+  assert.equal(await chosen(), 'id-where=server mc-where=server mode=server nl-where=server sens-where=server syn-where=server');
   await page.click('#tab-synthesis');
   await page.check('input[name=syn-where][value=browser]');
-  assert.equal(await chosen(), 'id-where=browser mc-where=browser mode=browser nl-where=browser syn-where=browser');
+  assert.equal(await chosen(), 'id-where=browser mc-where=browser mode=browser nl-where=browser sens-where=browser syn-where=browser');
   await page.click('#tab-analysis');
 });
 

@@ -5,7 +5,7 @@
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
-import { choosePreset, kea, openApp } from './lib.mjs';
+import { choosePreset, kea, openApp, runAnalysis } from './lib.mjs';
 
 let app;
 let page;
@@ -18,17 +18,6 @@ before(async () => {
 
 after(() => app?.close());
 
-/** Run the analysis in `where` and wait for its result. */
-async function runIn(where) {
-  await page.check(`input[name=mode][value=${where}]`);
-  const before = await page.evaluate(() => document.querySelector('#summary').textContent);
-  await page.click('#run');
-  await page.waitForFunction(
-    (b) => !document.querySelector('#results').hidden && document.querySelector('#summary').textContent !== b && !document.querySelector('#run').disabled,
-    before,
-    { timeout: 30000 },
-  );
-}
 
 /** What the budget section shows: each state's bar widths (%) and the table's text. */
 function shown() {
@@ -46,11 +35,11 @@ test('the error budget, in this browser and on the server, shows the shares kea 
   await choosePreset(page, 'helicopter-range');
   for (const where of ['browser', 'server']) {
     await page.uncheck('#run-budget');
-    await runIn(where);
+    await runAnalysis(page, where);
     assert.equal((await shown()).hidden, true, `${where}: no budget unless asked`);
 
     await page.check('#run-budget');
-    await runIn(where);
+    await runAnalysis(page, where);
     await page.selectOption('#budget-view', '0'); // the filtered variance at t_D
     const s = await shown();
     assert.equal(s.hidden, false, where);

@@ -213,3 +213,15 @@ export async function exportedModel(page) {
   const [download] = await Promise.all([page.waitForEvent('download'), page.click('#export-model')]);
   return JSON.parse(readFileSync(await download.path(), 'utf8'));
 }
+
+/** Run the Analysis tab's analysis in `where` (browser or server) and wait for its result. */
+export async function runAnalysis(page, where) {
+  await page.check(`input[name=mode][value=${where}]`);
+  const before = await page.evaluate(() => document.querySelector('#summary').textContent);
+  await page.click('#run');
+  await page.waitForFunction(
+    (b) => !document.querySelector('#results').hidden && document.querySelector('#summary').textContent !== b && !document.querySelector('#run').disabled,
+    before,
+    { timeout: 30000 },
+  );
+}

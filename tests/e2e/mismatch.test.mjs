@@ -5,7 +5,7 @@
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
-import { choosePreset, kea, openApp } from './lib.mjs';
+import { choosePreset, kea, openApp, runAnalysis } from './lib.mjs';
 
 let app;
 let page;
@@ -18,23 +18,13 @@ before(async () => {
 
 after(() => app?.close());
 
-async function runIn(where) {
-  await page.check(`input[name=mode][value=${where}]`);
-  const before = await page.evaluate(() => document.querySelector('#summary').textContent);
-  await page.click('#run');
-  await page.waitForFunction(
-    (b) => !document.querySelector('#results').hidden && document.querySelector('#summary').textContent !== b && !document.querySelector('#run').disabled,
-    before,
-    { timeout: 30000 },
-  );
-}
 
 test('a truth beside Run shows believed, actual and optimal SKOs as the CLI gives them', async () => {
   const cli = JSON.parse(kea('analyze', 'preset:helicopter-range', '--truth-set', 'sd=10', '--truth-set', 'f_f=0.3', '--json'));
   await choosePreset(page, 'helicopter-range');
   await page.fill('#run-truth', 'sd=10, f_f=0.3');
   for (const where of ['browser', 'server']) {
-    await runIn(where);
+    await runAnalysis(page, where);
     const rows = await page.evaluate(() =>
       [...document.querySelectorAll('#mismatch-table tbody tr')].map((tr) => [tr.dataset.state, ...[...tr.querySelectorAll('td')].map((td) => td.textContent)]),
     );
@@ -51,7 +41,7 @@ test('a truth beside Run shows believed, actual and optimal SKOs as the CLI give
   }
   // Without a truth the section goes.
   await page.fill('#run-truth', '');
-  await runIn('browser');
+  await runAnalysis(page, 'browser');
   assert.equal(await page.isHidden('#mismatch'), true);
   assert.deepEqual(consoleErrors, []);
 });

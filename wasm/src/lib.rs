@@ -164,6 +164,12 @@ fn analysis_request(model_json: &str, set_json: &str, options_json: &str) -> Res
         let parsed = kea_core::parse_json(options_json.as_bytes())
             .map_err(|e| Error::invalid("", format!("the analysis's options: {e}")))?;
         match parsed {
+            serde_json::Value::Object(o) if o.contains_key("model") || o.contains_key("set") => {
+                return Err(Error::invalid(
+                    "",
+                    "the analysis's options give the request's other members, not `model` or `set`",
+                ));
+            }
             serde_json::Value::Object(o) => o
                 .iter()
                 .map(|(k, v)| format!(", {}: {v}", serde_json::Value::from(k.as_str())))

@@ -14,7 +14,7 @@
 //! Rv = Σ_G Γ_G V_GG Γ_Gᵀ over the sources; one recursion per source, from its own
 //! part alone, gives its part R^s_k, and Σ_s R^s_k = R_k (to rounding: the filter's
 //! own R_k is a different sum of the same terms). The gains come from the filter's own
-//! step ([`SequentialJoseph`], the one Riccati), run again beside the sources — so the
+//! step ([`crate::numerics::riccati::SequentialJoseph`], the one Riccati), run again beside the sources — so the
 //! analysis's loop is not touched, and the budget costs nothing when not asked for.
 //!
 //! A source's share of a state's variance is R^s_ii / Σ_s R^s_ii, at t_D and averaged
@@ -211,7 +211,8 @@ struct Part {
 
 /// The error budget of `m`'s analysis over `steps` steps; `frozen_at`: the step from
 /// which the analysis's steady-state shortcut held R and the gains (its
-/// `steady_state`, when `shortcut_used`): the gains are held from there too.
+/// `steady_state`, when `shortcut_used`): the gains are held from there too. Errors are
+/// placed in the request (`model.…`; `budget` for a filter step that failed here).
 pub fn run(
     m: &CompiledModel,
     steps: u64,
@@ -259,7 +260,8 @@ pub fn run(
     Ok(Budget { sources, states })
 }
 
-/// The pass in the analysis's widest build ([`crate::analysis::build`]).
+/// The pass in AVX2 + FMA where the analysis's build ([`crate::analysis::build`]) is
+/// AVX2 or wider, else portable (the same bits either way).
 fn dispatch(
     m: &CompiledModel,
     steps: u64,

@@ -58,13 +58,13 @@ pub(super) fn run<const N: usize, L: Lanes>(
 
     for k in 1..=steps {
         let t_k = m.t0 + k as f64 * dt;
-        inp.at(m, k, k == 1)?;
+        inp.at(m, k, k == 1).map_err(crate::request::locate)?;
         if frozen_at.is_none_or(|f| k <= f) {
             let all = match schedule.as_mut() {
                 None => true,
                 Some(sc) => sc
                     .mask(k, t_k, &mut avail)
-                    .map_err(|p| time_err(&p, k, t_k))?,
+                    .map_err(|p| crate::request::locate(time_err(&p, k, t_k)))?,
             };
             if k == 1 || inp.rv_changed || avail != avail_prev {
                 let mask = (!all).then_some(&avail[..]);

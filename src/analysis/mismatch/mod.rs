@@ -139,11 +139,14 @@ pub fn compile(
             "the truth's interval must be the model's (t0, t_end)",
         ));
     }
-    if errors.is_empty() {
-        Ok(compiled)
-    } else {
-        Err(Error::Invalid(errors))
+    if !errors.is_empty() {
+        return Err(Error::Invalid(errors));
     }
+    // Availability belongs to the world the filter sees: the model's schedule, for the
+    // truth's own analysis too.
+    let mut compiled = compiled;
+    compiled.schedule = design.schedule.clone();
+    Ok(compiled)
 }
 
 /// The mismatched filter's result.
@@ -191,6 +194,36 @@ pub struct MismatchTrace {
     pub optimal_sko: Vec<f64>,
 }
 
+/// Place an error of the truth's run in the request: at `truth.model.…` for a truth
+/// model; for the model with `truth.set`, at `truth.set` with the model's path in the
+/// message.
+pub fn place_in(e: Error, truth_model: bool) -> Error {
+    match e {
+        Error::Numerical {
+            step,
+            t,
+            path,
+            message,
+        } => {
+            let (path, message) = if truth_model {
+                (format!("truth.model.{path}"), message)
+            } else {
+                (
+                    "truth.set".into(),
+                    format!("with truth.set, {path}: {message}"),
+                )
+            };
+            Error::Numerical {
+                step,
+                t,
+                path,
+                message,
+            }
+        }
+        e => e,
+    }
+}
+
 /// Run the mismatch beside a finished design analysis `design_result`, given the
 /// truth's own analysis (`truth_result`): the pass, and the criteria from the actual
 /// SKOs (with the truth's open-loop and measured SKOs and its y_B, z_B) — the result's
@@ -200,13 +233,19 @@ pub fn run(
     design_result: &AnalysisResult,
     truth: &CompiledModel,
     truth_result: &AnalysisResult,
+    place: impl Fn(Error) -> Error,
     progress: &mut dyn Progress,
 ) -> Result<(Mismatch, CriteriaSet), Error> {
     let n = design.n_states();
     let steps = design_result.steps;
-    // Trace points: the last step of every bucket (as many as the design's traces).
-    let points = (design_result.traces.t.len() / 2).max(1) as u64;
-    let bucket = steps.div_ceil(points).max(1);
+    // Trace points: the last step of every bucket, as many as the analysis's trace
+    // points (none where it has none).
+    let points = design.trace_points as u64;
+    let bucket = if points == 0 {
+        u64::MAX
+    } else {
+        steps.div_ceil(points).max(1)
+    };
     let mut tr_t = Vec::new();
     let mut tr_actual = vec![Vec::new(); n];
     let mut tr_believed = vec![Vec::new(); n];
@@ -218,7 +257,7 @@ pub fn run(
     };
     let (mut fin_var, mut fin_mean) = (vec![0.0; n], vec![0.0; n]);
     let every = crate::progress::steps_between_reports(50.0 * (2 * n * 2 * n * 2 * n) as f64);
-    let structural = pass::run(design, truth, steps, |s| {
+    let structural = pass::run(design, truth, steps, place, |s| {
         for i in 0..n {
             let actual = s.err_var[i].max(0.0).sqrt();
             let open = s.open_var[i].max(0.0).sqrt();
@@ -235,7 +274,7 @@ pub fn run(
             }
             sums.yx[i].add(open, actual);
         }
-        if s.k % bucket == 0 || s.k == steps {
+        if points > 0 && (s.k % bucket == 0 || s.k == steps) {
             tr_t.push(design.t0 + s.k as f64 * (design.t_end - design.t0) / steps as f64);
             for i in 0..n {
                 tr_actual[i].push(s.err_var[i].max(0.0).sqrt());

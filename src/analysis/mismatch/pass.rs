@@ -38,11 +38,14 @@ pub(super) struct Step<'a> {
 }
 
 /// Runs the recursion over `steps` steps, calling `each` after every step. Returns
-/// whether the structure differed (ΔA, ΔC, Δu or y0 not 0 at some step).
+/// whether the structure differed (ΔA, ΔC, Δu or y0 not 0 at some step). Errors are
+/// placed in the request: the model's at `model.…`, the truth's by `place`
+/// ([`super::place`]), a failed filter step at `truth`.
 pub(super) fn run(
     design: &CompiledModel,
     truth: &CompiledModel,
     steps: u64,
+    place: impl Fn(Error) -> Error,
     mut each: impl FnMut(Step) -> Result<(), Error>,
 ) -> Result<bool, Error> {
     let n = design.n_states();
@@ -91,30 +94,31 @@ pub(super) fn run(
 
     for k in 1..=steps {
         let t_k = design.t0 + k as f64 * dt;
-        di.at(design, k, k == 1)?;
-        ti.at(truth, k, k == 1)?;
+        di.at(design, k, k == 1).map_err(crate::request::locate)?;
+        ti.at(truth, k, k == 1).map_err(&place)?;
         let all = match schedule.as_mut() {
             None => true,
             Some(sc) => sc
                 .mask(k, t_k, &mut avail)
-                .map_err(|p| time_err(&p, k, t_k))?,
+                .map_err(|p| crate::request::locate(time_err(&p, k, t_k)))?,
         };
-        if k == 1 || di.rv_changed || avail != avail_prev {
-            let mask = (!all).then_some(&avail[..]);
+        let mask_changed = avail != avail_prev;
+        let mask = (!all).then_some(&avail[..]);
+        if k == 1 || di.rv_changed || mask_changed {
             prep.prepare(&design.c, &di.rv, mask, n, nm)
-                .map_err(|_| lost(k, t_k))?;
-            avail_prev.copy_from_slice(&avail);
+                .map_err(|_| lost(k, t_k, "the model's"))?;
         }
-        if k == 1 || ti.rv_changed || di.rv_changed || !all {
-            let mask = (!all).then_some(&avail[..]);
+        if k == 1 || ti.rv_changed || mask_changed {
             tprep
                 .prepare(&truth.c, &ti.rv, mask, n, nm)
-                .map_err(|_| lost(k, t_k))?;
+                .map_err(|_| lost(k, t_k, "the truth's"))?;
         }
-        if !joseph.step::<0, Scalar>(n, &mut big_r, &di.e, &di.big_b, &prep)
-            || !tjoseph.step::<0, Scalar>(n, &mut tbig_r, &ti.e, &ti.big_b, &tprep)
-        {
-            return Err(lost(k, t_k));
+        avail_prev.copy_from_slice(&avail);
+        if !joseph.step::<0, Scalar>(n, &mut big_r, &di.e, &di.big_b, &prep) {
+            return Err(lost(k, t_k, "the model's"));
+        }
+        if !tjoseph.step::<0, Scalar>(n, &mut tbig_r, &ti.e, &ti.big_b, &tprep) {
+            return Err(lost(k, t_k, "the truth's"));
         }
         dense(&mut at, &ti, n);
         dense(&mut ad, &di, n);
@@ -231,12 +235,15 @@ fn add_gqgt(s: &mut [f64], g: &[f64], q: &[f64], gq: &mut [f64], m: usize, k: us
     }
 }
 
+/// `whose` filter's step failed in the pass where its analysis's did not.
 #[cold]
-fn lost(k: u64, t: f64) -> Error {
+fn lost(k: u64, t: f64, whose: &str) -> Error {
     Error::Numerical {
         step: k,
         t,
         path: "truth".into(),
-        message: "the design filter's covariance recursion failed in the mismatch's pass where the analysis's did not".into(),
+        message: format!(
+            "{whose} filter's covariance recursion failed in the mismatch's pass where its analysis did not"
+        ),
     }
 }

@@ -60,12 +60,12 @@ impl Kind for Analysis {
     fn work(r: &Request) -> Work {
         let mut work = super::work::analysis_work(&r.compiled, Some(&r.model));
         if r.budget {
-            let (units, explain) = super::work::budget_work(&r.compiled);
+            let (units, explain) = super::budget::work(&r.compiled);
             work.units += units;
             work.explain += &format!(" + the budget {explain}");
         }
         if let Some(t) = &r.truth {
-            let (units, explain) = super::work::mismatch_work(&r.compiled, t);
+            let (units, explain) = super::mismatch::work(&r.compiled, t);
             work.units += units;
             work.explain += &format!(" + the mismatch {explain}");
         }
@@ -83,11 +83,11 @@ impl Kind for Analysis {
         // mismatch's run after it (from the start again after a restart), progress
         // split by their work.
         let analysis = super::work::analysis_work(&r.compiled, Some(&r.model)).units;
-        let budget = r.budget.then(|| super::work::budget_work(&r.compiled).0);
+        let budget = r.budget.then(|| super::budget::work(&r.compiled).0);
         let mismatch = r
             .truth
             .as_ref()
-            .map(|t| super::work::mismatch_work(&r.compiled, t).0);
+            .map(|t| super::mismatch::work(&r.compiled, t).0);
         let total = analysis + budget.unwrap_or(0.0) + mismatch.unwrap_or(0.0);
         let mut first = |f: f64| progress.report(analysis * f / total);
         let mut result =

@@ -1,8 +1,8 @@
 //! Plain-text and CSV renderings of a result, shared by the CLI, the server and wasm.
 
 use crate::analysis::budget::{Budget, BudgetSource, Shares, SourceKind, StateBudget};
-use crate::analysis::mismatch::Mismatch;
-use crate::analysis::result::{AnalysisResult, CriteriaSet};
+
+use crate::analysis::result::{AnalysisResult, CriteriaSet, Mismatch};
 use crate::text::{CELL, cell, csv_text, num, short};
 use std::fmt::Write;
 

@@ -39,7 +39,7 @@ pub struct AnalysisResult {
     pub budget: Option<super::budget::Budget>,
     /// The mismatched filter, when the request gave a `truth`.
     #[serde(skip_serializing_if = "Option::is_none", default)]
-    pub mismatch: Option<Box<super::mismatch::Mismatch>>,
+    pub mismatch: Option<Box<Mismatch>>,
     pub timing: Timing,
     /// Things the user should know (e.g. the shortcut was not applicable).
     pub warnings: Vec<String>,
@@ -225,4 +225,49 @@ pub struct FinalCovariance {
     pub covariance: Vec<Vec<f64>>,
     /// p_D, the gain (2.5), N×n.
     pub gain: Vec<Vec<f64>>,
+}
+
+/// The mismatched filter's result (a request's `truth`; [`crate::analysis::mismatch`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Mismatch {
+    /// `noise` where only the noise levels and the initial SKOs differ (A, C, u and y0
+    /// the same at every step), else `structure`.
+    pub differs_in: String,
+    pub states: Vec<MismatchState>,
+    /// The covariance set of the filter designed on the truth (the truth's analysis).
+    pub optimal: CriteriaSet,
+    /// Per state over time: actual, believed, optimal SKOs, at `t`.
+    pub traces: MismatchTraces,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MismatchState {
+    pub state: String,
+    /// √(diag Cov e_D): the actual SKO of the filter's error at t_D.
+    pub actual_sko: f64,
+    /// E e_D: the filter's mean error at t_D (0 unless y0, u, a or C differ).
+    pub bias: f64,
+    /// √(R_D)_ii of the design: what the filter believes.
+    pub believed_sko: f64,
+    /// The potential SKO of the filter designed on the truth.
+    pub optimal_sko: f64,
+    /// actual_sko / optimal_sko: what the mismatch costs (≥ 1 up to rounding for
+    /// zero bias).
+    pub loss: Option<f64>,
+    /// actual_sko / believed_sko: > 1, the filter is optimistic.
+    pub actual_over_believed: Option<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MismatchTraces {
+    pub t: Vec<f64>,
+    pub states: Vec<MismatchTrace>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MismatchTrace {
+    pub state: String,
+    pub actual_sko: Vec<f64>,
+    pub believed_sko: Vec<f64>,
+    pub optimal_sko: Vec<f64>,
 }

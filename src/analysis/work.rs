@@ -304,35 +304,6 @@ pub fn analysis_work(compiled: &CompiledModel, model: Option<&Model>) -> Work {
     }
 }
 
-/// The error budget's pass ([`crate::analysis::budget`]): D (for `"auto"` the cap) ×
-/// its step, which runs the filter's step again and one recursion per source — the
-/// work grows with the number of sources. Its units and how they were computed.
-pub fn budget_work(compiled: &CompiledModel) -> (f64, String) {
-    let (n, nm) = (compiled.n_states(), compiled.n_measurements());
-    let sources = crate::analysis::budget::source_count(compiled);
-    let step = crate::analysis::budget::step_units(n, nm, sources);
-    let steps = compiled.max_steps();
-    (
-        steps as f64 * step,
-        format!("D = {steps} steps × {step:.0} ({sources} sources)"),
-    )
-}
-
-/// The mismatched filter ([`crate::analysis::mismatch`]): the truth's own analysis,
-/// and D × the pass's step — two Riccati steps and the 2N-state covariance
-/// F S Fᵀ (2·(2N)³, plain loops) with its noise terms.
-pub fn mismatch_work(design: &CompiledModel, truth: &CompiledModel) -> (f64, String) {
-    let (n, nm) = (design.n_states() as f64, design.n_measurements() as f64);
-    let steps = design.max_steps();
-    let optimal = analysis_work(truth, None).units;
-    let n2 = 2.0 * n;
-    let step = 2.0 * n2 * n2 * n2 + n2 * n2 * (n + nm) + 2.0 * step_cost(design.n_states());
-    (
-        optimal + steps as f64 * step,
-        format!("the truth's analysis {optimal:.3e} + D = {steps} steps × {step:.0}"),
-    )
-}
-
 /// Units of parsing one expression (a distinct text of a member), constant or in t:
 /// exmex builds a parsed expression of tens of KB, and one in t is parsed twice (for
 /// one value and for blocks of values). Measured (a 2-core Zen 4, `kea analyze` of one

@@ -349,3 +349,17 @@ pub fn step_units(n: usize, nm: usize, sources: usize) -> f64 {
     crate::analysis::work::step_cost(n as usize)
         + sources as f64 * (2.0 * n * n * n + 4.0 * n * n + nm * n + 50.0)
 }
+
+/// The budget's work: D (for `"auto"` the cap) × its step, which runs the filter's
+/// step again and one recursion per source — the work grows with the number of
+/// sources. Its units and how they were computed.
+pub fn work(compiled: &CompiledModel) -> (f64, String) {
+    let (n, nm) = (compiled.n_states(), compiled.n_measurements());
+    let sources = source_count(compiled);
+    let step = step_units(n, nm, sources);
+    let steps = compiled.max_steps();
+    (
+        steps as f64 * step,
+        format!("D = {steps} steps × {step:.0} ({sources} sources)"),
+    )
+}

@@ -7,12 +7,13 @@
 //! potential accuracy: the `optimal`).
 
 use crate::analysis::criteria::{Avg, SetSums, criteria_set};
-use crate::analysis::result::{AnalysisResult, CriteriaSet};
+use crate::analysis::result::{
+    AnalysisResult, CriteriaSet, Mismatch, MismatchState, MismatchTrace, MismatchTraces,
+};
 use crate::error::{Error, FieldError, got};
 use crate::model::compile::CompiledModel;
 use crate::model::{Model, Overrides};
 use crate::progress::Progress;
-use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
 mod pass;
@@ -147,51 +148,6 @@ pub fn compile(
     let mut compiled = compiled;
     compiled.schedule = design.schedule.clone();
     Ok(compiled)
-}
-
-/// The mismatched filter's result.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Mismatch {
-    /// `noise` where only the noise levels and the initial SKOs differ (A, C, u and y0
-    /// the same at every step), else `structure`.
-    pub differs_in: String,
-    pub states: Vec<MismatchState>,
-    /// The covariance set of the filter designed on the truth (the truth's analysis).
-    pub optimal: CriteriaSet,
-    /// Per state over time: actual, believed, optimal SKOs, at `t`.
-    pub traces: MismatchTraces,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct MismatchState {
-    pub state: String,
-    /// √(diag Cov e_D): the actual SKO of the filter's error at t_D.
-    pub actual_sko: f64,
-    /// E e_D: the filter's mean error at t_D (0 unless y0, u, a or C differ).
-    pub bias: f64,
-    /// √(R_D)_ii of the design: what the filter believes.
-    pub believed_sko: f64,
-    /// The potential SKO of the filter designed on the truth.
-    pub optimal_sko: f64,
-    /// actual_sko / optimal_sko: what the mismatch costs (≥ 1 up to rounding for
-    /// zero bias).
-    pub loss: Option<f64>,
-    /// actual_sko / believed_sko: > 1, the filter is optimistic.
-    pub actual_over_believed: Option<f64>,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct MismatchTraces {
-    pub t: Vec<f64>,
-    pub states: Vec<MismatchTrace>,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct MismatchTrace {
-    pub state: String,
-    pub actual_sko: Vec<f64>,
-    pub believed_sko: Vec<f64>,
-    pub optimal_sko: Vec<f64>,
 }
 
 /// Place an error of the truth's run in the request: at `truth.model.…` for a truth
@@ -346,4 +302,20 @@ pub fn from_request(obj: &Map<String, Value>, errors: &mut Vec<FieldError>) -> O
             None
         }
     }
+}
+
+/// The mismatch's work: the truth's own analysis, and D × the pass's step — two
+/// Riccati steps and the 2N-state covariance F S Fᵀ (2·(2N)³, plain loops) with its
+/// noise terms. Its units and how they were computed.
+pub fn work(design: &CompiledModel, truth: &CompiledModel) -> (f64, String) {
+    use crate::analysis::work::{analysis_work, step_cost};
+    let (n, nm) = (design.n_states() as f64, design.n_measurements() as f64);
+    let steps = design.max_steps();
+    let optimal = analysis_work(truth, None).units;
+    let n2 = 2.0 * n;
+    let step = 2.0 * n2 * n2 * n2 + n2 * n2 * (n + nm) + 2.0 * step_cost(design.n_states());
+    (
+        optimal + steps as f64 * step,
+        format!("the truth's analysis {optimal:.3e} + D = {steps} steps × {step:.0}"),
+    )
 }

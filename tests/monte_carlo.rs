@@ -514,6 +514,6 @@ fn the_former_kind_name_simulation_reads_as_the_monte_carlo() {
         .unwrap();
     assert_eq!(
         unknown.field_errors()[0].message,
-        "unknown job kind `simulations`; known: analysis, monte_carlo, synthesis, identification, nonlinear"
+        "unknown job kind `simulations`; known: analysis, monte_carlo, synthesis, identification, nonlinear, sensitivity"
     );
 }

@@ -22,6 +22,7 @@ pub use state::{SELECTION_KEY, STATE_KEY};
 use std::ops::ControlFlow;
 
 pub mod budget;
+mod gains;
 pub mod inputs;
 pub mod kind;
 pub mod mismatch;

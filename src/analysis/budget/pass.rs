@@ -14,12 +14,12 @@
 
 use super::{Level, Part};
 use crate::analysis::Checkpoints;
-use crate::analysis::inputs::{Inputs, time_err};
+use crate::analysis::gains::{Available, Filter};
+use crate::analysis::inputs::Inputs;
 use crate::error::Error;
 use crate::model::compile::CompiledModel;
 use crate::numerics::lanes::Lanes;
 use crate::numerics::linalg::{mat, mat_mut, mirror, predict_in_place, predict_work};
-use crate::numerics::riccati::{Prepared, SequentialJoseph};
 use crate::progress::Progress;
 
 /// Runs the parts' recursions over `steps` steps (see [`super::run`]); inlined into
@@ -37,15 +37,8 @@ pub(super) fn run<const N: usize, L: Lanes>(
     let dt = (m.t_end - m.t0) / steps as f64;
     let (nl, ms) = (m.b.cols, m.noise.sources());
     let mut inp = Inputs::new(m, n, dt);
-    let mut prep = Prepared::new(n, nm);
-    let mut joseph = SequentialJoseph::new(n, nm);
-    let mut big_r = vec![0.0; n * n];
-    for i in 0..n {
-        big_r[i * n + i] = m.eta0[i] * m.eta0[i];
-    }
-    let mut schedule = m.schedule.clone();
-    let mut avail = vec![true; nm];
-    let mut avail_prev = vec![true; nm];
+    let mut filter = Filter::new(m);
+    let mut avail = Available::new(m);
     // Mᵀ, M R, a source's X W Xᵀ (or X V Xᵀ), its X and X S; the prediction's buffer.
     let mut mt = vec![0.0; n * n];
     let mut t = vec![0.0; n * n];
@@ -60,22 +53,12 @@ pub(super) fn run<const N: usize, L: Lanes>(
         let t_k = m.t0 + k as f64 * dt;
         inp.at(m, k, k == 1).map_err(crate::request::locate)?;
         if frozen_at.is_none_or(|f| k <= f) {
-            let all = match schedule.as_mut() {
-                None => true,
-                Some(sc) => sc
-                    .mask(k, t_k, &mut avail)
-                    .map_err(|p| crate::request::locate(time_err(&p, k, t_k)))?,
-            };
-            if k == 1 || inp.rv_changed || avail != avail_prev {
-                let mask = (!all).then_some(&avail[..]);
-                prep.prepare(&m.c, &inp.rv, mask, n, nm)
-                    .map_err(|_| super::lost(k, t_k))?;
-                avail_prev.copy_from_slice(&avail);
-            }
-            if !joseph.step::<N, L>(n, &mut big_r, &inp.e, &inp.big_b, &prep) {
+            avail.at(k, t_k)?;
+            if !filter.step::<N, L>(m, &inp, &avail) {
                 return Err(super::lost(k, t_k));
             }
         }
+        let joseph = &filter.joseph;
         // Mᵀ = Aᵀ hᵀ = hᵀ + Eᵀ hᵀ: row c of Mᵀ gains E_bc · row b of hᵀ.
         let ht = &joseph.ht;
         mt.copy_from_slice(ht);

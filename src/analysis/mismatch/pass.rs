@@ -17,11 +17,11 @@
 //! cancel). With the same A, C and u the e-block is the Joseph form with the design's
 //! gains and the truth's noises, e = h (A e + w) − K v.
 
-use crate::analysis::inputs::{Inputs, time_err};
+use crate::analysis::gains::{Available, Filter};
+use crate::analysis::inputs::Inputs;
 use crate::error::Error;
 use crate::model::compile::CompiledModel;
 use crate::numerics::lanes::Scalar;
-use crate::numerics::riccati::{Prepared, SequentialJoseph};
 
 /// What the pass gives per step: the error's covariance diagonal and mean, the truth's
 /// open-loop variance (S's x-block), each measurement's true SKO and availability, and
@@ -54,17 +54,11 @@ pub(super) fn run(
     let dt = (design.t_end - design.t0) / steps as f64;
     let mut di = Inputs::new(design, n, dt);
     let mut ti = Inputs::new(truth, n, dt);
-    let mut prep = Prepared::new(n, nm);
-    let mut joseph = SequentialJoseph::new(n, nm);
-    let mut big_r = vec![0.0; n * n];
-    // The filter designed on the truth (the optimal one), beside.
-    let mut tprep = Prepared::new(n, nm);
-    let mut tjoseph = SequentialJoseph::new(n, nm);
-    let mut tbig_r = vec![0.0; n * n];
-    for i in 0..n {
-        big_r[i * n + i] = design.eta0[i] * design.eta0[i];
-        tbig_r[i * n + i] = truth.eta0[i] * truth.eta0[i];
-    }
+    // The filter designed on the model, and the one designed on the truth (the
+    // optimal), beside; both see the model's availability.
+    let mut filter = Filter::new(design);
+    let mut optimal = Filter::new(truth);
+    let mut avail = Available::new(design);
     // z = [x; e]: x_0 ~ (y0^t, P0^t), x̂_0 = y0^d.
     let mut mu = vec![0.0; n2];
     let mut s = vec![0.0; n2 * n2];
@@ -78,12 +72,10 @@ pub(super) fn run(
     }
     let dc: Vec<f64> = truth.c.iter().zip(&design.c).map(|(t, d)| t - d).collect();
     let mut structural = truth.y0 != design.y0 || dc.iter().any(|&x| x != 0.0);
-    let mut schedule = design.schedule.clone();
-    let mut avail = vec![true; nm];
-    let mut avail_prev = vec![true; nm];
     // Work: A^t and A^d dense, F, G_w (2N × N), G_v (2N × n), products.
     let (mut at, mut ad) = (vec![0.0; n * n], vec![0.0; n * n]);
     let mut f = vec![0.0; n2 * n2];
+    let mut kdc = vec![0.0; n * n];
     let mut gw = vec![0.0; n2 * n];
     let mut gv = vec![0.0; n2 * nm];
     let mut tmp = vec![0.0; n2 * n2];
@@ -96,36 +88,26 @@ pub(super) fn run(
         let t_k = design.t0 + k as f64 * dt;
         di.at(design, k, k == 1).map_err(crate::request::locate)?;
         ti.at(truth, k, k == 1).map_err(&place)?;
-        let all = match schedule.as_mut() {
-            None => true,
-            Some(sc) => sc
-                .mask(k, t_k, &mut avail)
-                .map_err(|p| crate::request::locate(time_err(&p, k, t_k)))?,
-        };
-        let mask_changed = avail != avail_prev;
-        let mask = (!all).then_some(&avail[..]);
-        if k == 1 || di.rv_changed || mask_changed {
-            prep.prepare(&design.c, &di.rv, mask, n, nm)
-                .map_err(|_| lost(k, t_k, "the model's"))?;
-        }
-        if k == 1 || ti.rv_changed || mask_changed {
-            tprep
-                .prepare(&truth.c, &ti.rv, mask, n, nm)
-                .map_err(|_| lost(k, t_k, "the truth's"))?;
-        }
-        avail_prev.copy_from_slice(&avail);
-        if !joseph.step::<0, Scalar>(n, &mut big_r, &di.e, &di.big_b, &prep) {
+        avail.at(k, t_k)?;
+        if !filter.step::<0, Scalar>(design, &di, &avail) {
             return Err(lost(k, t_k, "the model's"));
         }
-        if !tjoseph.step::<0, Scalar>(n, &mut tbig_r, &ti.e, &ti.big_b, &tprep) {
+        if !optimal.step::<0, Scalar>(truth, &ti, &avail) {
             return Err(lost(k, t_k, "the truth's"));
         }
-        dense(&mut at, &ti, n);
-        dense(&mut ad, &di, n);
+        let joseph = &filter.joseph;
+        ti.dense_a_into(&mut at);
+        di.dense_a_into(&mut ad);
         structural |= at != ad || ti.u_dt != di.u_dt;
         // K (N × n) = gain_tᵀ; h = htᵀ.
         let kk = |i: usize, j: usize| joseph.gain_t[j * n + i];
         let h = |i: usize, b: usize| joseph.ht[b * n + i];
+        // K ΔC (N × N), once a step: F's, G_w's and c's lower blocks use it.
+        for i in 0..n {
+            for j in 0..n {
+                kdc[i * n + j] = (0..nm).map(|r| kk(i, r) * dc[r * n + j]).sum();
+            }
+        }
         // F = [[A^t, 0], [h ΔA − K ΔC A^t, h A^d]]
         f.fill(0.0);
         for i in 0..n {
@@ -133,13 +115,9 @@ pub(super) fn run(
                 f[i * n2 + j] = at[i * n + j];
                 let (mut lower_left, mut lower_right) = (0.0, 0.0);
                 for b in 0..n {
-                    lower_left += h(i, b) * (at[b * n + j] - ad[b * n + j]);
+                    lower_left +=
+                        h(i, b) * (at[b * n + j] - ad[b * n + j]) - kdc[i * n + b] * at[b * n + j];
                     lower_right += h(i, b) * ad[b * n + j];
-                }
-                for r in 0..nm {
-                    let kdc: f64 =
-                        kk(i, r) * (0..n).map(|b| dc[r * n + b] * at[b * n + j]).sum::<f64>();
-                    lower_left -= kdc;
                 }
                 f[(n + i) * n2 + j] = lower_left;
                 f[(n + i) * n2 + n + j] = lower_right;
@@ -151,8 +129,7 @@ pub(super) fn run(
         for i in 0..n {
             gw[i * n + i] = 1.0;
             for j in 0..n {
-                let kdc: f64 = (0..nm).map(|r| kk(i, r) * dc[r * n + j]).sum();
-                gw[(n + i) * n + j] = h(i, j) - kdc;
+                gw[(n + i) * n + j] = h(i, j) - kdc[i * n + j];
             }
             for r in 0..nm {
                 gv[(n + i) * nm + r] = -kk(i, r);
@@ -165,9 +142,7 @@ pub(super) fn run(
         for i in 0..n {
             mu_next[i] += ti.u_dt[i];
             let du: f64 = (0..n).map(|b| h(i, b) * (ti.u_dt[b] - di.u_dt[b])).sum();
-            let kdcu: f64 = (0..nm)
-                .map(|r| kk(i, r) * (0..n).map(|b| dc[r * n + b] * ti.u_dt[b]).sum::<f64>())
-                .sum();
+            let kdcu: f64 = (0..n).map(|b| kdc[i * n + b] * ti.u_dt[b]).sum();
             mu_next[n + i] += du - kdcu;
         }
         mu.copy_from_slice(&mu_next);
@@ -193,8 +168,8 @@ pub(super) fn run(
             err_var[i] = s[(n + i) * n2 + n + i];
             err_mean[i] = mu[n + i];
             open_var[i] = s[i * n2 + i];
-            believed_var[i] = big_r[i * n + i];
-            optimal_var[i] = tbig_r[i * n + i];
+            believed_var[i] = filter.big_r[i * n + i];
+            optimal_var[i] = optimal.big_r[i * n + i];
         }
         each(Step {
             k,
@@ -204,21 +179,10 @@ pub(super) fn run(
             err_mean: &err_mean,
             open_var: &open_var,
             meas_sko: &ti.meas_sko,
-            avail: &avail,
+            avail: avail.each(),
         })?;
     }
     Ok(structural)
-}
-
-/// A = I + E of `inp`, dense.
-fn dense(out: &mut [f64], inp: &Inputs, n: usize) {
-    out.fill(0.0);
-    for i in 0..n {
-        out[i * n + i] = 1.0;
-    }
-    for &(i, j, v) in inp.e.nonzeros() {
-        out[i * n + j] += v;
-    }
 }
 
 /// S's upper triangle += G Q Gᵀ (G: m × q, Q: q × q); `gq` holds G Q.

@@ -257,9 +257,10 @@ fn structural_mismatch_equals_the_joint_recursion() {
                 s.actual_sko.powi(2),
                 var[i]
             );
+            // (The reference's mean is of e = x − x̂; the bias is of x̂ − x.)
             let scale = mean[i].abs().max(1e-3 * s.actual_sko);
             assert!(
-                (s.bias - mean[i]).abs() <= 1e-9 * scale,
+                (s.bias + mean[i]).abs() <= 1e-9 * scale,
                 "{truth:?} {}: bias {} against {}",
                 s.state,
                 s.bias,
@@ -343,4 +344,119 @@ fn bad_truths_are_refused_at_their_paths() {
         "truth.model.system.a[0][1]",
         "",
     );
+}
+
+/// The Monte Carlo of the mismatched filter (`"truth"` in a Monte Carlo request): the
+/// runs imitate the truth, the filter is the model's.
+fn monte_carlo(truth: Value, runs: u64) -> kea_core::monte_carlo::MonteCarloResult {
+    use kea_core::exec::{Forgetful, Sequential};
+    let request = json!({ "model": model(), "runs": runs, "seed": 11, "truth": truth });
+    let prepared = registry::prepare("monte_carlo", request).expect("a valid request");
+    match prepared.run(&Sequential, &mut kea_core::NoProgress, &Forgetful) {
+        Ok(registry::Outcome::MonteCarlo(o)) => o.result,
+        Ok(_) => panic!("a Monte Carlo"),
+        Err(e) => panic!("the Monte Carlo runs: {e:?}"),
+    }
+}
+
+/// A sensor 16 times noisier and a model error 4 times larger than designed: the
+/// sample variances lie in their χ² bands around the actual covariance and outside
+/// them around what the filter believes — at the last step and step by step.
+#[test]
+fn monte_carlo_agrees_with_the_actual_covariance_not_the_believed_one() {
+    let runs = 2000;
+    let truth = json!({ "set": { "r": 3.2, "q": 2.0 } });
+    let mc = monte_carlo(truth.clone(), runs);
+    let an = analyse(json!({ "model": model(), "truth": truth }));
+    let m = an.mismatch.as_ref().unwrap();
+    let actual = mc.final_.actual_sko.as_ref().expect("actual SKOs");
+    let bias = mc.final_.actual_bias.as_ref().unwrap();
+    // The noise-only mismatch has no bias: Σe²/R ~ σ² χ²_R / R.
+    let band = kea_core::monte_carlo::chi2_band(runs as f64, runs as f64);
+    for i in 0..2 {
+        assert_eq!(
+            actual[i], m.states[i].actual_sko,
+            "the analysis's recursion"
+        );
+        assert_eq!(bias[i], 0.0);
+        let sample = mc.final_.filtered_sko[i].powi(2);
+        let (to_actual, to_believed) = (
+            sample / actual[i].powi(2),
+            sample / mc.final_.potential_sko[i].powi(2),
+        );
+        assert!(
+            (band[0]..=band[1]).contains(&to_actual),
+            "state {i}: {to_actual} outside {band:?}"
+        );
+        assert!(
+            to_believed > band[1],
+            "state {i}: {to_believed} inside {band:?}"
+        );
+    }
+    let verdicts = mc.consistency.per_state_actual.as_ref().unwrap();
+    for (v, b) in verdicts.iter().zip(&mc.consistency.per_state) {
+        assert_eq!(
+            v.verdict,
+            kea_core::monte_carlo::Verdict::Consistent,
+            "{v:?}"
+        );
+        assert!(v.fraction_in_band.unwrap() >= 0.85, "{v:?}");
+        assert_eq!(
+            b.verdict,
+            kea_core::monte_carlo::Verdict::Optimistic,
+            "{b:?}"
+        );
+        assert!(b.fraction_in_band.unwrap() <= 0.05, "{b:?}");
+    }
+    let traces = &mc.traces.states[0];
+    assert_eq!(traces.actual_sko.as_ref().unwrap().len(), mc.traces.t.len());
+}
+
+/// Another a, u and y0 (a biased filter): the sample variance about the sample mean in
+/// its band around the actual variance, the sample mean at the actual bias.
+#[test]
+fn monte_carlo_of_a_structural_mismatch_finds_the_actual_bias() {
+    let mc = monte_carlo(json!({ "set": { "k": 3.0, "g": 1.0, "y1": 2.0 } }), 2000);
+    let bias = mc.final_.actual_bias.as_ref().unwrap();
+    assert!(bias.iter().any(|b| b.abs() > 0.05), "{bias:?}");
+    for v in mc.consistency.per_state_actual.as_ref().unwrap() {
+        assert_eq!(
+            v.verdict,
+            kea_core::monte_carlo::Verdict::Consistent,
+            "{v:?}"
+        );
+        assert!(v.fraction_in_band.unwrap() >= 0.8, "{v:?}");
+        assert!(v.normalised_bias.unwrap().abs() <= 0.1, "{v:?}");
+    }
+}
+
+/// A truth equal to the model imitates the same world with the same draws: the
+/// sample filtered SKOs are the plain Monte Carlo's, bit for bit.
+#[test]
+fn monte_carlo_with_the_model_as_truth_is_the_plain_one() {
+    let plain = monte_carlo(json!("process"), 200);
+    let same = monte_carlo(json!({ "set": {} }), 200);
+    assert_eq!(plain.final_.filtered_sko, same.final_.filtered_sko);
+    for (p, s) in plain.traces.states.iter().zip(&same.traces.states) {
+        assert_eq!(p.filtered_sko, s.filtered_sko);
+        for (a, b) in p.a_priori_sko.iter().zip(&s.a_priori_sko) {
+            assert!(rel(*b, *a) <= 1e-12, "{a} {b}");
+        }
+    }
+    assert!(plain.consistency.per_state_actual.is_none());
+}
+
+#[test]
+fn bad_monte_carlo_truths_are_refused_at_their_paths() {
+    let refused = |truth: Value| {
+        registry::prepare(
+            "monte_carlo",
+            json!({ "model": model(), "runs": 10, "truth": truth }),
+        )
+        .err()
+        .expect("refused")
+    };
+    assert_error_at(&refused(json!({"set": {"nope": 1}})), "truth.set.nope", "");
+    assert_error_at(&refused(json!("banana")), "truth", "process");
+    assert_error_at(&refused(json!({})), "truth", "give `set`");
 }

@@ -593,6 +593,7 @@ fn responses_validate_against_the_spec() {
                "truth": {"set": {"sd": 10, "f_f": 0.3}}}),
         json!({"kind": "monte_carlo", "model": cv, "runs": 20, "seed": 1,
                "truth": "process", "model_error": "white", "trace_points": 10}),
+        json!({"kind": "monte_carlo", "model": cv, "runs": 20, "truth": {"set": {"q": 2}}}),
         json!({"kind": "synthesis", "model": cv,
                "target": {"criterion": "yx", "criteria": "covariance", "threshold": 1.5},
                "mode": {"grid": {"params": [{"name": "q", "values": [0.5, 2]}],

@@ -245,7 +245,8 @@ pub struct MismatchState {
     pub state: String,
     /// √(diag Cov e_D): the actual SKO of the filter's error at t_D.
     pub actual_sko: f64,
-    /// E e_D: the filter's mean error at t_D (0 unless y0, u, a or C differ).
+    /// E(x̂ − x)_D: the mean of the filtered error at t_D, in the Monte Carlo's sign
+    /// X − Y (0 unless y0, u, a or C differ).
     pub bias: f64,
     /// √(R_D)_ii of the design: what the filter believes.
     pub believed_sko: f64,

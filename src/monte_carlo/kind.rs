@@ -1,5 +1,9 @@
 //! The Monte Carlo as a kind of run ([`crate::kind`]): `{model, set?, runs, seed?,
 //! truth?, model_error?, trace_points?}` → the Monte Carlo result (METHOD §1.8).
+//! `truth` is what the filter is compared with — `"process"` (the default) or
+//! `"mean"` — or a mismatched filter's truth, `{"set": {…}}` or `{"model": {…}}` as in
+//! an analysis ([`crate::analysis::mismatch`]): the runs then imitate the truth's
+//! process and the filter stays designed on the model.
 
 use super::{DEFAULT_SEED, ModelError, MonteCarloRequest, MonteCarloResult, Truth};
 use crate::analysis::result::Timing;
@@ -22,6 +26,9 @@ pub struct Request {
     pub model: Model,
     pub compiled: CompiledModel,
     pub monte_carlo: MonteCarloRequest,
+    /// A mismatched filter's truth (`"truth": {...}`), compiled, and whether it is a
+    /// model of its own (`truth.model`).
+    pub truth: Option<(Box<CompiledModel>, bool)>,
 }
 
 /// A Monte Carlo's outcome: the result (its JSON is the result's alone) and the
@@ -57,14 +64,27 @@ impl Kind for MonteCarlo {
         let mut errors = request::unknown_members(&obj, Self::MEMBERS);
         let (model, set) = request::model_and_set(&obj, &mut errors);
         let sim = read_members(&obj, &mut errors);
+        let truth = obj
+            .get("truth")
+            .filter(|t| t.is_object())
+            .and_then(|_| crate::analysis::mismatch::from_request(&obj, &mut errors));
         let Some(model) = model.filter(|_| errors.is_empty()) else {
             return Err(Error::Invalid(errors));
         };
         let compiled = request::compile(&model, &set).map_err(request::locate)?;
+        let truth = match truth {
+            Some(t) => {
+                let is_model = t.model.is_some();
+                let c = crate::analysis::mismatch::compile(&t, &model, &set, &compiled)?;
+                Some((Box::new(c), is_model))
+            }
+            None => None,
+        };
         Ok(Request {
             model,
             compiled,
             monte_carlo: sim,
+            truth,
         })
     }
 
@@ -73,7 +93,13 @@ impl Kind for MonteCarlo {
     }
 
     fn work(r: &Request) -> Work {
-        super::work::monte_carlo_work(&r.compiled, Some(&r.model), &r.monte_carlo)
+        let mut work = super::work::monte_carlo_work(&r.compiled, Some(&r.model), &r.monte_carlo);
+        if r.truth.is_some() {
+            let (units, explain) = super::work::truth_work(&r.compiled);
+            work.units += units;
+            work.explain += &format!(" + the truth {explain}");
+        }
+        work
     }
 
     fn run<E: Executor>(
@@ -84,8 +110,13 @@ impl Kind for MonteCarlo {
     ) -> Result<Outcome, Error> {
         // The analysis's and the runs' states are kept in the memo as they go: a run
         // after a restart goes on from the last ones kept (crate::resume).
-        let result = super::simulate_compiled(&r.compiled, &r.monte_carlo, exec, progress, memo)
-            .map_err(request::locate)?;
+        let truth = r.truth.as_ref().map(|(t, is_model)| super::Mismatched {
+            truth: t,
+            truth_is_model: *is_model,
+        });
+        let result =
+            super::simulate_compiled(&r.compiled, truth, &r.monte_carlo, exec, progress, memo)
+                .map_err(request::locate)?;
         Ok(Outcome {
             result,
             threads: exec.threads(),
@@ -129,15 +160,19 @@ fn read_members(obj: &Map<String, Value>, errors: &mut Vec<FieldError>) -> Monte
     ) {
         sim.seed = x;
     }
-    match request::choice(
-        obj,
-        "truth",
-        &[
-            ("process", "the imitated process Y, the Kalman reading"),
-            ("mean", "the mean y, seed 000's reading"),
-        ],
-        errors,
-    ) {
+    // (An object is a mismatched filter's truth, read beside.)
+    let reading = obj.get("truth").filter(|t| !t.is_object()).map(|_| obj);
+    match reading.and_then(|obj| {
+        request::choice(
+            obj,
+            "truth",
+            &[
+                ("process", "the imitated process Y, the Kalman reading"),
+                ("mean", "the mean y, seed 000's reading"),
+            ],
+            errors,
+        )
+    }) {
         Some(0) => sim.truth = Truth::Process,
         Some(_) => sim.truth = Truth::Mean,
         None => {}

@@ -55,6 +55,7 @@ use crate::resume::{F, bits, put};
 pub use state::STATE_KEY;
 use state::{MonteCarloStamp, MonteCarloState};
 
+mod actual;
 pub(crate) mod bands;
 pub mod kind;
 mod plan;
@@ -67,6 +68,7 @@ mod runs;
 mod state;
 pub mod work;
 
+use actual::ActualSums;
 pub use bands::{BAND_PROBABILITY, chi2_band};
 use plan::{Layout, Plan, SumLayout};
 pub use request::{
@@ -103,13 +105,24 @@ pub fn simulate_resumable<E: Executor>(
     memo: &dyn Memo,
 ) -> Result<MonteCarloResult, Error> {
     let compiled = crate::model::compile::compile(model, set)?;
-    simulate_compiled(&compiled, req, exec, progress, memo)
+    simulate_compiled(&compiled, None, req, exec, progress, memo)
 }
 
-/// [`simulate_resumable`] of a compiled model: its analysis (the first 5 % of the
-/// progress), then the runs.
+/// The truth of a Monte Carlo of a mismatched filter (`"truth": {"set"|"model"}`,
+/// [`crate::analysis::mismatch`]): the world the runs imitate, while the filter is
+/// designed on the model. Compiled by [`crate::analysis::mismatch::compile`].
+#[derive(Clone, Copy)]
+pub struct Mismatched<'a> {
+    pub truth: &'a CompiledModel,
+    /// The truth is a model of its own (`truth.model`): where its errors are placed.
+    pub truth_is_model: bool,
+}
+
+/// [`simulate_resumable`] of a compiled model, in the world `truth` if given: its
+/// analysis (the first 5 % of the progress), then the runs.
 pub fn simulate_compiled<E: Executor>(
     compiled: &CompiledModel,
+    truth: Option<Mismatched>,
     req: &MonteCarloRequest,
     exec: &E,
     progress: &mut dyn Progress,
@@ -120,7 +133,7 @@ pub fn simulate_compiled<E: Executor>(
     let mut scaled = |f: f64| progress.report(0.05 * f);
     let analysis = crate::analysis::run_resumable(compiled, &mut scaled, memo)?;
     let mut rest = |f: f64| progress.report(0.05 + 0.95 * f);
-    run_resumable(compiled, &analysis, req, exec, &mut rest, memo)
+    run_resumable(compiled, truth, &analysis, req, exec, &mut rest, memo)
 }
 
 /// Simulate a compiled model, given its analysis (D, y_B, z_B, the other sets).
@@ -131,13 +144,15 @@ pub fn run<E: Executor>(
     exec: &E,
     progress: &mut dyn Progress,
 ) -> Result<MonteCarloResult, Error> {
-    run_resumable(model, analysis, req, exec, progress, &Forgetful)
+    run_resumable(model, None, analysis, req, exec, progress, &Forgetful)
 }
 
-/// [`run`], keeping the runs' state in `memo` between chunks when it asks for it, and
-/// going on from a state kept there ([`simulate_resumable`]).
+/// [`run`] in the world `truth` if given, keeping the runs' state in `memo` between
+/// chunks when it asks for it, and going on from a state kept there
+/// ([`simulate_resumable`]). A run with a truth keeps no state: it starts over.
 pub fn run_resumable<E: Executor>(
     model: &CompiledModel,
+    truth: Option<Mismatched>,
     analysis: &AnalysisResult,
     req: &MonteCarloRequest,
     exec: &E,
@@ -147,19 +162,19 @@ pub fn run_resumable<E: Executor>(
     check_request(req, model)?;
     let chunk = chunk_steps(model, req);
     match model.n_states() {
-        1 => run_n::<1, E>(model, analysis, req, exec, progress, memo, chunk),
-        2 => run_n::<2, E>(model, analysis, req, exec, progress, memo, chunk),
-        3 => run_n::<3, E>(model, analysis, req, exec, progress, memo, chunk),
-        4 => run_n::<4, E>(model, analysis, req, exec, progress, memo, chunk),
-        5 => run_n::<5, E>(model, analysis, req, exec, progress, memo, chunk),
-        6 => run_n::<6, E>(model, analysis, req, exec, progress, memo, chunk),
-        7 => run_n::<7, E>(model, analysis, req, exec, progress, memo, chunk),
-        8 => run_n::<8, E>(model, analysis, req, exec, progress, memo, chunk),
-        9 => run_n::<9, E>(model, analysis, req, exec, progress, memo, chunk),
-        10 => run_n::<10, E>(model, analysis, req, exec, progress, memo, chunk),
-        11 => run_n::<11, E>(model, analysis, req, exec, progress, memo, chunk),
-        12 => run_n::<12, E>(model, analysis, req, exec, progress, memo, chunk),
-        _ => run_n::<0, E>(model, analysis, req, exec, progress, memo, chunk),
+        1 => run_n::<1, E>((model, truth), analysis, req, exec, progress, memo, chunk),
+        2 => run_n::<2, E>((model, truth), analysis, req, exec, progress, memo, chunk),
+        3 => run_n::<3, E>((model, truth), analysis, req, exec, progress, memo, chunk),
+        4 => run_n::<4, E>((model, truth), analysis, req, exec, progress, memo, chunk),
+        5 => run_n::<5, E>((model, truth), analysis, req, exec, progress, memo, chunk),
+        6 => run_n::<6, E>((model, truth), analysis, req, exec, progress, memo, chunk),
+        7 => run_n::<7, E>((model, truth), analysis, req, exec, progress, memo, chunk),
+        8 => run_n::<8, E>((model, truth), analysis, req, exec, progress, memo, chunk),
+        9 => run_n::<9, E>((model, truth), analysis, req, exec, progress, memo, chunk),
+        10 => run_n::<10, E>((model, truth), analysis, req, exec, progress, memo, chunk),
+        11 => run_n::<11, E>((model, truth), analysis, req, exec, progress, memo, chunk),
+        12 => run_n::<12, E>((model, truth), analysis, req, exec, progress, memo, chunk),
+        _ => run_n::<0, E>((model, truth), analysis, req, exec, progress, memo, chunk),
     }
 }
 
@@ -173,8 +188,9 @@ pub fn chunk_steps(model: &CompiledModel, req: &MonteCarloRequest) -> usize {
     crate::work::fitting(CHUNK_WORK, step, CHUNK_STEPS as u64) as usize
 }
 
+/// The runs of the filter designed on `m` in the world `truth` (or `m`'s), N states.
 fn run_n<const N: usize, E: Executor>(
-    m: &CompiledModel,
+    (m, truth): (&CompiledModel, Option<Mismatched>),
     analysis: &AnalysisResult,
     req: &MonteCarloRequest,
     exec: &E,
@@ -184,15 +200,23 @@ fn run_n<const N: usize, E: Executor>(
 ) -> Result<MonteCarloResult, Error> {
     let steps = analysis.steps;
     let runs = req.runs as usize;
-    let mut plan = Plan::new(m, steps);
+    let mut plan = Plan::new(m, truth.map(|t| (t.truth, t.truth_is_model)), steps);
+    // The world the runs imitate: the truth's, or the model's.
+    let world = truth.map_or(m, |t| t.truth);
     let d = plan.d;
     let n = d.n;
     let nm = d.nm;
-    let lay = Layout::new(d);
+    let mismatched = truth.is_some();
+    let with = if mismatched { n } else { 0 };
+    let lay = Layout::new(d, mismatched);
     let sl = SumLayout::new(d);
-    let w_sqrt = sqrt_psd(&m.w, d.nl);
-    let v_sqrt = sqrt_psd(&m.v, d.ms);
+    let w_sqrt = sqrt_psd(&world.w, d.nl);
+    let v_sqrt = sqrt_psd(&world.v, d.ms);
     let c_nz = plan.inp.c_nz.clone();
+    let wc_nz = match truth {
+        Some(t) => crate::analysis::inputs::Inputs::new(t.truth, n, plan.dt).c_nz,
+        None => c_nz.clone(),
+    };
     let pattern = |tm: &crate::expr::TimeMatrix, diag: bool| -> Vec<(usize, usize)> {
         (0..tm.rows)
             .flat_map(|i| (0..tm.cols).map(move |j| (i, j)))
@@ -202,9 +226,10 @@ fn run_n<const N: usize, E: Executor>(
             .collect()
     };
     let a_nz = pattern(&m.a, true);
-    let bd_nz = pattern(&m.b, false);
+    let wa_nz = pattern(&world.a, true);
+    let bd_nz = pattern(&world.b, false);
     // Γ = C g in the seed's form: Γ's pattern is not g's; take it dense then.
-    let g_nz = match &m.noise {
+    let g_nz = match &world.noise {
         crate::model::compile::MeasurementNoise::Gamma(g) => pattern(g, false),
         crate::model::compile::MeasurementNoise::SeedG(_) => (0..d.nm)
             .flat_map(|i| (0..d.ms).map(move |j| (i, j)))
@@ -217,7 +242,10 @@ fn run_n<const N: usize, E: Executor>(
         truth: req.truth,
         model_error: req.model_error,
         c_nz: &c_nz,
+        wc_nz: &wc_nz,
+        same_c: world.c == m.c,
         a_nz: &a_nz,
+        wa_nz: &wa_nz,
         bd_nz: &bd_nz,
         g_nz: &g_nz,
         w_sqrt: &w_sqrt,
@@ -233,7 +261,7 @@ fn run_n<const N: usize, E: Executor>(
             (first, len)
         })
         .filter(|&(_, len)| len > 0)
-        .map(|(first, len)| Block::new(first as u64, len, req.seed, m, &sh))
+        .map(|(first, len)| Block::new(first as u64, len, req.seed, (world, &m.y0), &sh))
         .collect();
 
     let rf = runs as f64;
@@ -243,7 +271,9 @@ fn run_n<const N: usize, E: Executor>(
     let pair = &m.pair_of_state;
 
     let trace_points = req.trace_points.unwrap_or(m.trace_points);
-    let mut rows = Rows::new(steps, n * T_SERIES + 2, trace_points);
+    // The series: T_SERIES per state, NEES, NIS, then with a truth each state's
+    // actual variance and bias.
+    let mut rows = Rows::new(steps, n * T_SERIES + 2 + 2 * with, trace_points);
     let mut mc = (
         vec![Avg::default(); n],
         vec![Avg::default(); n],
@@ -267,19 +297,26 @@ fn run_n<const N: usize, E: Executor>(
         filtered_sko: vec![0.0; n],
         potential_sko: vec![0.0; n],
         chi: vec![0.0; n],
+        actual_sko: None,
+        actual_bias: None,
     };
 
     let mut chunk = vec![0.0; chunk_len * lay.size];
     let mut pot = vec![0.0; chunk_len * n];
     let mut chi = vec![0.0; chunk_len * n];
     let mut open = vec![0.0; chunk_len * n];
+    // With a truth: the actual error variances and means of each step of the chunk,
+    // and the sample variance (about the sample mean) judged against them.
+    let mut act = vec![0.0; chunk_len * with];
+    let mut bia = vec![0.0; chunk_len * with];
+    let mut actual_sums = ActualSums::new(with, rf);
     let mut k0 = 1u64;
 
     // An earlier run's state (a restart): its values, and on from the chunk after it.
     let stamp = MonteCarloStamp::new(steps, (n, nm), req.runs, req.seed, chunk_len);
-    let keeps = keeps_state(req.runs, n);
+    let keeps = keeps_state(req.runs, n) && !mismatched;
     let block_runs: Vec<usize> = blocks.iter().map(|b| b.runs).collect();
-    let series = n * T_SERIES + 2;
+    let series = n * T_SERIES + 2 + 2 * with;
     let earlier = memo
         .recall(STATE_KEY)
         .and_then(|text| MonteCarloState::from_text(&text, stamp, &block_runs, series));
@@ -321,7 +358,11 @@ fn run_n<const N: usize, E: Executor>(
             for i in 0..n {
                 pot[s * n + i] = plan.big_r[i * n + i].max(0.0);
                 chi[s * n + i] = plan.chi[i];
-                open[s * n + i] = plan.p_y[i * n + i].max(0.0);
+                open[s * n + i] = plan.open[i].max(0.0);
+            }
+            if mismatched {
+                act[s * n..(s + 1) * n].copy_from_slice(&plan.actual);
+                bia[s * n..(s + 1) * n].copy_from_slice(&plan.bias);
             }
         }
         let chunk_ref = &chunk[..len * lay.size];
@@ -383,6 +424,17 @@ fn run_n<const N: usize, E: Executor>(
                         }
                     }
                     let _ = j;
+                }
+                if mismatched {
+                    let (av, ab) = (act[s * n + i], bia[s * n + i]);
+                    rows.put(n * T_SERIES + 2 + 2 * i, av);
+                    rows.put(n * T_SERIES + 3 + 2 * i, ab);
+                    // The sample variance about the sample mean, (R − 1) s² / σ² ~ χ²_{R−1}.
+                    let sv = (tot[sl.filt2 + i] - rf * mean_f * mean_f).max(0.0) / (rf - 1.0);
+                    actual_sums.add(i, sv, mean_f, av, ab);
+                    if k == steps {
+                        actual_sums.last[i] = (av.max(0.0).sqrt(), ab);
+                    }
                 }
                 if p > 0.0 {
                     let ratio = vf / p;
@@ -546,7 +598,17 @@ fn run_n<const N: usize, E: Executor>(
             potential_sko: sqrt_col(take(base + T_POT)),
             // χ is an SKO already: its bucket average is kept as is.
             chi: plain(take(base + T_CHI)),
+            actual_sko: None,
+            actual_bias: None,
         });
+    }
+    if mismatched {
+        for (i, st) in states.iter_mut().enumerate() {
+            st.actual_sko = Some(sqrt_col(take(n * T_SERIES + 2 + 2 * i)));
+            st.actual_bias = Some(plain(take(n * T_SERIES + 3 + 2 * i)));
+        }
+        final_.actual_sko = Some(actual_sums.last.iter().map(|l| l.0).collect());
+        final_.actual_bias = Some(actual_sums.last.iter().map(|l| l.1).collect());
     }
     let nees_tr = take(n * T_SERIES);
     let nis_tr = take(n * T_SERIES + 1);
@@ -556,6 +618,9 @@ fn run_n<const N: usize, E: Executor>(
     }
     if req.truth == Truth::Mean {
         warnings.push("truth = \"mean\" (seed 000's reading): the filtered error excludes the model error, so it is not expected to match R_k".into());
+    }
+    if mismatched {
+        warnings.push("truth: the runs imitate the truth and the filter is designed on the model; `consistency.per_state` and NEES and NIS judge what the filter believes, `per_state_actual` its actual error".into());
     }
     if nis_count == 0 {
         warnings.push("no measurement is available at any step, so the NIS check is undefined (its band and average are null)".into());
@@ -576,6 +641,7 @@ fn run_n<const N: usize, E: Executor>(
             nees,
             nis,
             per_state,
+            per_state_actual: actual_sums.verdicts(&m.states),
         },
         final_,
         traces: MonteCarloTraces {
@@ -646,7 +712,7 @@ mod tests {
         let req = MonteCarloRequest::new(40, 7);
         let json = |chunk: usize| {
             let r = run_n::<0, Sequential>(
-                &compiled,
+                (&compiled, None),
                 &analysis,
                 &req,
                 &Sequential,

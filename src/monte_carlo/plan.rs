@@ -1,14 +1,19 @@
 //! The plan (METHOD §1.8): the deterministic part, the same for every run — the mean
 //! (3.3), the Riccati recursion (2.1)–(2.7) with the schedule, the bound (3.16)–(3.19)
 //! and the open-loop covariance — advanced once per step, and the records it writes.
+//! With a truth (a mismatched filter), the world the runs imitate is the truth's: the
+//! plan steps the mismatch's recursion beside (its actual error covariance, and the
+//! truth's mean and inputs for the records), and the filter stays the model's.
 
 use crate::analysis::inputs::{Inputs, time_err};
+use crate::analysis::mismatch::pass::Pass;
 use crate::analysis::overflowed;
 use crate::error::Error;
 use crate::model::compile::CompiledModel;
 use crate::numerics::linalg::{cholesky, cholesky_solve, mul, mul_abt_sym, mul_vec};
 
-/// Dimensions shared by the plan and the blocks.
+/// Dimensions shared by the plan and the blocks: N, n, and the world's L (columns of
+/// b, sources of F) and M (sources of Φ).
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Dims {
     pub(super) n: usize,
@@ -17,16 +22,20 @@ pub(super) struct Dims {
     pub(super) ms: usize,
 }
 
-/// Layout of one step's inputs in a chunk (offsets into a flat f64 record).
+/// Layout of one step's inputs in a chunk (offsets into a flat f64 record). The
+/// filter's A and u are the model's; the world's (`wa`, `wu`, and bΔt, Γ, y) are the
+/// truth's where there is one, else the same entries as the filter's.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Layout {
     pub(super) a: usize,      // A_{k−1}, N×N
     pub(super) u: usize,      // u_{k−1}Δt, N
-    pub(super) bd: usize,     // b_{k−1}Δt, N×L
-    pub(super) gamma: usize,  // Γ_k, n×M
+    pub(super) wa: usize,     // the world's A_{k−1}, N×N
+    pub(super) wu: usize,     // the world's u_{k−1}Δt, N
+    pub(super) bd: usize,     // the world's b_{k−1}Δt, N×L
+    pub(super) gamma: usize,  // the world's Γ_k, n×M
     pub(super) gain: usize,   // p_k, N×n (zero columns for unavailable measurements)
     pub(super) avail: usize,  // n flags (1.0 / 0.0)
-    pub(super) y: usize,      // mean y_k, N
+    pub(super) y: usize,      // the world's mean y_k, N
     pub(super) r_chol: usize, // Cholesky factor of R_k, N×N (valid if flag), 1/L_ii on the diagonal
     pub(super) q_chol: usize, // Cholesky factor of q_k, masked, n×n, 1/L_ii on the diagonal
     pub(super) flags: usize,  // [R_k factor valid, q_k factor valid, measurements available]
@@ -34,7 +43,8 @@ pub(super) struct Layout {
 }
 
 impl Layout {
-    pub(super) fn new(d: Dims) -> Self {
+    /// The layout; `world`: the world is a truth of its own (its A and u stored too).
+    pub(super) fn new(d: Dims, world: bool) -> Self {
         let mut o = 0;
         let mut take = |len: usize| {
             let at = o;
@@ -43,6 +53,11 @@ impl Layout {
         };
         let a = take(d.n * d.n);
         let u = take(d.n);
+        let (wa, wu) = if world {
+            (take(d.n * d.n), take(d.n))
+        } else {
+            (a, u)
+        };
         let bd = take(d.n * d.nl);
         let gamma = take(d.nm * d.ms);
         let gain = take(d.n * d.nm);
@@ -54,6 +69,8 @@ impl Layout {
         Layout {
             a,
             u,
+            wa,
+            wu,
             bd,
             gamma,
             gain,
@@ -94,11 +111,25 @@ impl SumLayout {
     }
 }
 
+/// The truth of a mismatched filter, as the plan steps it.
+struct World<'m> {
+    truth: &'m CompiledModel,
+    truth_is_model: bool,
+    pass: Pass,
+}
+
 /// The deterministic part, advanced once per step for all runs: time functions, the
 /// mean (3.3), the Riccati recursion (2.1)–(2.7) with the schedule, the bound
 /// (3.16)–(3.19) and the open-loop covariance.
 pub(super) struct Plan<'m> {
     m: &'m CompiledModel,
+    world: Option<World<'m>>,
+    /// The world's open-loop variances diag P^Y_k (the model's, or the truth's).
+    pub(super) open: Vec<f64>,
+    /// With a truth: the actual error variances and means of the filter (the
+    /// mismatch's recursion) at step k; empty without.
+    pub(super) actual: Vec<f64>,
+    pub(super) bias: Vec<f64>,
     pub(super) d: Dims,
     pub(super) dt: f64,
     /// A = I + aΔt (dense here), uΔt, bΔt, B, Γ, Rv, ζ: the analysis' inputs.
@@ -128,21 +159,38 @@ pub(super) struct Plan<'m> {
 }
 
 impl<'m> Plan<'m> {
-    pub(super) fn new(m: &'m CompiledModel, steps: u64) -> Self {
+    /// The plan of the filter designed on `m`, in the world `truth` (a truth model
+    /// and whether it is one of its own, `truth.model`) or, without, in `m`'s.
+    pub(super) fn new(
+        m: &'m CompiledModel,
+        truth: Option<(&'m CompiledModel, bool)>,
+        steps: u64,
+    ) -> Self {
         let n = m.n_states();
+        let w = truth.map_or(m, |t| t.0);
         let d = Dims {
             n,
             nm: m.n_measurements(),
-            nl: m.b.cols,
-            ms: m.noise.sources(),
+            nl: w.b.cols,
+            ms: w.noise.sources(),
         };
         let mut big_r = vec![0.0; n * n];
         for i in 0..n {
             big_r[i * n + i] = m.eta0[i] * m.eta0[i];
         }
         let dt = (m.t_end - m.t0) / steps as f64;
+        let world = truth.map(|(truth, truth_is_model)| World {
+            truth,
+            truth_is_model,
+            pass: Pass::new(m, truth, steps),
+        });
+        let with = if world.is_some() { n } else { 0 };
         Plan {
             m,
+            world,
+            open: vec![0.0; n],
+            actual: vec![0.0; with],
+            bias: vec![0.0; with],
             d,
             dt,
             inp: Inputs::new(m, n, dt),
@@ -302,16 +350,36 @@ impl<'m> Plan<'m> {
             ));
         }
 
-        // The record for the blocks.
+        // The record for the blocks: the filter's A and u, the world's inputs and mean.
         rec[lay.a..lay.a + n * n].copy_from_slice(&self.big_a);
         rec[lay.u..lay.u + n].copy_from_slice(&self.inp.u_dt);
-        rec[lay.bd..lay.bd + n * nl].copy_from_slice(&self.inp.bd);
-        rec[lay.gamma..lay.gamma + nm * ms].copy_from_slice(&self.inp.gamma);
+        if let Some(w) = &mut self.world {
+            // The mismatch's step k: the truth's inputs, mean, open-loop and the
+            // filter's actual error (its own errors placed at `truth…`).
+            let truth_is_model = w.truth_is_model;
+            let place = |e| crate::analysis::mismatch::place_in(e, truth_is_model);
+            let st = w.pass.step(m, w.truth, k, place)?;
+            self.open.copy_from_slice(st.open_var);
+            self.actual.copy_from_slice(st.err_var);
+            self.bias.copy_from_slice(st.err_mean);
+            let ti = w.pass.truth_inputs();
+            rec[lay.wa..lay.wa + n * n].copy_from_slice(w.pass.truth_a());
+            rec[lay.wu..lay.wu + n].copy_from_slice(&ti.u_dt);
+            rec[lay.bd..lay.bd + n * nl].copy_from_slice(&ti.bd);
+            rec[lay.gamma..lay.gamma + nm * ms].copy_from_slice(&ti.gamma);
+            rec[lay.y..lay.y + n].copy_from_slice(w.pass.truth_mean());
+        } else {
+            for i in 0..n {
+                self.open[i] = self.p_y[i * n + i];
+            }
+            rec[lay.bd..lay.bd + n * nl].copy_from_slice(&self.inp.bd);
+            rec[lay.gamma..lay.gamma + nm * ms].copy_from_slice(&self.inp.gamma);
+            rec[lay.y..lay.y + n].copy_from_slice(&self.y);
+        }
         rec[lay.gain..lay.gain + n * nm].copy_from_slice(&self.gain);
         for j in 0..nm {
             rec[lay.avail + j] = if self.avail[j] { 1.0 } else { 0.0 };
         }
-        rec[lay.y..lay.y + n].copy_from_slice(&self.y);
         let rc = &mut rec[lay.r_chol..lay.r_chol + n * n];
         rc.copy_from_slice(&self.big_r);
         let r_ok = cholesky(rc, n);

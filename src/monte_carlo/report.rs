@@ -63,6 +63,37 @@ pub fn text(r: &MonteCarloResult, threads: usize) -> String {
             cell(Some(v.band[1]))
         );
     }
+    if let (Some(actual), Some(bias), Some(verdicts)) = (
+        &r.final_.actual_sko,
+        &r.final_.actual_bias,
+        &r.consistency.per_state_actual,
+    ) {
+        let _ = writeln!(
+            s,
+            "\nThe runs imitate the truth; the filter is the model's. Its actual error (the mismatch's recursion) against the sample:"
+        );
+        let _ = writeln!(
+            s,
+            "{:<12} {:>12} {:>12} {:>12}   verdict (mean s²/σ², band; mean sample − actual bias, in σ)",
+            "state", "sample SKO", "actual SKO", "actual bias"
+        );
+        for (i, st) in r.states.iter().enumerate() {
+            let v = &verdicts[i];
+            let _ = writeln!(
+                s,
+                "{:<12} {:>12} {:>12} {:>12}   {} ({} in [{}, {}]; {})",
+                st,
+                cell(Some(r.final_.filtered_sko[i])),
+                cell(Some(actual[i])),
+                cell(Some(bias[i])),
+                verdict(v.verdict),
+                cell(v.variance_ratio),
+                cell(Some(v.band[0])),
+                cell(Some(v.band[1])),
+                cell(v.normalised_bias)
+            );
+        }
+    }
     let c = &r.consistency;
     for (name, st) in [("NEES", &c.nees), ("NIS", &c.nis)] {
         let _ = writeln!(
@@ -110,7 +141,8 @@ pub fn text(r: &MonteCarloResult, threads: usize) -> String {
     s
 }
 
-/// Traces of a Monte Carlo as CSV: t, then per state the sample and potential SKOs; a
+/// Traces of a Monte Carlo as CSV: t, then per state the sample and potential SKOs,
+/// NEES and NIS, and with a truth each state's actual SKO and bias; a
 /// value that is not a number (overflowed, or no measurement) is an empty cell, as in
 /// the analysis's CSV (`null` in the JSON).
 pub fn traces_csv(r: &MonteCarloResult) -> String {
@@ -130,7 +162,13 @@ pub fn traces_csv(r: &MonteCarloResult) -> String {
                 .iter()
                 .flat_map(|st| SERIES.iter().map(move |s| format!("{s}:{}", st.state))),
         )
-        .chain(["nees".to_string(), "nis".to_string()]);
+        .chain(["nees".to_string(), "nis".to_string()])
+        .chain(
+            tr.states
+                .iter()
+                .filter(|st| st.actual_sko.is_some())
+                .flat_map(|st| ["actual_sko", "actual_bias"].map(|s| format!("{s}:{}", st.state))),
+        );
     // (As the analysis's CSV: plain, or in exponent form outside [1e-4, 1e15).)
     let num = crate::text::num;
     let opt = |v: Option<f64>| v.filter(|x| x.is_finite()).map(num).unwrap_or_default();
@@ -152,6 +190,12 @@ pub fn traces_csv(r: &MonteCarloResult) -> String {
             );
         }
         fields.extend([opt(tr.nees[row]), opt(tr.nis[row])]);
+        // With a truth: the actual SKO and bias of every state, after NEES and NIS.
+        for st in &tr.states {
+            if let (Some(a), Some(b)) = (&st.actual_sko, &st.actual_bias) {
+                fields.extend([Some(a[row]), Some(b[row])].map(opt));
+            }
+        }
         fields
     });
     crate::text::csv_text(header, rows)

@@ -40,6 +40,13 @@ pub struct Consistency {
     /// Average NIS (1/R) Σ ν_kᵀ q_k⁻¹ ν_k of the innovations (available measurements).
     pub nis: ConsistencyStat,
     pub per_state: Vec<StateVerdict>,
+    /// With a truth (a mismatched filter): per state, the sample variance of the
+    /// filtered error about its sample mean against the *actual* error variance of
+    /// the filter designed on the model (band χ²_{R−1} / (R − 1)); its bias, the
+    /// sample mean less the actual bias, in actual SKOs. `per_state` then judges what
+    /// the filter believes (R_ii).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub per_state_actual: Option<Vec<StateVerdict>>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -111,6 +118,11 @@ pub struct MonteCarloFinal {
     /// sqrt(diag R_D) and the bound χ_D (3.19).
     pub potential_sko: Vec<f64>,
     pub chi: Vec<f64>,
+    /// With a truth: the filter's actual error SKO (about its mean) and bias at D.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub actual_sko: Option<Vec<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub actual_bias: Option<Vec<f64>>,
 }
 
 /// Traces: each row is the average over a bucket of `bucket_steps` steps (variances
@@ -140,4 +152,9 @@ pub struct MonteCarloStateTrace {
     /// Potential SKO sqrt(R_ii) and the bound χ (3.19).
     pub potential_sko: Vec<f64>,
     pub chi: Vec<f64>,
+    /// With a truth: the filter's actual error SKO (about its mean) and bias.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub actual_sko: Option<Vec<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub actual_bias: Option<Vec<f64>>,
 }

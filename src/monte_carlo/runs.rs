@@ -29,13 +29,18 @@ pub(super) struct Shared<'a> {
     pub(super) sl: SumLayout,
     pub(super) truth: Truth,
     pub(super) model_error: ModelError,
+    /// The filter's C (the model's), and the world's (the truth's, or the same).
     pub(super) c_nz: &'a [(usize, usize, f64)],
-    /// Entries of A = I + aΔt, bΔt and Γ that can be non-zero (row, col): the
-    /// per-run products skip the structural zeros.
+    pub(super) wc_nz: &'a [(usize, usize, f64)],
+    /// The world's C is the filter's: the innovation is formed as C (truth − H).
+    pub(super) same_c: bool,
+    /// Entries of the filter's A = I + aΔt, the world's A, bΔt and Γ that can be
+    /// non-zero (row, col): the per-run products skip the structural zeros.
     pub(super) a_nz: &'a [(usize, usize)],
+    pub(super) wa_nz: &'a [(usize, usize)],
     pub(super) bd_nz: &'a [(usize, usize)],
     pub(super) g_nz: &'a [(usize, usize)],
-    /// Lower-triangular square roots of W (L×L) and V (M×M).
+    /// Lower-triangular square roots of the world's W (L×L) and V (M×M).
     pub(super) w_sqrt: &'a [f64],
     pub(super) v_sqrt: &'a [f64],
 }
@@ -61,16 +66,19 @@ fn draw(rng: &mut ChaCha8Rng, s: &[f64], dim: usize, xi: &mut [f64], z: &mut [f6
 }
 
 impl Block {
+    /// Runs `first_run`… of the world `world` (Y_0 ~ (y0, diag η0²), the model error
+    /// from its W), each filter starting from `x0` (the model's y0).
     pub(super) fn new(
         first_run: u64,
         runs: usize,
         seed: u64,
-        m: &CompiledModel,
+        (world, x0): (&CompiledModel, &[f64]),
         sh: &Shared,
     ) -> Self {
+        let m = world;
         let Dims { n, nl, .. } = sh.d;
         let mut y = vec![0.0; runs * n];
-        let x: Vec<f64> = (0..runs).flat_map(|_| m.y0.iter().copied()).collect();
+        let x: Vec<f64> = (0..runs).flat_map(|_| x0.iter().copied()).collect();
         let mut f_const = vec![0.0; runs * nl];
         let mut xi = vec![0.0; nl.max(n)];
         let mut rngs = Vec::with_capacity(runs);
@@ -166,6 +174,8 @@ impl Block {
             let out = &mut sums[s * sl.size..(s + 1) * sl.size];
             let a = &rec[lay.a..lay.a + n * n];
             let u = &rec[lay.u..lay.u + n];
+            let wa = &rec[lay.wa..lay.wa + n * n];
+            let wu = &rec[lay.wu..lay.wu + n];
             let bd = &rec[lay.bd..lay.bd + n * nl];
             let ym = &rec[lay.y..lay.y + n];
             let gamma = &rec[lay.gamma..lay.gamma + nm * ms];
@@ -183,12 +193,12 @@ impl Block {
                     phi[l * nr + r] = one[l];
                 }
             }
-            // Step 21: Y_k = A Y + uΔt + bΔt F.
+            // Step 21: Y_k = A Y + uΔt + bΔt F (the world's A, u, b).
             for i in 0..n {
-                y_new[i * nr..(i + 1) * nr].fill(u[i]);
+                y_new[i * nr..(i + 1) * nr].fill(wu[i]);
             }
-            for &(i, j) in sh.a_nz {
-                axpy(&mut y_new, i, &ys, j, a[i * n + j], nr);
+            for &(i, j) in sh.wa_nz {
+                axpy(&mut y_new, i, &ys, j, wa[i * n + j], nr);
             }
             for &(i, l) in sh.bd_nz {
                 axpy(&mut y_new, i, &f, l, bd[i * nl + l], nr);
@@ -215,11 +225,21 @@ impl Block {
             for &(i, j) in sh.a_nz {
                 axpy(&mut h, i, &xs, j, a[i * n + j], nr);
             }
+            // ν = Z − C H, Z = C^w·truth + ΓΦ
             nu.copy_from_slice(&noise);
-            for &(j, i, c) in sh.c_nz {
-                let (t, hh) = (&truth[i * nr..(i + 1) * nr], &h[i * nr..(i + 1) * nr]);
-                for ((v, t), hh) in nu[j * nr..(j + 1) * nr].iter_mut().zip(t).zip(hh) {
-                    *v += c * (t - hh);
+            if sh.same_c {
+                for &(j, i, c) in sh.c_nz {
+                    let (t, hh) = (&truth[i * nr..(i + 1) * nr], &h[i * nr..(i + 1) * nr]);
+                    for ((v, t), hh) in nu[j * nr..(j + 1) * nr].iter_mut().zip(t).zip(hh) {
+                        *v += c * (t - hh);
+                    }
+                }
+            } else {
+                for &(j, i, c) in sh.wc_nz {
+                    axpy(&mut nu, j, truth, i, c, nr);
+                }
+                for &(j, i, c) in sh.c_nz {
+                    axpy(&mut nu, j, &h, i, -c, nr);
                 }
             }
             for j in 0..nm {

@@ -98,3 +98,15 @@ pub fn monte_carlo_work(
         path: "runs".into(),
     }
 }
+
+/// A truth's share (a mismatched filter): the mismatch's recursion stepped beside the
+/// plan, D × its step ([`crate::analysis::mismatch::pass_step`]). Its units and how
+/// they were computed.
+pub fn truth_work(design: &CompiledModel) -> (f64, String) {
+    let steps = design.max_steps();
+    let step = crate::analysis::mismatch::pass_step(design);
+    (
+        steps as f64 * step,
+        format!("D = {steps} steps × the mismatch's step {step:.0}"),
+    )
+}

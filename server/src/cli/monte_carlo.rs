@@ -1,20 +1,17 @@
-//! `kea monte-carlo MODEL.json|preset:NAME [--runs R] [--seed S] [--truth process|mean]
+//! `kea monte-carlo MODEL.json|preset:NAME [--runs R] [--seed S]
+//! [--truth process|mean|FILE|preset:NAME] [--truth-set name=value]…
 //! [--model-error white|constant] [--trace-points ROWS] [--set name=value]… [--threads T]
 //! [--max-work UNITS] [--json] [--csv FILE|-]`: the Monte Carlo of METHOD §1.8 — real
-//! (simulated) against potential (Riccati) accuracy. R is 1000 unless given. The report
-//! is text, or JSON with `--json`; `--csv` also writes the traces to a file (or, as
-//! `-`, to stdout in place of the text). `kea simulate`, its former name, is an alias.
+//! (simulated) against potential (Riccati) accuracy; with a truth model or
+//! `--truth-set`, of the mismatched filter (the runs imitate the truth). R is 1000
+//! unless given. The report is text, or JSON with `--json`; `--csv` also writes the
+//! traces to a file (or, as `-`, to stdout in place of the text). `kea simulate`, its
+//! former name, is an alias.
 
 use crate::Run;
 use crate::parallel::Rayon;
 use std::path::PathBuf;
 use std::process::ExitCode;
-
-#[derive(Clone, Copy, Debug, clap::ValueEnum)]
-pub enum TruthArg {
-    Process,
-    Mean,
-}
 
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 pub enum ModelErrorArg {
@@ -32,9 +29,16 @@ pub struct Args {
     /// Seed of the random streams (same seed, same numbers, whatever --threads).
     #[arg(long, default_value_t = kea_core::monte_carlo::DEFAULT_SEED)]
     pub seed: u64,
-    /// What the filter is compared with: the noisy process Y, or the mean y (seed 000).
-    #[arg(long, value_enum, default_value = "process")]
-    pub truth: TruthArg,
+    /// What the filter is compared with: `process` (the noisy process Y), `mean` (the
+    /// mean y, seed 000), or a truth model (a file, `preset:NAME`): the mismatched
+    /// filter, designed on MODEL, in the truth's world (`./process` for a file of
+    /// that name).
+    #[arg(long, value_name = "process|mean|FILE", default_value = "process")]
+    pub truth: String,
+    /// A param the truth has another value of, e.g. `--truth-set sd=10` (repeatable):
+    /// the runs imitate MODEL with these values, the filter is designed on MODEL.
+    #[arg(long = "truth-set", value_name = "NAME=VALUE", value_parser = super::parse_override)]
+    pub truth_set: Vec<(String, f64)>,
     /// Model error drawn at every step (white) or once per run (a constant bias).
     #[arg(long, value_enum, default_value = "white")]
     pub model_error: ModelErrorArg,
@@ -82,15 +86,34 @@ impl Run for Args {
             "runs": self.runs,
             "seed": self.seed,
             // (the names of the JSON and of the flags: process, white…)
-            "truth": match self.truth {
-                TruthArg::Process => "process",
-                TruthArg::Mean => "mean",
-            },
             "model_error": match self.model_error {
                 ModelErrorArg::White => "white",
                 ModelErrorArg::Constant => "constant",
             },
         });
+        let reading = matches!(self.truth.as_str(), "process" | "mean");
+        if reading && self.truth_set.is_empty() {
+            request["truth"] = self.truth.clone().into();
+        } else {
+            if self.truth == "mean" {
+                eprintln!(
+                    "--truth-set imitates the truth's process: it cannot go with --truth mean"
+                );
+                return ExitCode::from(super::EXIT_INVALID);
+            }
+            let truth_set = match super::overrides(&self.truth_set) {
+                Ok(s) => s,
+                Err(code) => return code,
+            };
+            let mut truth = serde_json::json!({ "set": truth_set });
+            if !reading {
+                truth["model"] = match super::read_json(&self.truth) {
+                    Ok(m) => m,
+                    Err(code) => return code,
+                };
+            }
+            request["truth"] = truth;
+        }
         if let Some(rows) = self.trace_points {
             request["trace_points"] = rows.into();
         }

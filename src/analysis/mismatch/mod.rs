@@ -16,7 +16,7 @@ use crate::model::{Model, Overrides};
 use crate::progress::Progress;
 use serde_json::{Map, Value};
 
-mod pass;
+pub(crate) mod pass;
 
 /// The truth, read from a request's `truth`.
 #[derive(Clone, Debug)]
@@ -304,16 +304,23 @@ pub fn from_request(obj: &Map<String, Value>, errors: &mut Vec<FieldError>) -> O
     }
 }
 
-/// The mismatch's work: the truth's own analysis, and D × the pass's step — two
-/// Riccati steps and the 2N-state covariance F S Fᵀ (2·(2N)³, plain loops) with its
-/// noise terms. Its units and how they were computed.
-pub fn work(design: &CompiledModel, truth: &CompiledModel) -> (f64, String) {
-    use crate::analysis::work::{analysis_work, step_cost};
+/// The pass's step: two Riccati steps and the 2N-state covariance F S Fᵀ (2·(2N)³,
+/// plain loops) with its noise terms.
+pub fn pass_step(design: &CompiledModel) -> f64 {
     let (n, nm) = (design.n_states() as f64, design.n_measurements() as f64);
+    let n2 = 2.0 * n;
+    2.0 * n2 * n2 * n2
+        + n2 * n2 * (n + nm)
+        + 2.0 * crate::analysis::work::step_cost(design.n_states())
+}
+
+/// The mismatch's work: the truth's own analysis, and D × the pass's step
+/// ([`pass_step`]). Its units and how they were computed.
+pub fn work(design: &CompiledModel, truth: &CompiledModel) -> (f64, String) {
+    use crate::analysis::work::analysis_work;
     let steps = design.max_steps();
     let optimal = analysis_work(truth, None).units;
-    let n2 = 2.0 * n;
-    let step = 2.0 * n2 * n2 * n2 + n2 * n2 * (n + nm) + 2.0 * step_cost(design.n_states());
+    let step = pass_step(design);
     (
         optimal + steps as f64 * step,
         format!("the truth's analysis {optimal:.3e} + D = {steps} steps × {step:.0}"),

@@ -23,10 +23,11 @@ use crate::error::Error;
 use crate::model::compile::CompiledModel;
 use crate::numerics::lanes::Scalar;
 
-/// What the pass gives per step: the error's covariance diagonal and mean, the truth's
+/// What the pass gives per step: the error's covariance diagonal and the mean of the
+/// filtered error x̂ − x (the Monte Carlo's X − Y), the truth's
 /// open-loop variance (S's x-block), each measurement's true SKO and availability, and
 /// the filtered variances the design believes and the truth's own filter reaches.
-pub(super) struct Step<'a> {
+pub(crate) struct Step<'a> {
     pub k: u64,
     pub err_var: &'a [f64],
     pub believed_var: &'a [f64],
@@ -40,7 +41,7 @@ pub(super) struct Step<'a> {
 /// Runs the recursion over `steps` steps, calling `each` after every step. Returns
 /// whether the structure differed (ΔA, ΔC, Δu or y0 not 0 at some step). Errors are
 /// placed in the request: the model's at `model.…`, the truth's by `place`
-/// ([`super::place`]), a failed filter step at `truth`.
+/// ([`super::place_in`]), a failed filter step at `truth`.
 pub(super) fn run(
     design: &CompiledModel,
     truth: &CompiledModel,
@@ -48,57 +49,148 @@ pub(super) fn run(
     place: impl Fn(Error) -> Error,
     mut each: impl FnMut(Step) -> Result<(), Error>,
 ) -> Result<bool, Error> {
-    let n = design.n_states();
-    let nm = design.n_measurements();
-    let n2 = 2 * n;
-    let dt = (design.t_end - design.t0) / steps as f64;
-    let mut di = Inputs::new(design, n, dt);
-    let mut ti = Inputs::new(truth, n, dt);
-    // The filter designed on the model, and the one designed on the truth (the
-    // optimal), beside; both see the model's availability.
-    let mut filter = Filter::new(design);
-    let mut optimal = Filter::new(truth);
-    let mut avail = Available::new(design);
-    // z = [x; e]: x_0 ~ (y0^t, P0^t), x̂_0 = y0^d.
-    let mut mu = vec![0.0; n2];
-    let mut s = vec![0.0; n2 * n2];
-    for i in 0..n {
-        mu[i] = truth.y0[i];
-        mu[n + i] = truth.y0[i] - design.y0[i];
-        let v = truth.eta0[i] * truth.eta0[i];
-        for (a, b) in [(i, i), (i, n + i), (n + i, i), (n + i, n + i)] {
-            s[a * n2 + b] = v;
+    let mut pass = Pass::new(design, truth, steps);
+    for k in 1..=steps {
+        each(pass.step(design, truth, k, &place)?)?;
+    }
+    Ok(pass.structural)
+}
+
+/// The recursion's state, advanced one step at a time ([`Pass::step`]): the Monte
+/// Carlo with a truth steps it beside its own plan, and reads the truth's inputs of
+/// each step from it ([`Pass::truth_inputs`], [`Pass::truth_a`], [`Pass::truth_mean`]).
+pub(crate) struct Pass {
+    n: usize,
+    nm: usize,
+    dt: f64,
+    t0: f64,
+    di: Inputs,
+    ti: Inputs,
+    /// The filter designed on the model, and the one designed on the truth (the
+    /// optimal), beside; both see the model's availability.
+    filter: Filter,
+    optimal: Filter,
+    avail: Available,
+    /// z = [x; e]: its mean and covariance.
+    mu: Vec<f64>,
+    s: Vec<f64>,
+    dc: Vec<f64>,
+    /// ΔA, ΔC, Δu or y0 not 0 at some step so far.
+    pub(crate) structural: bool,
+    // Work: A^t and A^d dense, F, G_w (2N × N), G_v (2N × n), products.
+    at: Vec<f64>,
+    ad: Vec<f64>,
+    f: Vec<f64>,
+    kdc: Vec<f64>,
+    gw: Vec<f64>,
+    gv: Vec<f64>,
+    tmp: Vec<f64>,
+    gq: Vec<f64>,
+    mu_next: Vec<f64>,
+    err_var: Vec<f64>,
+    err_mean: Vec<f64>,
+    open_var: Vec<f64>,
+    believed_var: Vec<f64>,
+    optimal_var: Vec<f64>,
+}
+
+impl Pass {
+    /// The pass before step 1: x_0 ~ (y0^t, P0^t), x̂_0 = y0^d.
+    pub(crate) fn new(design: &CompiledModel, truth: &CompiledModel, steps: u64) -> Self {
+        let n = design.n_states();
+        let nm = design.n_measurements();
+        let n2 = 2 * n;
+        let dt = (design.t_end - design.t0) / steps as f64;
+        let mut mu = vec![0.0; n2];
+        let mut s = vec![0.0; n2 * n2];
+        for i in 0..n {
+            mu[i] = truth.y0[i];
+            mu[n + i] = truth.y0[i] - design.y0[i];
+            let v = truth.eta0[i] * truth.eta0[i];
+            for (a, b) in [(i, i), (i, n + i), (n + i, i), (n + i, n + i)] {
+                s[a * n2 + b] = v;
+            }
+        }
+        let dc: Vec<f64> = truth.c.iter().zip(&design.c).map(|(t, d)| t - d).collect();
+        let structural = truth.y0 != design.y0 || dc.iter().any(|&x| x != 0.0);
+        Pass {
+            n,
+            nm,
+            dt,
+            t0: design.t0,
+            di: Inputs::new(design, n, dt),
+            ti: Inputs::new(truth, n, dt),
+            filter: Filter::new(design),
+            optimal: Filter::new(truth),
+            avail: Available::new(design),
+            mu,
+            s,
+            dc,
+            structural,
+            at: vec![0.0; n * n],
+            ad: vec![0.0; n * n],
+            f: vec![0.0; n2 * n2],
+            kdc: vec![0.0; n * n],
+            gw: vec![0.0; n2 * n],
+            gv: vec![0.0; n2 * nm],
+            tmp: vec![0.0; n2 * n2],
+            gq: vec![0.0; n2 * n.max(nm)],
+            mu_next: vec![0.0; n2],
+            err_var: vec![0.0; n],
+            err_mean: vec![0.0; n],
+            open_var: vec![0.0; n],
+            believed_var: vec![0.0; n],
+            optimal_var: vec![0.0; n],
         }
     }
-    let dc: Vec<f64> = truth.c.iter().zip(&design.c).map(|(t, d)| t - d).collect();
-    let mut structural = truth.y0 != design.y0 || dc.iter().any(|&x| x != 0.0);
-    // Work: A^t and A^d dense, F, G_w (2N × N), G_v (2N × n), products.
-    let (mut at, mut ad) = (vec![0.0; n * n], vec![0.0; n * n]);
-    let mut f = vec![0.0; n2 * n2];
-    let mut kdc = vec![0.0; n * n];
-    let mut gw = vec![0.0; n2 * n];
-    let mut gv = vec![0.0; n2 * nm];
-    let mut tmp = vec![0.0; n2 * n2];
-    let mut gq = vec![0.0; n2 * n.max(nm)];
-    let mut mu_next = vec![0.0; n2];
-    let (mut err_var, mut err_mean, mut open_var) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-    let (mut believed_var, mut optimal_var) = (vec![0.0; n], vec![0.0; n]);
 
-    for k in 1..=steps {
-        let t_k = design.t0 + k as f64 * dt;
+    /// The truth's inputs of the last step (uΔt, bΔt, Γ, …).
+    pub(crate) fn truth_inputs(&self) -> &Inputs {
+        &self.ti
+    }
+
+    /// The truth's A = I + aΔt of the last step, dense (N × N).
+    pub(crate) fn truth_a(&self) -> &[f64] {
+        &self.at
+    }
+
+    /// The truth's mean state after the last step (x's mean).
+    pub(crate) fn truth_mean(&self) -> &[f64] {
+        &self.mu[..self.n]
+    }
+
+    /// Step k (1, 2, … in order) of both models and the joint recursion.
+    pub(crate) fn step(
+        &mut self,
+        design: &CompiledModel,
+        truth: &CompiledModel,
+        k: u64,
+        place: impl Fn(Error) -> Error,
+    ) -> Result<Step<'_>, Error> {
+        let (n, nm) = (self.n, self.nm);
+        let n2 = 2 * n;
+        let t_k = self.t0 + k as f64 * self.dt;
+        let (di, ti) = (&mut self.di, &mut self.ti);
         di.at(design, k, k == 1).map_err(crate::request::locate)?;
-        ti.at(truth, k, k == 1).map_err(&place)?;
-        avail.at(k, t_k)?;
-        if !filter.step::<0, Scalar>(design, &di, &avail) {
+        ti.at(truth, k, k == 1).map_err(place)?;
+        self.avail.at(k, t_k)?;
+        if !self.filter.step::<0, Scalar>(design, di, &self.avail) {
             return Err(lost(k, t_k, "the model's"));
         }
-        if !optimal.step::<0, Scalar>(truth, &ti, &avail) {
+        if !self.optimal.step::<0, Scalar>(truth, ti, &self.avail) {
             return Err(lost(k, t_k, "the truth's"));
         }
-        let joseph = &filter.joseph;
-        ti.dense_a_into(&mut at);
-        di.dense_a_into(&mut ad);
-        structural |= at != ad || ti.u_dt != di.u_dt;
+        let joseph = &self.filter.joseph;
+        let (at, ad, f, kdc, dc) = (
+            &mut self.at,
+            &mut self.ad,
+            &mut self.f,
+            &mut self.kdc,
+            &self.dc,
+        );
+        ti.dense_a_into(at);
+        di.dense_a_into(ad);
+        self.structural |= at != ad || ti.u_dt != di.u_dt;
         // K (N × n) = gain_tᵀ; h = htᵀ.
         let kk = |i: usize, j: usize| joseph.gain_t[j * n + i];
         let h = |i: usize, b: usize| joseph.ht[b * n + i];
@@ -124,6 +216,7 @@ pub(super) fn run(
             }
         }
         // G_w = [I; h − K ΔC], G_v = [0; −K]
+        let (gw, gv) = (&mut self.gw, &mut self.gv);
         gw.fill(0.0);
         gv.fill(0.0);
         for i in 0..n {
@@ -136,6 +229,7 @@ pub(super) fn run(
             }
         }
         // μ ← F μ + c, c = [u^t Δt; h Δu − K ΔC u^t Δt]
+        let (mu, mu_next) = (&mut self.mu, &mut self.mu_next);
         for i in 0..n2 {
             mu_next[i] = (0..n2).map(|j| f[i * n2 + j] * mu[j]).sum();
         }
@@ -145,8 +239,9 @@ pub(super) fn run(
             let kdcu: f64 = (0..n).map(|b| kdc[i * n + b] * ti.u_dt[b]).sum();
             mu_next[n + i] += du - kdcu;
         }
-        mu.copy_from_slice(&mu_next);
+        mu.copy_from_slice(mu_next);
         // S ← F S Fᵀ + G_w B^t G_wᵀ + G_v Rv^t G_vᵀ, the upper triangle mirrored
+        let (s, tmp) = (&mut self.s, &mut self.tmp);
         for i in 0..n2 {
             for j in 0..n2 {
                 tmp[i * n2 + j] = (0..n2).map(|b| f[i * n2 + b] * s[b * n2 + j]).sum();
@@ -157,32 +252,32 @@ pub(super) fn run(
                 s[i * n2 + j] = (0..n2).map(|b| tmp[i * n2 + b] * f[j * n2 + b]).sum();
             }
         }
-        add_gqgt(&mut s, &gw, &ti.big_b, &mut gq, n2, n);
-        add_gqgt(&mut s, &gv, &ti.rv, &mut gq, n2, nm);
+        add_gqgt(s, gw, &ti.big_b, &mut self.gq, n2, n);
+        add_gqgt(s, gv, &ti.rv, &mut self.gq, n2, nm);
         for i in 1..n2 {
             for j in 0..i {
                 s[i * n2 + j] = s[j * n2 + i];
             }
         }
         for i in 0..n {
-            err_var[i] = s[(n + i) * n2 + n + i];
-            err_mean[i] = mu[n + i];
-            open_var[i] = s[i * n2 + i];
-            believed_var[i] = filter.big_r[i * n + i];
-            optimal_var[i] = optimal.big_r[i * n + i];
+            self.err_var[i] = s[(n + i) * n2 + n + i];
+            // The filtered error's mean in METHOD §1.8's sign, X − Y = x̂ − x = −e.
+            self.err_mean[i] = -mu[n + i];
+            self.open_var[i] = s[i * n2 + i];
+            self.believed_var[i] = self.filter.big_r[i * n + i];
+            self.optimal_var[i] = self.optimal.big_r[i * n + i];
         }
-        each(Step {
+        Ok(Step {
             k,
-            err_var: &err_var,
-            believed_var: &believed_var,
-            optimal_var: &optimal_var,
-            err_mean: &err_mean,
-            open_var: &open_var,
+            err_var: &self.err_var,
+            believed_var: &self.believed_var,
+            optimal_var: &self.optimal_var,
+            err_mean: &self.err_mean,
+            open_var: &self.open_var,
             meas_sko: &ti.meas_sko,
-            avail: avail.each(),
-        })?;
+            avail: self.avail.each(),
+        })
     }
-    Ok(structural)
 }
 
 /// S's upper triangle += G Q Gᵀ (G: m × q, Q: q × q); `gq` holds G Q.

@@ -3,10 +3,14 @@
 // for the same seed) or as a server job of kind `monte_carlo`; the potential SKO √R_ii
 // against the sample SKO of the filtered error (and the bound χ) per state, the
 // consistency verdicts (NEES, NIS, per state), and the criteria sets side by side.
+// With "Truth params" (NAME=VALUE, as beside Run; docs/mismatch.md) the runs imitate
+// the truth and the filter stays the model's: the actual SKO of that mismatched filter
+// is drawn beside, and judged against the sample in the consistency table.
 
 import uPlot from './vendor/uplot/uPlot.esm.js';
 import { MAX_SAFE, numberProblem, toNumber } from './numbers.js';
 import { valueAxis } from './plot.js';
+import { parseTruth } from './mismatch.js';
 import { noTraces, resumedText } from './results.js';
 import { KeptFields, RunBar, RunView, duration, el, field, fmt, input, recheckControl, requestErrors, select, wasmCall } from './views.js';
 
@@ -19,6 +23,7 @@ const CRITERIA = [
 const SERIES = [
   ['potential_sko', 'potential SKO √R_ii', '#9467bd', []],
   ['filtered_sko', 'real: sample SKO of X − truth', '#d62728', []],
+  ['actual_sko', 'actual SKO (the model’s filter in the truth)', '#ff7f0e', [2, 3]],
   ['chi', 'bound χ', '#2ca02c', [6, 4]],
 ];
 
@@ -39,6 +44,7 @@ export class MonteCarloView extends RunView {
     this.seed = input('mc-seed', '1', { inputmode: 'numeric', 'data-request-path': 'seed' });
     this.truth = select('mc-truth', [['process', 'process: Y (Kalman reading)'], ['mean', 'mean: y (the seed’s reading)']], 'process');
     this.truth.dataset.requestPath = 'truth';
+    this.truthSet = input('mc-truth-set', '', { placeholder: 'e.g. sd=10, f_f=0.3', 'data-request-path': 'truth.set' });
     this.modelError = select('mc-model-error', [['white', 'white (drawn every step)'], ['constant', 'constant (once per run)']], 'white');
     this.modelError.dataset.requestPath = 'model_error';
     this.tracePoints = input('mc-trace-points', '', { inputmode: 'numeric', placeholder: 'model’s', 'data-request-path': 'trace_points' });
@@ -55,10 +61,11 @@ export class MonteCarloView extends RunView {
           field('Runs R', this.runs),
           field('Seed', this.seed),
           field('Truth', this.truth),
+          field('Truth params', this.truthSet),
           field('Model error F', this.modelError),
           field('Trace points', this.tracePoints),
         ),
-        el('p', { class: 'help', text: 'Each run draws its own ChaCha8 stream of the seed: the same seed gives bit-identical results in the browser and on the server. Cost ∝ R × D × N².' }),
+        el('p', { class: 'help', text: 'Each run draws its own ChaCha8 stream of the seed: the same seed gives bit-identical results in the browser and on the server. Cost ∝ R × D × N². Truth params (NAME=VALUE, …): the runs imitate the model with these values, the filter stays designed on the model — a mismatched filter, whose actual SKO is drawn beside.' }),
       ),
     );
     this.bar = new RunBar({ prefix: 'mc', label: 'Run Monte Carlo', op: 'simulate', kind: 'monte_carlo', onRun: (where, exec) => this.run(where, exec), onResume: (model, exec) => this.resume(model, exec) });
@@ -71,7 +78,7 @@ export class MonteCarloView extends RunView {
     new ResizeObserver(() => this.plot?.setSize({ width: this.width(), height: 320 })).observe(this.chart);
     this.root.append(this.form, this.bar.root, this.out);
     // The fields as they were before a reload (they do not depend on the model).
-    this.kept = new KeptFields('kea-monte-carlo', [[this.runs], [this.seed], [this.truth], [this.modelError], [this.tracePoints]]);
+    this.kept = new KeptFields('kea-monte-carlo', [[this.runs], [this.seed], [this.truth], [this.truthSet], [this.modelError], [this.tracePoints]]);
     this.kept.restore();
     for (const type of ['input', 'change']) this.form.addEventListener(type, () => this.kept.save());
   }
@@ -80,7 +87,10 @@ export class MonteCarloView extends RunView {
   fill(request) {
     this.runs.value = String(request.runs ?? '');
     this.seed.value = String(request.seed ?? 1); // the defaults of the request format
-    this.truth.value = request.truth ?? 'process';
+    const mismatched = typeof request.truth === 'object' && request.truth !== null;
+    this.truth.value = mismatched ? 'process' : request.truth ?? 'process';
+    const set = mismatched && !request.truth.model ? request.truth.set ?? {} : {};
+    this.truthSet.value = Object.entries(set).map(([k, v]) => `${k}=${v}`).join(', ');
     this.modelError.value = request.model_error ?? 'white';
     this.tracePoints.value = request.trace_points === undefined ? '' : String(request.trace_points);
     this.kept.save();
@@ -112,6 +122,13 @@ export class MonteCarloView extends RunView {
       truth: this.truth.value,
       model_error: this.modelError.value,
     };
+    try {
+      const truth = parseTruth(this.truthSet.value);
+      if (truth && this.truth.value === 'mean') errors.push({ path: 'truth', message: 'truth params imitate the truth’s process: choose Truth = process' });
+      else if (truth) request.truth = truth;
+    } catch (message) {
+      errors.push({ path: 'truth.set', message: String(message) });
+    }
     const tp = whole(this.tracePoints, 'trace_points', { optional: true });
     if (tp !== undefined) request.trace_points = tp;
     if (errors.length) throw { kind: 'invalid', title: 'Invalid Monte Carlo request', errors };
@@ -129,7 +146,7 @@ export class MonteCarloView extends RunView {
     const summary = el('p', {
       id: 'mc-summary',
       text: [
-        `R = ${q.runs.toLocaleString('en')} runs, seed ${q.seed}, truth ${q.truth}, model error ${q.model_error}`,
+        `R = ${q.runs.toLocaleString('en')} runs, seed ${q.seed}, truth ${r.final.actual_sko ? 'the truth params’ process' : q.truth}, model error ${q.model_error}`,
         `D = ${r.steps.toLocaleString('en')} steps, Δt = ${fmt(r.dt)}, t ∈ [${fmt(r.t0)}, ${fmt(r.t_end)}]`,
         `${duration(r.timing.wall_ms)} on the ${where === 'browser' ? 'browser (wasm)' : 'server'}`,
         resumedText(r.timing),
@@ -207,6 +224,19 @@ export class MonteCarloView extends RunView {
         ),
       );
     });
+    (c.per_state_actual ?? []).forEach((s, i) => {
+      body.append(
+        el(
+          'tr',
+          { 'data-stat': `actual-${i}`, class: i === 0 ? 'sep' : null },
+          el('th', { scope: 'row', text: `${s.state}: s² / actual σ²`, title: `sample variance of the filtered error about its mean over the actual one of the model’s filter in the truth; mean error less the actual bias / SKO ${fmt(s.normalised_bias)}` }),
+          el('td', { class: 'num', 'data-value': s.variance_ratio ?? '', text: fmt(s.variance_ratio) }),
+          el('td', { class: 'num', text: band(s.band) }),
+          el('td', { class: 'num', text: pct(s.fraction_in_band) }),
+          verdict(s.verdict),
+        ),
+      );
+    });
     table.append(body);
     return el('div', { class: 'scroll' }, table);
   }
@@ -266,7 +296,7 @@ export class MonteCarloView extends RunView {
     // On a linear scale the axis fits potential and real; a much larger χ (|A| makes it
     // grow fast for oscillating blocks) runs off the top instead of flattening them.
     const top = (key) => Math.max(0, ...(trace[key] ?? []).filter((v) => v !== null && Number.isFinite(v)));
-    const fitted = Math.max(top('potential_sko'), top('filtered_sko'));
+    const fitted = Math.max(top('potential_sko'), top('filtered_sko'), top('actual_sko'));
     const clipChi = !log && fitted > 0 && top('chi') > 3 * fitted;
     const yTop = clipChi ? fitted * 1.15 : null;
     // A χ (nearly) all beyond the top is not drawn: its few first points inside (a

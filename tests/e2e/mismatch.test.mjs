@@ -1,7 +1,9 @@
 // The mismatched filter in the page, in a real browser against the real server: a
 // truth typed beside Run (NAME=VALUE) gives, in this browser and on the server, the
 // table and chart of believed, actual and optimal SKOs that `kea analyze --truth-set`
-// gives; a malformed truth is refused before a run.
+// gives; a malformed truth is refused before a run. In the Monte Carlo tab, truth
+// params make the runs imitate the truth: the actual SKO is drawn beside the sample one
+// and judged against it, as `kea monte-carlo --truth-set` judges it.
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
@@ -53,4 +55,41 @@ test('a malformed truth is refused before a run', async () => {
   await page.waitForFunction(() => document.querySelector('#status').classList.contains('error'));
   assert.match(await page.textContent('#status'), /Truth: expected NAME=VALUE \(such as sd=10\), got "q=abc"/);
   await page.fill('#run-truth', '');
+});
+
+test('Monte Carlo truth params judge the sample against the actual SKO as the CLI does', async () => {
+  const cli = JSON.parse(kea('monte-carlo', 'preset:helicopter-range', '--runs', '200', '--truth-set', 'sd=10', '--truth-set', 'f_f=0.3', '--json'));
+  await choosePreset(page, 'helicopter-range');
+  await page.click('#tab-monte-carlo');
+  await page.fill('#mc-runs', '200');
+  await page.fill('#mc-seed', '1');
+  await page.fill('#mc-truth-set', 'sd=10, f_f=0.3');
+  for (const where of ['browser', 'server']) {
+    await page.evaluate(() => delete document.getElementById('mc-result').dataset.where);
+    await page.check(`input[name=mc-where][value=${where}]`);
+    await page.click('#mc-run');
+    await page.waitForFunction((w) => document.getElementById('mc-result').dataset.where === w && !document.getElementById('mc-run').disabled, where, { timeout: 60000 });
+    const rows = await page.evaluate(() =>
+      [...document.querySelectorAll('#mc-consistency tr[data-stat^="actual-"]')].map((tr) => [tr.querySelector('td.num').dataset.value, tr.querySelector('[data-verdict]').dataset.verdict]),
+    );
+    assert.equal(rows.length, 6, where);
+    cli.consistency.per_state_actual.forEach((s, i) => {
+      assert.equal(Number(rows[i][0]), s.variance_ratio, `${where} ${s.state}: the same bits`);
+      assert.equal(rows[i][1], s.verdict, `${where} ${s.state}`);
+    });
+    // The believed SKO is optimistic for the range: the sample is judged against both.
+    assert.equal(await page.getAttribute('#mc-consistency tr[data-stat="state-0"] [data-verdict]', 'data-verdict'), 'optimistic');
+    assert.equal(await page.getAttribute('#mc-consistency tr[data-stat="actual-0"] [data-verdict]', 'data-verdict'), 'consistent');
+    assert.match(await page.textContent('#mc-chart'), /actual SKO \(the model’s filter in the truth\)/, where);
+  }
+  // Truth params with the mean reading are refused before a run, at the field.
+  await page.selectOption('#mc-truth', 'mean');
+  await page.click('#mc-run');
+  await page.waitForFunction(() => document.querySelector('#mc-status').classList.contains('error'));
+  assert.match(await page.textContent('#mc-status'), /see the marked fields/);
+  assert.match(await page.textContent('#mc-truth ~ .control-error'), /choose Truth = process/);
+  await page.selectOption('#mc-truth', 'process');
+  await page.fill('#mc-truth-set', '');
+  await page.click('#tab-analysis');
+  assert.deepEqual(consoleErrors, []);
 });

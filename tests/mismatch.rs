@@ -270,9 +270,9 @@ fn structural_mismatch_equals_the_joint_recursion() {
     }
 }
 
-/// With truth = design the actual SKOs are the potential ones (to rounding: the
-/// pass's products against the filter's expanded update), no bias, loss 1, and the
-/// actual criteria the covariance set's.
+/// With truth = design the actual SKOs are the potential ones bit for bit (the
+/// filter's own R), no bias, loss 1, and the actual criteria the covariance set's (to
+/// rounding: the truth's open-loop SKO is the pass's).
 #[test]
 fn truth_equal_to_design_is_the_filter() {
     for name in ["cv-tracker", "helicopter-range", "helicopter-angle"] {
@@ -280,16 +280,12 @@ fn truth_equal_to_design_is_the_filter() {
         let m = r.mismatch.as_ref().unwrap();
         assert_eq!(m.differs_in, "noise");
         for (i, s) in m.states.iter().enumerate() {
-            assert!(
-                rel(s.actual_sko, r.final_.potential_sko[i]) <= 1e-12,
+            assert_eq!(
+                s.actual_sko, r.final_.potential_sko[i],
                 "{name} {}",
                 s.state
             );
-            assert!(
-                rel(s.optimal_sko, s.believed_sko) <= 1e-12,
-                "{name} {}",
-                s.state
-            );
+            assert_eq!(s.optimal_sko, s.actual_sko, "{name} {}", s.state);
             assert_eq!(s.bias, 0.0);
         }
         let (a, c) = (
@@ -308,6 +304,7 @@ fn truth_equal_to_design_is_the_filter() {
                 t.optimal_sko, t.believed_sko,
                 "{name}: the same filter, the same bits"
             );
+            assert_eq!(t.actual_sko, t.believed_sko, "{name}: the filter's own R");
         }
     }
 }

@@ -213,7 +213,7 @@ pub fn run(
     };
     let (mut fin_var, mut fin_mean) = (vec![0.0; n], vec![0.0; n]);
     let every = crate::progress::steps_between_reports(50.0 * (2 * n * 2 * n * 2 * n) as f64);
-    let structural = pass::run(design, truth, steps, place, |s| {
+    let (structural, same) = pass::run(design, truth, steps, place, |s| {
         for i in 0..n {
             let actual = s.err_var[i].max(0.0).sqrt();
             let open = s.open_var[i].max(0.0).sqrt();
@@ -257,8 +257,14 @@ pub fn run(
     );
     let states = (0..n)
         .map(|i| {
-            let actual_sko = fin_var[i].max(0.0).sqrt();
             let believed_sko = design_result.final_.potential_sko[i];
+            // A truth that is the model throughout: the actual error covariance is the
+            // filter's own R_k, as the analysis computed it.
+            let actual_sko = if same {
+                believed_sko
+            } else {
+                fin_var[i].max(0.0).sqrt()
+            };
             let optimal_sko = truth_result.final_.potential_sko[i];
             let ratio = |a: f64, b: f64| (b > 0.0).then(|| a / b);
             MismatchState {

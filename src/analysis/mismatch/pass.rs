@@ -39,7 +39,8 @@ pub(crate) struct Step<'a> {
 }
 
 /// Runs the recursion over `steps` steps, calling `each` after every step. Returns
-/// whether the structure differed (ΔA, ΔC, Δu or y0 not 0 at some step). Errors are
+/// whether the structure differed (ΔA, ΔC, Δu or y0 not 0 at some step) and whether
+/// the truth was the model at every step ([`Pass::same`]). Errors are
 /// placed in the request: the model's at `model.…`, the truth's by `place`
 /// ([`super::place_in`]), a failed filter step at `truth`.
 pub(super) fn run(
@@ -48,12 +49,12 @@ pub(super) fn run(
     steps: u64,
     place: impl Fn(Error) -> Error,
     mut each: impl FnMut(Step) -> Result<(), Error>,
-) -> Result<bool, Error> {
+) -> Result<(bool, bool), Error> {
     let mut pass = Pass::new(design, truth, steps);
     for k in 1..=steps {
         each(pass.step(design, truth, k, &place)?)?;
     }
-    Ok(pass.structural)
+    Ok((pass.structural, pass.same))
 }
 
 /// The recursion's state, advanced one step at a time ([`Pass::step`]): the Monte
@@ -77,6 +78,9 @@ pub(crate) struct Pass {
     dc: Vec<f64>,
     /// ΔA, ΔC, Δu or y0 not 0 at some step so far.
     pub(crate) structural: bool,
+    /// The truth has been the model so far: the same y0, η0, C and, at every step, the
+    /// same A, u, B and Rv, bit for bit.
+    same: bool,
     // Work: A^t and A^d dense, F, G_w (2N × N), G_v (2N × n), products.
     at: Vec<f64>,
     ad: Vec<f64>,
@@ -113,6 +117,7 @@ impl Pass {
         }
         let dc: Vec<f64> = truth.c.iter().zip(&design.c).map(|(t, d)| t - d).collect();
         let structural = truth.y0 != design.y0 || dc.iter().any(|&x| x != 0.0);
+        let same = !structural && truth.eta0 == design.eta0;
         Pass {
             n,
             nm,
@@ -127,6 +132,7 @@ impl Pass {
             s,
             dc,
             structural,
+            same,
             at: vec![0.0; n * n],
             ad: vec![0.0; n * n],
             f: vec![0.0; n2 * n2],
@@ -191,6 +197,7 @@ impl Pass {
         ti.dense_a_into(at);
         di.dense_a_into(ad);
         self.structural |= at != ad || ti.u_dt != di.u_dt;
+        self.same &= !self.structural && ti.big_b == di.big_b && ti.rv == di.rv;
         // K (N × n) = gain_tᵀ; h = htᵀ.
         let kk = |i: usize, j: usize| joseph.gain_t[j * n + i];
         let h = |i: usize, b: usize| joseph.ht[b * n + i];
@@ -259,8 +266,12 @@ impl Pass {
                 s[i * n2 + j] = s[j * n2 + i];
             }
         }
+        // Where the truth has been the model so far, the filter's error covariance is
+        // its own R_k: reported as the filter computed it (the recursion above, which
+        // goes on for the steps after, agrees to rounding).
+        let own = self.same.then_some(&self.filter.big_r);
         for i in 0..n {
-            self.err_var[i] = s[(n + i) * n2 + n + i];
+            self.err_var[i] = own.map_or(s[(n + i) * n2 + n + i], |r| r[i * n + i]);
             // The filtered error's mean in METHOD §1.8's sign, X − Y = x̂ − x = −e.
             self.err_mean[i] = -mu[n + i];
             self.open_var[i] = s[i * n2 + i];

@@ -6,7 +6,7 @@
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
 import { deflateRawSync } from 'node:zlib';
-import { choosePreset, kea, newPage, openApp } from './lib.mjs';
+import { choosePreset, kea, newPage, openApp, runMonteCarlo } from './lib.mjs';
 
 let server;
 let browser;
@@ -269,10 +269,7 @@ test('times taken read alike: one format, 3 significant digits, in the browser a
   await page.click('#tab-monte-carlo');
   await page.fill('#mc-runs', '50');
   for (const where of ['browser', 'server']) {
-    await page.evaluate(() => delete document.getElementById('mc-result').dataset.where);
-    await page.check(`input[name=mc-where][value=${where}]`);
-    await page.click('#mc-run');
-    await page.waitForFunction((w) => document.getElementById('mc-result').dataset.where === w && !document.getElementById('mc-run').disabled, where, { timeout: 60000 });
+    await runMonteCarlo(page, where);
     const [, computed] = (await page.textContent('#mc-summary')).match(/· ([^·]+?) on the/);
     const [, done] = (await page.textContent('#mc-status')).match(/Done in (.+?) \(/);
     assert.ok(tookRule(computed) && tookRule(done), `${where}: ${computed}, done in ${done}`);
@@ -294,10 +291,7 @@ test('a Monte Carlo χ all beyond the top of the chart is not drawn; its legend 
   await choosePreset(page, 'helicopter-range', 0);
   await page.click('#tab-monte-carlo');
   await page.fill('#mc-runs', '50');
-  await page.check('input[name=mc-where][value=browser]');
-  await page.evaluate(() => delete document.getElementById('mc-result').dataset.where);
-  await page.click('#mc-run');
-  await page.waitForFunction(() => document.getElementById('mc-result').dataset.where === 'browser', null, { timeout: 60000 });
+  await runMonteCarlo(page, 'browser');
   await page.selectOption('#mc-state', '2'); // j_f: χ leaves the axis in its first few points
   assert.match(await page.textContent('#mc-chart .u-legend'), /bound χ \(beyond the top; log scale shows it\)/);
   assert.equal(await chiPixels(), 0, 'nothing of χ is drawn');

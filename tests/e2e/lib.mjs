@@ -225,3 +225,11 @@ export async function runAnalysis(page, where) {
     { timeout: 30000 },
   );
 }
+
+/** Run the Monte Carlo tab's runs in `where` (browser or server) and wait for its result. */
+export async function runMonteCarlo(page, where) {
+  await page.evaluate(() => delete document.getElementById('mc-result').dataset.where);
+  await page.check(`input[name=mc-where][value=${where}]`);
+  await page.click('#mc-run');
+  await page.waitForFunction((w) => document.getElementById('mc-result').dataset.where === w && !document.getElementById('mc-run').disabled, where, { timeout: 60000 });
+}

@@ -7,7 +7,7 @@
 
 import { after, before, test } from 'node:test';
 import assert from 'node:assert/strict';
-import { choosePreset, kea, openApp, runAnalysis } from './lib.mjs';
+import { choosePreset, kea, openApp, runAnalysis, runMonteCarlo } from './lib.mjs';
 
 let app;
 let page;
@@ -65,10 +65,7 @@ test('Monte Carlo truth params judge the sample against the actual SKO as the CL
   await page.fill('#mc-seed', '1');
   await page.fill('#mc-truth-set', 'sd=10, f_f=0.3');
   for (const where of ['browser', 'server']) {
-    await page.evaluate(() => delete document.getElementById('mc-result').dataset.where);
-    await page.check(`input[name=mc-where][value=${where}]`);
-    await page.click('#mc-run');
-    await page.waitForFunction((w) => document.getElementById('mc-result').dataset.where === w && !document.getElementById('mc-run').disabled, where, { timeout: 60000 });
+    await runMonteCarlo(page, where);
     const rows = await page.evaluate(() =>
       [...document.querySelectorAll('#mc-consistency tr[data-stat^="actual-"]')].map((tr) => [tr.querySelector('td.num').dataset.value, tr.querySelector('[data-verdict]').dataset.verdict]),
     );

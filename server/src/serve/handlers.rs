@@ -350,7 +350,8 @@ pub async fn analyze(
                 ControlFlow::Continue(())
             }
         };
-        let out = prepared.run(&mut progress, &stop, &kea_core::exec::Forgetful);
+        // The result alone: the response has no use for the traces CSV a job keeps.
+        let out = prepared.run_result(&mut progress, &stop, &kea_core::exec::Forgetful);
         (out, started.elapsed() > limit)
     })
     .await
@@ -373,7 +374,7 @@ pub async fn analyze(
         }
         out => out.map_err(|e| Problem::from_core(in_stored_model(e, stored.as_deref())))?,
     };
-    Ok(raw_json(StatusCode::OK, out.result_json))
+    Ok(raw_json(StatusCode::OK, out))
 }
 
 /// Sets its flag when dropped: the synchronous analysis's request is gone.

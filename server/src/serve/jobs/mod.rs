@@ -58,15 +58,36 @@ impl PreparedJob {
         stop: &(dyn Fn() -> bool + Sync),
         memo: &dyn Memo,
     ) -> Result<JobOutput, Error> {
+        let outcome = self.outcome(progress, stop, memo)?;
+        Ok(JobOutput {
+            result_json: outcome.to_json(),
+            traces_csv: outcome.csv(),
+        })
+    }
+
+    /// [`PreparedJob::run`] for a response that is the result alone (a synchronous
+    /// analysis): its JSON text, without the traces CSV a job keeps.
+    pub fn run_result(
+        self,
+        progress: &mut dyn Progress,
+        stop: &(dyn Fn() -> bool + Sync),
+        memo: &dyn Memo,
+    ) -> Result<String, Error> {
+        Ok(self.outcome(progress, stop, memo)?.to_json())
+    }
+
+    fn outcome(
+        self,
+        progress: &mut dyn Progress,
+        stop: &(dyn Fn() -> bool + Sync),
+        memo: &dyn Memo,
+    ) -> Result<kea_core::registry::Outcome, Error> {
         let start = Instant::now();
         let exec = Rayon::new(None)
             .map_err(|e| Error::invalid("", e))?
             .stopping_when(stop);
         let mut outcome = self.0.run(&exec, progress, memo)?;
         outcome.timing().wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        Ok(JobOutput {
-            result_json: outcome.to_json(),
-            traces_csv: outcome.csv(),
-        })
+        Ok(outcome)
     }
 }

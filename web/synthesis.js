@@ -4,7 +4,7 @@
 // `synthesis`; the result as grid tables or as the answer with its verification.
 
 import { numberProblem, toNumber } from './numbers.js';
-import { KeptFields, RunBar, RunView, checkModel, checkOverrides, duration, el, field, fmt, input, markControls, recheckControl, requestErrors, scrollHint, scrollHintText, select, uiWords } from './views.js';
+import { KeptFields, RunBar, RunView, checkOverrides, duration, el, field, fmt, input, recheckControl, requestErrors, scrollHint, scrollHintText, select, uiWords } from './views.js';
 
 const CRITERIA = [
   ['yz', 'F_YZ (measured vs a-priori)'],
@@ -470,18 +470,10 @@ export class SynthesisView extends RunView {
     ]);
   }
 
-  async run(where, exec) {
-    try {
-      const request = this.request();
-      markControls(this.form, []);
-      const invalid = await checkModel(request.model, this.ctx.pendingModelErrors?.() ?? []);
-      if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
-      const overridden = await checkOverrides(request.model, this.overrides(request));
-      if (overridden.length) throw { kind: 'invalid', title: 'Invalid synthesis request', errors: overridden };
-      return await this.follow(where, () => exec(request), request.model); // exec serialises the request at once
-    } catch (e) {
-      throw this.failed(e);
-    }
+  /** The model with each override the synthesis will try, checked before a run. */
+  async checkRequest(request) {
+    const overridden = await checkOverrides(request.model, this.overrides(request));
+    if (overridden.length) throw { kind: 'invalid', title: 'Invalid synthesis request', errors: overridden };
   }
 
 

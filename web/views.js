@@ -508,7 +508,8 @@ export function recheckControl(control, local) {
 export class RunView {
   /**
    * A run of the tab's `request()` on the editor's model: the model checked first (its
-   * errors at its cells), then the run followed. A tab with more to check overrides it.
+   * errors at its cells), then the tab's own checks (`checkRequest`), then the run
+   * followed.
    */
   async run(where, exec) {
     try {
@@ -516,11 +517,15 @@ export class RunView {
       markControls(this.form, []);
       const invalid = await checkModel(request.model, this.ctx.pendingModelErrors?.() ?? []);
       if (invalid.length) throw { kind: 'invalid', title: 'Invalid model', errors: invalid };
+      await this.checkRequest(request);
       return await this.follow(where, () => exec(request), request.model); // exec serialises the request at once
     } catch (e) {
       throw this.failed(e);
     }
   }
+
+  /** A tab with more to check than the model throws {kind: 'invalid', …} here. */
+  async checkRequest(_request) {}
 
   /** The editor's model changed: a result shown is stale, and a run's error (about the model before) goes. */
   markStale() {

@@ -161,9 +161,8 @@ fn read_members(obj: &Map<String, Value>, errors: &mut Vec<FieldError>) -> Monte
         sim.seed = x;
     }
     // (An object is a mismatched filter's truth, read beside.)
-    let reading = obj.get("truth").filter(|t| !t.is_object()).map(|_| obj);
-    match reading.and_then(|obj| {
-        request::choice(
+    if !obj.get("truth").is_some_and(Value::is_object) {
+        match request::choice(
             obj,
             "truth",
             &[
@@ -171,11 +170,11 @@ fn read_members(obj: &Map<String, Value>, errors: &mut Vec<FieldError>) -> Monte
                 ("mean", "the mean y, seed 000's reading"),
             ],
             errors,
-        )
-    }) {
-        Some(0) => sim.truth = Truth::Process,
-        Some(_) => sim.truth = Truth::Mean,
-        None => {}
+        ) {
+            Some(0) => sim.truth = Truth::Process,
+            Some(_) => sim.truth = Truth::Mean,
+            None => {}
+        }
     }
     match request::choice(
         obj,

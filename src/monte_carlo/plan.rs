@@ -182,7 +182,8 @@ impl<'m> Plan<'m> {
         let world = truth.map(|(truth, truth_is_model)| World {
             truth,
             truth_is_model,
-            pass: Pass::new(m, truth, steps),
+            // (The filter designed on the truth is the analysis's concern, not the runs'.)
+            pass: Pass::new(m, truth, steps, false),
         });
         let with = if world.is_some() { n } else { 0 };
         Plan {

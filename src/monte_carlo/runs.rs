@@ -66,16 +66,15 @@ fn draw(rng: &mut ChaCha8Rng, s: &[f64], dim: usize, xi: &mut [f64], z: &mut [f6
 }
 
 impl Block {
-    /// Runs `first_run`… of the world `world` (Y_0 ~ (y0, diag η0²), the model error
+    /// Runs `first_run`… of the world `m` (Y_0 ~ (y0, diag η0²), the model error
     /// from its W), each filter starting from `x0` (the model's y0).
     pub(super) fn new(
         first_run: u64,
         runs: usize,
         seed: u64,
-        (world, x0): (&CompiledModel, &[f64]),
+        (m, x0): (&CompiledModel, &[f64]),
         sh: &Shared,
     ) -> Self {
-        let m = world;
         let Dims { n, nl, .. } = sh.d;
         let mut y = vec![0.0; runs * n];
         let x: Vec<f64> = (0..runs).flat_map(|_| x0.iter().copied()).collect();

@@ -50,7 +50,7 @@ pub(super) fn run(
     place: impl Fn(Error) -> Error,
     mut each: impl FnMut(Step) -> Result<(), Error>,
 ) -> Result<(bool, bool), Error> {
-    let mut pass = Pass::new(design, truth, steps);
+    let mut pass = Pass::new(design, truth, steps, true);
     for k in 1..=steps {
         each(pass.step(design, truth, k, &place)?)?;
     }
@@ -67,10 +67,10 @@ pub(crate) struct Pass {
     t0: f64,
     di: Inputs,
     ti: Inputs,
-    /// The filter designed on the model, and the one designed on the truth (the
-    /// optimal), beside; both see the model's availability.
+    /// The filter designed on the model, and (where asked for) the one designed on
+    /// the truth (the optimal), beside; both see the model's availability.
     filter: Filter,
-    optimal: Filter,
+    optimal: Option<Filter>,
     avail: Available,
     /// z = [x; e]: its mean and covariance.
     mu: Vec<f64>,
@@ -99,8 +99,14 @@ pub(crate) struct Pass {
 }
 
 impl Pass {
-    /// The pass before step 1: x_0 ~ (y0^t, P0^t), x̂_0 = y0^d.
-    pub(crate) fn new(design: &CompiledModel, truth: &CompiledModel, steps: u64) -> Self {
+    /// The pass before step 1: x_0 ~ (y0^t, P0^t), x̂_0 = y0^d; with the optimal filter
+    /// beside if `optimal` (else its variances stay 0).
+    pub(crate) fn new(
+        design: &CompiledModel,
+        truth: &CompiledModel,
+        steps: u64,
+        optimal: bool,
+    ) -> Self {
         let n = design.n_states();
         let nm = design.n_measurements();
         let n2 = 2 * n;
@@ -126,7 +132,7 @@ impl Pass {
             di: Inputs::new(design, n, dt),
             ti: Inputs::new(truth, n, dt),
             filter: Filter::new(design),
-            optimal: Filter::new(truth),
+            optimal: optimal.then(|| Filter::new(truth)),
             avail: Available::new(design),
             mu,
             s,
@@ -183,7 +189,9 @@ impl Pass {
         if !self.filter.step::<0, Scalar>(design, di, &self.avail) {
             return Err(lost(k, t_k, "the model's"));
         }
-        if !self.optimal.step::<0, Scalar>(truth, ti, &self.avail) {
+        if let Some(o) = &mut self.optimal
+            && !o.step::<0, Scalar>(truth, ti, &self.avail)
+        {
             return Err(lost(k, t_k, "the truth's"));
         }
         let joseph = &self.filter.joseph;
@@ -276,7 +284,9 @@ impl Pass {
             self.err_mean[i] = -mu[n + i];
             self.open_var[i] = s[i * n2 + i];
             self.believed_var[i] = self.filter.big_r[i * n + i];
-            self.optimal_var[i] = self.optimal.big_r[i * n + i];
+            if let Some(o) = &self.optimal {
+                self.optimal_var[i] = o.big_r[i * n + i];
+            }
         }
         Ok(Step {
             k,
